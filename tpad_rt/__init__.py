@@ -1,0 +1,24 @@
+"""tpad-rt: real-time haptic rendering for ultrasonic friction-modulation displays.
+
+API map
+-------
+Errors (``tpad_rt.errors``)
+    TpadError, ConfigError, BackendError
+Files (``tpad_rt.config``)
+    load_texture(path) -> TextureFile, load_device(path) -> DeviceFile,
+    check_file(path) -> list of breadcrumb errors
+Device model (``tpad_rt.device``)
+    Device.from_file(path) / Device.default(): calibration, circuit and limits
+Physics (``tpad_rt.physics``, SI units, NumPy-vectorised, numba-callable)
+    friction.relative_friction, friction.amplitude_for,
+    electromech.impedance, electromech.real_power_eq6, electromech.real_power_exact,
+    electromech.resonance_hz, electromech.quality_factor,
+    plate.bending_wavenumber, plate.mode_resonance_hz, plate.sandwich_stiffness_per_width,
+    plate.amplification_number, plate.power_ratio
+"""
+
+from tpad_rt.errors import BackendError, ConfigError, TpadError
+
+__version__ = "0.1.0"
+
+__all__ = ["BackendError", "ConfigError", "TpadError", "__version__"]

@@ -1,0 +1,63 @@
+"""The ``tpad-rt`` command line: one module per subcommand.
+
+Each subcommand module defines ``add_parser(subparsers)`` (which registers the
+subcommand and sets ``func`` to its ``run(args) -> int``). ``main`` turns every
+:class:`~tpad_rt.errors.TpadError` and every bad flag into one message on stderr
+and exit status 1, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from typing import NoReturn, Sequence
+
+from tpad_rt.errors import TpadError
+
+#: Subcommand modules, in the order ``tpad-rt --help`` lists them.
+_SUBCOMMANDS = ("check", "schema", "design")
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose usage errors exit 1 with one clear line."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(1, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full ``tpad-rt`` parser with every subcommand registered."""
+    from tpad_rt import __version__
+
+    parser = _Parser(
+        prog="tpad-rt",
+        description="Real-time haptic rendering for ultrasonic friction-modulation displays (TPaDs).",
+    )
+    parser.add_argument("--version", action="version", version=f"tpad-rt {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    subparsers.required = True
+    for name in _SUBCOMMANDS:
+        importlib.import_module(f"tpad_rt.cli.{name}").add_parser(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``tpad-rt`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except TpadError as err:
+        print(f"tpad-rt {args.command}: {err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"tpad-rt {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _entry() -> NoReturn:
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    _entry()

@@ -1,0 +1,28 @@
+"""The exceptions tpad-rt raises for things a user can fix.
+
+Every error a user can cause (a bad file, URL, flag or missing component) is a
+:class:`TpadError`; the CLI prints its message on one line and exits 1.
+"""
+
+from __future__ import annotations
+
+
+class TpadError(Exception):
+    """Base class of every user-facing tpad-rt error; its message is complete."""
+
+
+class ConfigError(TpadError):
+    """A texture or device file, or a value given for one, is invalid.
+
+    ``errors`` holds one breadcrumb line per problem, each of the form
+    ``<file>: <path.to[1].key>: <what is wrong>`` (the file part is omitted
+    when there is no file). ``str(err)`` joins them with newlines.
+    """
+
+    def __init__(self, errors: list[str] | str):
+        self.errors: list[str] = [errors] if isinstance(errors, str) else list(errors)
+        super().__init__("\n".join(self.errors))
+
+
+class BackendError(TpadError):
+    """An input or output backend could not be opened or failed while running."""
