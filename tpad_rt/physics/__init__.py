@@ -1,0 +1,21 @@
+"""Pure physical models of a TPaD, in SI units (paper: Xu, Peshkin, Colgate).
+
+API map
+-------
+``friction`` (Eqs. 2-3)
+    relative_friction, amplitude_for; defaults MU0, POISSON, PSI_STAR
+``electromech`` (Butterworth-Van Dyke circuit, Eqs. 2-6)
+    impedance, real_power_eq6, real_power_exact, resonance_hz, quality_factor
+``plate`` (Eqs. 16-21)
+    bending_wavenumber, mode_resonance_hz, sandwich_stiffness_per_width,
+    amplification_number, power_ratio; Layer, TABLE1_GLASSES, ACTUATOR, table1_glass
+
+Every public function validates its inputs (ValueError naming the argument, the
+expected range and the value got) and broadcasts like a NumPy ufunc. Each has a
+numba-compiled scalar twin ``<name>_core`` (``njit(cache=True, nogil=True)``, no
+checks) for the real-time kernels.
+"""
+
+from tpad_rt.physics import electromech, friction, plate
+
+__all__ = ["electromech", "friction", "plate"]
