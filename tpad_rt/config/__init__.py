@@ -1,0 +1,50 @@
+"""Texture and device files: safe YAML loading, validation, breadcrumb errors, JSON Schema.
+
+API map
+-------
+load_texture(path) -> TextureFile
+    one of Grating, Bitmap, Gradient, Bumps, Edges, Temporal, Layers
+load_device(path) -> DeviceFile
+load_any(path) -> TextureFile | DeviceFile
+    a device file has ``resonance_hz``, a texture file has ``kind``
+check_file(path) -> list[str]
+    every breadcrumb error of a file (empty if it is fine)
+schema_json("texture" | "device") -> dict
+    JSON Schema of a format
+
+Loading raises :class:`tpad_rt.errors.ConfigError`, one breadcrumb line per
+problem: ``textures/x.yaml: layers[1].period_mm: must be > 0, got -2 (line 9)``.
+The models are frozen pydantic models; image-based textures have
+``load_image_array()``. docs/formats.md is the contract.
+"""
+
+from tpad_rt.config.device_schema import DeviceFile
+from tpad_rt.config.json_schema import schema_json
+from tpad_rt.config.loader import check_file, load_any, load_device, load_texture
+from tpad_rt.config.texture_schema import (
+    Bitmap,
+    Bumps,
+    Edges,
+    Gradient,
+    Grating,
+    Layers,
+    Temporal,
+    TextureFile,
+)
+
+__all__ = [
+    "Bitmap",
+    "Bumps",
+    "DeviceFile",
+    "Edges",
+    "Gradient",
+    "Grating",
+    "Layers",
+    "Temporal",
+    "TextureFile",
+    "check_file",
+    "load_any",
+    "load_device",
+    "load_texture",
+    "schema_json",
+]

@@ -1,0 +1,85 @@
+"""Reading the pixel files of ``bitmap`` and image height maps.
+
+A picture (``.png``, ``.pgm``) is read with Pillow: 8-bit greyscale is divided
+by 255, 16-bit greyscale by 65535, and any other mode (RGB, palette, with
+alpha) is first converted to 8-bit luminance (alpha is ignored). A ``.npy``
+file must hold one 2-D array of real numbers in [0, 1]; it is read with
+``allow_pickle=False``, its header checked before its data is read.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+IMAGE_SUFFIXES = (".png", ".pgm", ".npy")
+MAX_IMAGE_SIDE = 4096
+
+_PICTURE_FORMATS = ["PNG", "PPM"]  # Pillow reads PGM with its PPM plugin
+_SIXTEEN_BIT_MODES = ("I;16", "I;16B", "I;16L", "I")
+
+
+class ImageError(Exception):
+    """An image file is missing, unreadable, too large or holds unusable values."""
+
+
+def read_image(path: Path) -> np.ndarray:
+    """The image at ``path`` as a read-only float64 array in [0, 1], row 0 at the top.
+
+    Raises ImageError for another extension, a missing or unreadable file, a
+    side of 0 or more than 4096 pixels, or (``.npy``) an array that is not 2-D,
+    not real-valued, not finite or outside [0, 1].
+    """
+    if path.suffix.lower() not in IMAGE_SUFFIXES:
+        raise ImageError(f"must be a .png, .pgm or .npy file, got '{path.name}'")
+    if not path.is_file():
+        raise ImageError(f"no such file: {path}")
+    pixels = _read_array(path) if path.suffix.lower() == ".npy" else _read_picture(path)
+    pixels.flags.writeable = False
+    return pixels
+
+
+def _read_picture(path: Path) -> np.ndarray:
+    try:
+        with Image.open(path, formats=_PICTURE_FORMATS) as picture:
+            _check_size(picture.height, picture.width)
+            if picture.mode in _SIXTEEN_BIT_MODES:
+                return np.asarray(picture, dtype=np.float64) / 65535.0
+            return np.asarray(picture.convert("L"), dtype=np.float64) / 255.0
+    except (OSError, ValueError, SyntaxError, EOFError, Image.DecompressionBombError) as err:
+        raise ImageError(f"cannot read {path} as a PNG or PGM image: {err}") from None
+
+
+def _read_array(path: Path) -> np.ndarray:
+    try:
+        with open(path, "rb") as stream:
+            major, _ = np.lib.format.read_magic(stream)
+            read_header = np.lib.format.read_array_header_1_0 if major == 1 else np.lib.format.read_array_header_2_0
+            shape, _, dtype = read_header(stream)
+    except (OSError, ValueError, EOFError) as err:
+        raise ImageError(f"cannot read {path} as a NumPy .npy array: {err}") from None
+    if dtype.hasobject:
+        raise ImageError(f"{path} holds Python objects; only plain numeric arrays are loaded (never pickles)")
+    if len(shape) != 2:
+        raise ImageError(f"{path} must hold a 2-D array, got shape {shape}")
+    if dtype.kind not in "biuf":
+        raise ImageError(f"{path} must hold real numbers, got dtype {dtype}")
+    _check_size(*shape)
+    try:
+        values = np.load(path, allow_pickle=False).astype(np.float64)
+    except (OSError, ValueError, EOFError) as err:
+        raise ImageError(f"cannot read {path} as a NumPy .npy array: {err}") from None
+    if not np.isfinite(values).all():
+        raise ImageError(f"{path} holds NaN or infinite values")
+    low, high = float(values.min()), float(values.max())
+    if low < 0 or high > 1:
+        raise ImageError(f"{path} must hold values in [0, 1], got {low:g} to {high:g}")
+    return values
+
+
+def _check_size(height: int, width: int) -> None:
+    """Raises ImageError unless both sides are 1 to MAX_IMAGE_SIDE pixels."""
+    if not (1 <= width <= MAX_IMAGE_SIDE and 1 <= height <= MAX_IMAGE_SIDE):
+        raise ImageError(f"image is {width} x {height} pixels; sides must be 1 to {MAX_IMAGE_SIDE}")

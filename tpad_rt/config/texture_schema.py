@@ -1,0 +1,335 @@
+"""Texture files: one model per ``kind`` of docs/formats.md, and the ``TextureFile`` union.
+
+Image paths are relative to the texture file: validate with
+``context={BASE_DIR: <directory of the file>}`` (default: the working directory).
+Images are checked when the file is validated; ``load_image_array()`` reads the
+pixels for the renderer.
+"""
+
+from __future__ import annotations
+
+from contextvars import ContextVar
+from pathlib import Path
+from typing import Annotated, Any, Literal, Union
+
+import numpy as np
+from annotated_types import Gt, Le, MaxLen, MinLen
+from pydantic import (
+    AfterValidator,
+    Field,
+    PrivateAttr,
+    Strict,
+    ValidationInfo,
+    ValidatorFunctionWrapHandler,
+    field_validator,
+    model_validator,
+)
+
+from tpad_rt.config.fields import (
+    Flag,
+    Fraction,
+    FrictionLevel,
+    Number,
+    PointMm,
+    Positive,
+    SizeMm,
+    StrictModel,
+    Text,
+    rule_error,
+)
+from tpad_rt.config.images import ImageError, read_image
+from tpad_rt.config.shapes import Outline, Region
+from tpad_rt.errors import ConfigError
+
+#: Validation-context key: the directory relative image paths start from.
+BASE_DIR = "base_dir"
+MAX_LAYERS = 16
+MAX_LAYER_DEPTH = 4
+
+Waveform = Literal["sine", "square", "triangle", "sawtooth"]
+Wrap = Literal["tile", "clamp"]
+
+_layers_depth: ContextVar[int] = ContextVar("tpad_rt_layers_depth", default=0)
+
+
+def _usable_image(value: Path, info: ValidationInfo) -> Path:
+    """The absolute path of a readable image, relative paths taken from ``context[BASE_DIR]``."""
+    path = Path((info.context or {}).get(BASE_DIR, ".")) / value
+    try:
+        read_image(path)
+    except ImageError as err:
+        raise rule_error(str(err)) from None
+    return path.absolute()
+
+
+ImageFile = Annotated[Path, AfterValidator(_usable_image)]
+
+
+# --- friction levels -------------------------------------------------------
+
+
+class FrictionRange(StrictModel):
+    """``{low, high}`` with ``0 < low <= high <= 1``."""
+
+    low: FrictionLevel
+    high: FrictionLevel
+
+    @model_validator(mode="after")
+    def _ordered(self) -> FrictionRange:
+        if self.low > self.high:
+            raise rule_error(f"must be <= high ({self.high:g}), got {self.low:g}", "low")
+        return self
+
+
+class FrictionAroundBase(FrictionRange):
+    """``{base, low, high}`` with ``0 < low <= base <= high <= 1``."""
+
+    base: FrictionLevel
+
+    @model_validator(mode="after")
+    def _base_inside(self) -> FrictionAroundBase:
+        if self.low <= self.high and not self.low <= self.base <= self.high:
+            raise rule_error(f"must be between low ({self.low:g}) and high ({self.high:g}), got {self.base:g}", "base")
+        return self
+
+
+class BumpFriction(StrictModel):
+    """Friction at a bump's centre and away from bumps."""
+
+    inside: FrictionLevel
+    outside: FrictionLevel
+
+
+class EdgeFriction(StrictModel):
+    """Friction on an outline's band and elsewhere."""
+
+    edge: FrictionLevel
+    background: FrictionLevel
+
+
+# --- shared parts of kinds ---------------------------------------------------
+
+
+class _Texture(StrictModel):
+    description: Text
+
+
+class _Periodic(_Texture):
+    """A waveform repeating in space or time; ``duty`` only for square and triangle."""
+
+    waveform: Waveform = "sine"
+    duty: Fraction = 0.5
+
+    @model_validator(mode="after")
+    def _duty_needs_shape(self) -> _Periodic:
+        if "duty" in self.model_fields_set and self.waveform in ("sine", "sawtooth"):
+            raise rule_error(f"not allowed with waveform '{self.waveform}' (only square and triangle)", "duty")
+        return self
+
+
+class _ImageMap(StrictModel):
+    """A greyscale image laid on the plate."""
+
+    image: ImageFile
+    size_mm: SizeMm
+    origin_mm: PointMm = (0.0, 0.0)
+    wrap: Wrap = "tile"
+    _pixels: np.ndarray | None = PrivateAttr(default=None)
+
+    def load_image_array(self) -> np.ndarray:
+        """The image as a read-only float64 array in [0, 1], row 0 at the top; read once.
+
+        Raises ConfigError if the file is no longer usable (changed since validation).
+        """
+        if self._pixels is None:
+            try:
+                self._pixels = read_image(self.image)
+            except ImageError as err:
+                raise ConfigError(str(err)) from None
+        return self._pixels
+
+
+# --- gradient height maps ----------------------------------------------------
+
+
+class BumpHeight(StrictModel):
+    """Raised-cosine bump."""
+
+    shape: Literal["bump"]
+    center_mm: PointMm
+    radius_mm: Positive
+    height_mm: Number
+
+
+class RidgeHeight(StrictModel):
+    """Infinite raised-cosine ridge through ``center_mm`` running along ``angle_deg``."""
+
+    shape: Literal["ridge"]
+    center_mm: PointMm
+    angle_deg: Number = 0.0
+    width_mm: Positive
+    height_mm: Number
+
+
+class SineHeight(StrictModel):
+    """Sinusoidal corrugation varying along ``angle_deg``."""
+
+    shape: Literal["sine"]
+    period_mm: Positive
+    angle_deg: Number = 0.0
+    height_mm: Number
+
+
+class ImageHeight(_ImageMap):
+    """Greyscale height map; value 1 is ``height_mm`` high."""
+
+    shape: Literal["image"]
+    height_mm: Number
+
+
+HeightMap = Annotated[Union[BumpHeight, RidgeHeight, SineHeight, ImageHeight], Field(discriminator="shape")]
+
+
+# --- kinds -------------------------------------------------------------------
+
+
+class Grating(_Periodic):
+    """Periodic bars."""
+
+    kind: Literal["grating"]
+    period_mm: Positive
+    angle_deg: Number = 0.0
+    phase_deg: Number = 0.0
+    friction: FrictionRange
+
+
+class Bitmap(_ImageMap, _Texture):
+    """Friction map from an image or array (value 0: ``low``, 1: ``high``)."""
+
+    kind: Literal["bitmap"]
+    invert: Flag = False
+    friction: FrictionRange
+
+
+class Gradient(_Texture):
+    """Virtual bumps: friction ``base + gain * slope`` of a height map, clamped to [low, high]."""
+
+    kind: Literal["gradient"]
+    height: HeightMap
+    gain: Number = 2.0
+    friction: FrictionAroundBase
+
+
+class BumpGrid(StrictModel):
+    """An infinite grid of bump centres."""
+
+    spacing_mm: SizeMm
+    offset_mm: PointMm = (0.0, 0.0)
+
+
+class Bumps(_Texture):
+    """Round patches at ``centers_mm`` or on a ``grid`` (exactly one of the two)."""
+
+    kind: Literal["bumps"]
+    centers_mm: Annotated[list[PointMm], MinLen(1)] | None = None
+    grid: BumpGrid | None = None
+    radius_mm: Positive
+    profile: Literal["cosine", "gaussian", "disk"] = "cosine"
+    friction: BumpFriction
+
+    @model_validator(mode="after")
+    def _one_placement(self) -> Bumps:
+        if self.centers_mm is None and self.grid is None:
+            raise rule_error("one of centers_mm and grid is required")
+        if self.centers_mm is not None and self.grid is not None:
+            raise rule_error("not allowed together with centers_mm (give one of them)", "grid")
+        return self
+
+
+class Edges(_Texture):
+    """Bands along the outlines of shapes."""
+
+    kind: Literal["edges"]
+    shapes: Annotated[list[Outline], MinLen(1)]
+    width_mm: Positive = 1.0
+    profile: Literal["step", "cosine"] = "step"
+    friction: EdgeFriction
+
+
+class Temporal(_Periodic):
+    """Friction changing with time wherever the finger slides."""
+
+    kind: Literal["temporal"]
+    waveform: Waveform = "square"
+    frequency_hz: Annotated[float, Strict(), Gt(0), Le(1000)]
+    friction: FrictionRange
+
+
+class Layers(_Texture):
+    """Composition of 1 to 16 textures, nested at most 4 levels deep."""
+
+    kind: Literal["layers"]
+    layers: Annotated[list[Layer], MinLen(1), MaxLen(MAX_LAYERS)]
+
+    @field_validator("layers", mode="wrap")
+    @classmethod
+    def _limit_nesting(cls, value: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+        depth = _layers_depth.get() + 1
+        if depth > MAX_LAYER_DEPTH:
+            raise rule_error(f"layers nest at most {MAX_LAYER_DEPTH} levels deep")
+        token = _layers_depth.set(depth)
+        try:
+            return handler(value)
+        finally:
+            _layers_depth.reset(token)
+
+
+TextureFile = Annotated[
+    Union[Grating, Bitmap, Gradient, Bumps, Edges, Temporal, Layers], Field(discriminator="kind")
+]
+
+
+# --- layers: every kind, with an optional description, op and region ---------
+
+
+class _LayerFields(StrictModel):
+    description: Text | None = None
+    op: Literal["multiply", "min", "max", "add"] = "multiply"
+    region: Region | None = None
+
+
+class GratingLayer(_LayerFields, Grating):
+    """A grating used as a layer."""
+
+
+class BitmapLayer(_LayerFields, Bitmap):
+    """A bitmap used as a layer."""
+
+
+class GradientLayer(_LayerFields, Gradient):
+    """A gradient used as a layer."""
+
+
+class BumpsLayer(_LayerFields, Bumps):
+    """Bumps used as a layer."""
+
+
+class EdgesLayer(_LayerFields, Edges):
+    """Edges used as a layer."""
+
+
+class TemporalLayer(_LayerFields, Temporal):
+    """A temporal texture used as a layer."""
+
+
+class LayersLayer(_LayerFields, Layers):
+    """A nested composition used as a layer."""
+
+
+Layer = Annotated[
+    Union[GratingLayer, BitmapLayer, GradientLayer, BumpsLayer, EdgesLayer, TemporalLayer, LayersLayer],
+    Field(discriminator="kind"),
+]
+
+Layers.model_rebuild()
+LayersLayer.model_rebuild()
