@@ -1,0 +1,36 @@
+"""``tpad-rt schema texture|device [--out FILE]``: print a file format's JSON Schema."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from tpad_rt.config.json_schema import SCHEMA_KINDS, schema_json
+from tpad_rt.errors import TpadError
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Register ``schema``."""
+    parser = subparsers.add_parser(
+        "schema",
+        help="print the JSON Schema of texture or device files",
+        description="Print the JSON Schema of texture or device files, for editors that validate YAML.",
+    )
+    parser.add_argument("kind", choices=SCHEMA_KINDS, help="which file format")
+    parser.add_argument("--out", metavar="FILE", help="write the schema to FILE instead of standard output")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print or write the schema; raises TpadError if FILE cannot be written."""
+    text = json.dumps(schema_json(args.kind), indent=2) + "\n"
+    if args.out is None:
+        sys.stdout.write(text)
+        return 0
+    try:
+        Path(args.out).write_text(text, encoding="utf-8")
+    except OSError as err:
+        raise TpadError(f"cannot write {args.out}: {err.strerror or err}") from None
+    return 0
