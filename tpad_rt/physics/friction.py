@@ -18,11 +18,13 @@ import numpy.typing as npt
 
 from tpad_rt.physics._validate import FloatOrArray, checked
 
-#: Friction coefficient with the vibration off (paper Section III, from Vezzoli et al.).
+# The paper (model: Section III; values: start of Section IV, with U = 50 mm/s) takes
+# these from Vezzoli et al. and Sednaoui et al.
+#: Friction coefficient with the vibration off.
 MU0 = 0.25
-#: Poisson's ratio of the finger skin (paper Section III, from Vezzoli et al.).
+#: Poisson's ratio of the finger skin.
 POISSON = 0.33
-#: Characteristic value of the dimensionless group Psi (paper Section III, from Sednaoui et al.).
+#: Characteristic value of the dimensionless group Psi.
 PSI_STAR = 4.69
 
 
