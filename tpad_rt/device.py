@@ -1,0 +1,184 @@
+"""One TPaD's calibration in SI units: resonance, gains, circuit and limits.
+
+A :class:`Device` is built from a device file (docs/formats.md "Device files") by
+:meth:`Device.from_file`, from an already validated :class:`tpad_rt.config.DeviceFile`
+by :meth:`Device.from_spec`, or from ``calibration/default.yaml`` by
+:meth:`Device.default`. Its methods evaluate the force-dependent tables (linear
+interpolation, clamped at the table ends; vectorised over ``force_n``): these are
+what the real-time kernel tabulates.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from tpad_rt.config import DeviceFile, load_device
+from tpad_rt.errors import ConfigError
+from tpad_rt.physics import electromech
+from tpad_rt.physics._validate import FloatOrArray, non_negative
+
+#: Where the device files of the paper's TPaDs live (in the source tree).
+CALIBRATION_DIR = Path(__file__).resolve().parents[1] / "calibration"
+
+_Table = npt.NDArray[np.float64]
+_TABLE_FIELDS = (
+    "force_table_n",
+    "amplitude_m_per_v_table",
+    "motional_force_table_n",
+    "motional_l_h_table",
+    "motional_c_f_table",
+    "motional_r_ohm_table",
+)
+
+
+@dataclass(frozen=True)
+class Plate:
+    """The glass plate (SI) and its ``(m, n)`` mode."""
+
+    material: str
+    thickness_m: float
+    density_kg_m3: float
+    youngs_pa: float
+    length_m: float
+    width_m: float
+    mode: tuple[int, int]
+
+
+@dataclass(frozen=True)
+class Actuator:
+    """The piezo actuator bonded to the plate (SI)."""
+
+    thickness_m: float
+    density_kg_m3: float
+    youngs_pa: float
+
+
+@dataclass(frozen=True, eq=False)
+class Device:
+    """A TPaD's calibration, SI units; the ``*_table`` fields are read-only float64 arrays.
+
+    ``amplitude_m_per_v_table`` (m per peak volt) is indexed by ``force_table_n``;
+    the motional branch tables by their own ``motional_force_table_n``.
+    """
+
+    label: str
+    description: str
+    plate: Plate
+    actuator: Actuator
+    resonance_hz: float
+    volts_per_full_scale: float
+    max_voltage_v: float
+    force_table_n: _Table
+    amplitude_m_per_v_table: _Table
+    c0_f: float
+    shunt_ohm: float
+    motional_force_table_n: _Table
+    motional_l_h_table: _Table
+    motional_c_f_table: _Table
+    motional_r_ohm_table: _Table
+    mu0: float
+    poisson: float
+    psi_star: float
+    speed_floor_m_s: float
+    power_budget_w: float
+    preemphasis: bool
+
+    def __post_init__(self) -> None:
+        for name in _TABLE_FIELDS:
+            table = np.array(getattr(self, name), dtype=np.float64)
+            table.setflags(write=False)
+            object.__setattr__(self, name, table)
+
+    @classmethod
+    def from_spec(cls, spec: DeviceFile) -> Device:
+        """The Device described by a validated device file model (file units converted to SI)."""
+        plate, actuator, circuit = spec.plate, spec.actuator, spec.circuit
+        return cls(
+            label=spec.label,
+            description=spec.description,
+            plate=Plate(
+                material=plate.material,
+                thickness_m=plate.thickness_mm * 1e-3,
+                density_kg_m3=plate.density_g_cm3 * 1e3,
+                youngs_pa=plate.youngs_modulus_gpa * 1e9,
+                length_m=plate.length_mm * 1e-3,
+                width_m=plate.width_mm * 1e-3,
+                mode=tuple(plate.mode),
+            ),
+            actuator=Actuator(
+                thickness_m=actuator.thickness_mm * 1e-3,
+                density_kg_m3=actuator.density_g_cm3 * 1e3,
+                youngs_pa=actuator.youngs_modulus_gpa * 1e9,
+            ),
+            resonance_hz=spec.resonance_hz,
+            volts_per_full_scale=spec.amplifier.volts_per_full_scale,
+            max_voltage_v=spec.amplifier.max_voltage_v,
+            force_table_n=spec.calibration.force_n,
+            amplitude_m_per_v_table=np.multiply(spec.calibration.amplitude_um_per_v, 1e-6),
+            c0_f=circuit.c0_nf * 1e-9,
+            shunt_ohm=circuit.shunt_ohm,
+            motional_force_table_n=circuit.force_n,
+            motional_l_h_table=circuit.motional_l_h,
+            motional_c_f_table=np.multiply(circuit.motional_c_pf, 1e-12),
+            motional_r_ohm_table=circuit.motional_r_ohm,
+            mu0=spec.friction_model.mu0,
+            poisson=spec.friction_model.poisson,
+            psi_star=spec.friction_model.psi_star,
+            speed_floor_m_s=spec.speed_floor_mm_s * 1e-3,
+            power_budget_w=spec.power_budget_w,
+            preemphasis=spec.preemphasis,
+        )
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> Device:
+        """The Device in the device file at ``path``; ConfigError listing every problem in it."""
+        return cls.from_spec(load_device(path))
+
+    @classmethod
+    def default(cls) -> Device:
+        """The default device, ``calibration/default.yaml`` (SLG_0.56); ConfigError if it is missing."""
+        path = CALIBRATION_DIR / "default.yaml"
+        if not path.is_file():
+            raise ConfigError(
+                f"{path}: default device file not found (it ships in the source tree's calibration/ folder); "
+                "pass a device file instead"
+            )
+        return cls.from_file(path)
+
+    def amplitude_m_per_v(self, force_n: npt.ArrayLike) -> FloatOrArray:
+        """Plate vibration amplitude (m) per peak drive volt at contact force ``force_n`` (N, >= 0)."""
+        return np.interp(non_negative("force_n", force_n), self.force_table_n, self.amplitude_m_per_v_table)
+
+    def motional(self, force_n: npt.ArrayLike) -> tuple[FloatOrArray, FloatOrArray, FloatOrArray]:
+        """Motional branch ``(L in H, C in F, R in ohm)`` at contact force ``force_n`` (N, >= 0)."""
+        forces = non_negative("force_n", force_n)
+        return tuple(  # type: ignore[return-value]
+            np.interp(forces, self.motional_force_table_n, table)
+            for table in (self.motional_l_h_table, self.motional_c_f_table, self.motional_r_ohm_table)
+        )
+
+    def power_w_per_v2(self, force_n: npt.ArrayLike) -> FloatOrArray:
+        """Real power (W) per squared peak drive volt at resonance, exact circuit (paper Eqs. 2-6).
+
+        Drive of 1 V peak (``u_rms = 1/sqrt(2)``) at the motional branch's own resonance
+        at that force (``X1 = 0``, as the paper's Eq. 6 assumes; the calibration files
+        tune it to ``resonance_hz`` at 0 N). The fixed carrier is slightly off it at
+        other forces and draws less, so for the power budget this errs on the high
+        side. Multiply by ``V**2`` for a peak drive of ``V`` volts.
+        """
+        l_h, c_f, r_ohm = self.motional(force_n)
+        freq_hz = electromech.resonance_hz(l_h, c_f)
+        return electromech.real_power_exact(1 / math.sqrt(2), freq_hz, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
+
+    def quality_factor(self, force_n: npt.ArrayLike) -> FloatOrArray:
+        """Quality factor ``sqrt(L / C) / R`` of the motional branch at contact force ``force_n``."""
+        return electromech.quality_factor(*self.motional(force_n))
+
+    def envelope_time_constant_s(self, force_n: npt.ArrayLike) -> FloatOrArray:
+        """Time constant (s) of the vibration envelope, ``Q / (pi f0)`` with ``f0 = resonance_hz``."""
+        return self.quality_factor(force_n) / (math.pi * self.resonance_hz)
