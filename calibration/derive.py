@@ -85,7 +85,7 @@ SOURCE = {
     "amplifier.volts_per_full_scale": "illustrative",
     "calibration.force_n": "measured: the paper's nine contact forces (Section II)",
     "calibration.amplitude_um_per_v": "illustrative: 0 N amplitude at 40 V from Section IV where stated (SLG_0.4 ~6 um, "
-    "D263_0.4 ~2 um less, lowest 1.8 um), else chosen to match its f*alpha ordering; "
+    "D263_0.4 ~2 um less, lowest 1.8 um), else chosen so f*alpha orders the plates as Section IV does; "
     "falls with force as a0 (r + (1 - r) exp(-F / 0.6 N)), r = 0.35 (SLG_0.4: 0.25)",
     "circuit.c0_nf": "measured: paper Section V",
     "circuit.shunt_ohm": "measured: paper Sections II and V",
@@ -96,7 +96,7 @@ SOURCE = {
     "circuit.motional_l_h": "illustrative: Q = 300 at 0 N, rising 5 % by 2 N",
     "circuit.motional_c_pf": "derived: tunes the motional branch to resonance_hz at 0 N; illustrative: falls 5 % by 2 N; "
     "7 significant figures to keep the tuning within 0.01 Hz",
-    "friction_model": "measured: paper Section IV (from Vezzoli et al. and Sednaoui et al.)",
+    "friction_model": "measured: the literature values the paper uses (Section IV, from Vezzoli et al. and Sednaoui et al.)",
     "speed_floor_mm_s": "illustrative",
     "power_budget_w": "illustrative: 1.2 x the 0 N power at 40 V, rounded up to 0.05 W",
     "preemphasis": "illustrative",
@@ -231,7 +231,11 @@ class _Dumper(yaml.SafeDumper):
     """Block mappings, flow (one-line) lists."""
 
 
-_Dumper.add_representer(list, lambda dumper, data: dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True))
+def _flow_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True)
+
+
+_Dumper.add_representer(list, _flow_list)
 
 
 def render(document: dict[str, Any]) -> str:

@@ -111,7 +111,9 @@ def design_rows(plates: list[Layer], length_m: float, mode_m: int, reference: st
             "thickness_mm": p.thickness_mm,
             "density_g_cm3": p.density_g_cm3,
             "youngs_modulus_gpa": p.youngs_modulus_gpa,
-            "resonance_hz": float(plate.mode_resonance_hz(p.thickness_m, p.density_kg_m3, p.youngs_pa, length_m, mode_m)),
+            "resonance_hz": float(
+                plate.mode_resonance_hz(p.thickness_m, p.density_kg_m3, p.youngs_pa, length_m, mode_m)
+            ),
             "n": n_by_label[p.label],
             "n2": n_by_label[p.label] ** 2,
             "power_ratio": float(plate.power_ratio(n_by_label[reference], n_by_label[p.label])),
@@ -121,7 +123,12 @@ def design_rows(plates: list[Layer], length_m: float, mode_m: int, reference: st
 
 
 def _table(rows: list[dict[str, Any]], mode_m: int, reference: str) -> Table:
-    table = Table(title=f"TPaD plate design, power relative to {reference}", box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
+    table = Table(
+        title=f"TPaD plate design, power relative to {reference}",
+        box=box.SIMPLE_HEAD,
+        show_edge=False,
+        pad_edge=False,
+    )
     table.add_column("glass", no_wrap=True)
     for header in ("h\nmm", "rho\ng/cm3", "E\nGPa", f"f {mode_m}x0\nkHz", "n", "n^2", "P /\nP_ref"):
         table.add_column(header, justify="right", no_wrap=True)

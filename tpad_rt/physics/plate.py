@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numba
 import numpy.typing as npt
 
-from tpad_rt.physics._validate import FloatOrArray, checked, positive
+from tpad_rt.physics._validate import FloatOrArray, positive
 
 
 @dataclass(frozen=True)
@@ -166,7 +166,8 @@ def mode_resonance_hz(
     Wavelength ``2 length / m``, ``beta = 2 pi / wavelength``,
     ``w = beta^2 sqrt(E h^2 / (12 rho))``. The actuator, the glue and the width
     are ignored; for the paper's eight plates it gives 22.96-46.67 kHz against the
-    measured 22.4-44.6 kHz, 2.5 % high at the low end and 4.6 % at the top. All arguments must be finite and > 0 (ValueError otherwise).
+    measured 22.4-44.6 kHz, 2.5 % high at the low end and 4.6 % at the top.
+    All arguments must be finite and > 0 (ValueError otherwise).
     """
     return _mode_resonance_hz_ufunc(
         *positive(
