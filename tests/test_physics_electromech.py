@@ -80,7 +80,8 @@ def test_exact_power_conserves_energy(freq_hz, c0_f, r_ohm, r0_ohm):
     current = u_rms / (r0_ohm + z)
     delivered = (u_rms * current.conjugate()).real - abs(current) ** 2 * r0_ohm
     exact = em.real_power_exact(u_rms, freq_hz, c0_f, L_H, C_F, r_ohm, r0_ohm)
-    assert exact == pytest.approx(delivered, rel=1e-6, abs=1e-15)
+    # the subtraction cancels far off resonance: allow rounding on the scale of the apparent power
+    assert exact == pytest.approx(delivered, rel=1e-6, abs=1e-12 * abs(u_rms * current))
 
 
 @NO_DEADLINE
