@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -24,13 +25,9 @@ def explain(error: ErrorDetails, root: Any) -> tuple[Location, str]:
         return (*loc, spots[-1].discriminator or "?"), _explain_tag(error, spots[-1])
     if kind == RULE_ERROR:
         return (*loc, *ctx.get("key", ())), error["msg"]
-    if loc and loc[-1] == "[key]":
-        return loc[:-1], f"key {_explain_type(error, spots[-1], spots)}"
-    explain_kind = _EXPLAIN.get(kind)
-    if explain_kind is None:
-        message = error["msg"]
-        return loc, f"{message[:1].lower()}{message[1:]}, got {show_value(error['input'])}"
-    return loc, explain_kind(error, spots[-1], spots)
+    is_key = bool(loc) and loc[-1] == "[key]"  # pydantic's marker for a bad mapping key
+    message = _EXPLAIN.get(kind, _explain_other)(error, spots[-1], spots)
+    return (loc[:-1], f"key {message}") if is_key else (loc, message)
 
 
 def did_you_mean(word: Any, choices: list[Any]) -> str:
@@ -49,7 +46,8 @@ def _explain_tag(error: ErrorDetails, spot: Spot) -> str:
     choices = ", ".join(spot.choices())
     if error["type"] == "union_tag_not_found":
         return f"required key missing (one of {choices})"
-    tag = error["ctx"]["tag"]
+    given = error["input"]
+    tag = given.get(spot.discriminator, error["ctx"]["tag"]) if isinstance(given, dict) else error["ctx"]["tag"]
     return f"must be one of {choices}; got {show_value(tag)}{did_you_mean(tag, spot.choices())}"
 
 
@@ -60,9 +58,12 @@ def _explain_literal(error: ErrorDetails, spot: Spot, spots: list[Spot]) -> str:
 
 
 def _explain_extra(error: ErrorDetails, spot: Spot, spots: list[Spot]) -> str:
-    parent = spots[-2] if len(spots) > 1 else spot
-    loc_key = error["loc"][-1]
-    return f"unknown key{did_you_mean(loc_key, parent.keys())}"
+    return f"unknown key{did_you_mean(error['loc'][-1], spots[-2].keys())}"
+
+
+def _explain_other(error: ErrorDetails, spot: Spot, spots: list[Spot]) -> str:
+    message = error["msg"]
+    return f"{message[:1].lower()}{message[1:]}{_got(error)}"
 
 
 def _explain_bound(symbol: str, bound: str) -> _Explain:
@@ -80,8 +81,22 @@ def _explain_length(error: ErrorDetails, spot: Spot, spots: list[Spot]) -> str:
 
 
 def _explain_type(error: ErrorDetails, spot: Spot, spots: list[Spot]) -> str:
-    expected = _TYPE_NAMES.get(error["type"], "of another type")
-    return f"must be {expected}{_got(error)}"
+    expected = _TYPE_NAMES[error["type"]]
+    hint = _NUMBER_AS_TEXT if expected in ("a number", "a whole number") and _reads_as_number(error["input"]) else ""
+    return f"must be {expected}{_got(error)}{hint}"
+
+
+_NUMBER_AS_TEXT = " (text: write numbers without quotes, and exponents with a dot as in 1.0e-3)"
+
+
+def _reads_as_number(given: Any) -> bool:
+    """True for text such as ``'2.5'`` or ``'1e-3'`` (YAML 1.1 reads an exponent without a dot as text)."""
+    if not isinstance(given, str):
+        return False
+    try:
+        return math.isfinite(float(given))
+    except ValueError:
+        return False
 
 
 def _expect(text: str) -> _Explain:

@@ -68,8 +68,8 @@ def load_yaml(path: Path, source: str) -> YamlDocument:
         raise ConfigError(breadcrumb(source, (), err.message, err.line)) from None
     except yaml.MarkedYAMLError as err:
         raise ConfigError(breadcrumb(source, (), f"invalid YAML: {_describe(err)}", _line(err))) from None
-    except yaml.YAMLError as err:
-        raise ConfigError(breadcrumb(source, (), f"invalid YAML: {str(err).splitlines()[0]}")) from None
+    except yaml.reader.ReaderError as err:
+        raise ConfigError(breadcrumb(source, (), f"invalid YAML: {_describe_reader(err)}")) from None
 
 
 def _compose_and_construct(text: bytes, source: str) -> YamlDocument:
@@ -238,6 +238,12 @@ def _kind(node: Node | None) -> str:
 
 def _describe(err: yaml.MarkedYAMLError) -> str:
     return f"{err.context}: {err.problem}" if err.context and err.problem else str(err.problem or err.context)
+
+
+def _describe_reader(err: yaml.reader.ReaderError) -> str:
+    if err.encoding == "unicode":
+        return f"character #x{err.character:04x} is not allowed"
+    return f"cannot decode as {err.encoding}: byte #x{err.character:02x} at offset {err.position} ({err.reason})"
 
 
 def _line(err: yaml.MarkedYAMLError) -> int | None:
