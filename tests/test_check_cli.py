@@ -1,0 +1,131 @@
+"""``tpad-rt check`` and ``tpad-rt schema`` from the command line."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tpad_rt.cli import main
+from tpad_rt.config import schema_json
+
+TESTS = Path(__file__).parent
+GOOD = TESTS / "good_files"
+BAD = TESTS / "bad_files"
+_EXPECT = "# expect: "
+
+
+def _expected(path: Path) -> list[str]:
+    folder = str(path.parent)
+    lines = path.read_text().splitlines()
+    return [f"{path}: " + line.removeprefix(_EXPECT).replace("{dir}", folder) for line in lines if line.startswith(_EXPECT)]
+
+
+def _run(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
+    environment = {key: value for key, value in os.environ.items() if key not in ("FORCE_COLOR", "NO_COLOR")}
+    return subprocess.run(
+        [sys.executable, "-m", "tpad_rt", *args],
+        capture_output=True,
+        text=True,
+        cwd=TESTS.parent,
+        env={**environment, **env},
+        timeout=120,
+    )
+
+
+def test_good_files_print_ok(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", str(GOOD / "grating.yaml")]) == 0
+    out, err = capsys.readouterr()
+    assert out == f"ok  {GOOD / 'grating.yaml'} (texture: grating)\n"
+    assert err == ""
+
+
+def test_device_file_prints_its_label(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", str(GOOD / "device.yaml")]) == 0
+    assert capsys.readouterr().out == f"ok  {GOOD / 'device.yaml'} (device: SLG_0.56)\n"
+
+
+def test_mixed_files_report_every_error_and_a_summary(capsys: pytest.CaptureFixture[str]) -> None:
+    bad = [BAD / "layers_period_example.yaml", BAD / "inf.yaml"]
+    assert main(["check", str(GOOD / "layers.yaml"), *map(str, bad)]) == 1
+    out, err = capsys.readouterr()
+    assert out.splitlines() == [f"ok  {GOOD / 'layers.yaml'} (texture: layers)", "3 files checked: 1 ok, 2 with errors"]
+    assert err.splitlines() == _expected(bad[0]) + _expected(bad[1])
+
+
+def test_quiet_prints_only_errors(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", "--quiet", str(GOOD / "grating.yaml"), str(GOOD / "temporal.yaml")]) == 0
+    assert capsys.readouterr() == ("", "")
+    assert main(["check", "-q", str(GOOD / "grating.yaml"), str(BAD / "nan.yaml")]) == 1
+    out, err = capsys.readouterr()
+    assert out == "" and err.splitlines() == _expected(BAD / "nan.yaml")
+
+
+def test_check_needs_a_file(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as caught:
+        main(["check"])
+    assert caught.value.code == 1
+    assert "the following arguments are required: FILE" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "names",
+    [
+        ["layers_period_example", "unknown_key_typo", "duplicate_key"],
+        ["syntax_error", "alias_bomb", "python_object_tag", "nesting_too_deep"],
+        ["npy_pickle", "device_unequal_tables", "device_missing_source", "layers_too_deep"],
+    ],
+)
+def test_subprocess_prints_only_breadcrumbs_and_exits_1(names: list[str]) -> None:
+    paths = [BAD / f"{name}.yaml" for name in names]
+    result = _run("check", "--quiet", *map(str, paths))
+    assert result.returncode == 1
+    assert result.stdout == ""
+    assert result.stderr.splitlines() == [line for path in paths for line in _expected(path)]
+    assert "Traceback" not in result.stderr
+
+
+def test_subprocess_missing_file() -> None:
+    result = _run("check", "no/such/file.yaml")
+    assert result.returncode == 1
+    assert result.stderr == "no/such/file.yaml: cannot read: no such file or directory\n"
+
+
+def test_plain_when_piped_and_coloured_when_forced() -> None:
+    args = ("check", str(GOOD / "grating.yaml"), str(BAD / "nan.yaml"))
+    plain = _run(*args)
+    assert "\x1b[" not in plain.stdout + plain.stderr
+    coloured = _run(*args, FORCE_COLOR="1")
+    assert "\x1b[" in coloured.stdout and "\x1b[" in coloured.stderr
+    assert coloured.returncode == 1
+
+
+@pytest.mark.parametrize("kind", ["texture", "device"])
+def test_schema_prints_json(kind: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["schema", kind]) == 0
+    out = capsys.readouterr().out
+    assert json.loads(out) == schema_json(kind)
+    assert out.startswith('{\n  "$schema"')
+
+
+def test_schema_out_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    target = tmp_path / "texture.schema.json"
+    assert main(["schema", "texture", "--out", str(target)]) == 0
+    assert capsys.readouterr().out == ""
+    assert json.loads(target.read_text()) == schema_json("texture")
+
+
+def test_schema_out_file_not_writable(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    target = tmp_path / "missing" / "x.json"
+    assert main(["schema", "device", "--out", str(target)]) == 1
+    assert capsys.readouterr().err == f"tpad-rt schema: cannot write {target}: No such file or directory\n"
+
+
+def test_schema_bad_choice() -> None:
+    result = _run("schema", "sound")
+    assert result.returncode == 1
+    assert "invalid choice: 'sound'" in result.stderr and "Traceback" not in result.stderr
