@@ -163,17 +163,16 @@ class Device:
         )
 
     def power_w_per_v2(self, force_n: npt.ArrayLike) -> FloatOrArray:
-        """Real power (W) per squared peak drive volt at resonance, exact circuit (paper Eqs. 2-6).
+        """Real power (W) per squared peak drive volt at the carrier, exact circuit (paper Eqs. 2-6).
 
-        Drive of 1 V peak (``u_rms = 1/sqrt(2)``) at the motional branch's own resonance
-        at that force (``X1 = 0``, as the paper's Eq. 6 assumes; the calibration files
-        tune it to ``resonance_hz`` at 0 N). The fixed carrier is slightly off it at
-        other forces and draws less, so for the power budget this errs on the high
-        side. Multiply by ``V**2`` for a peak drive of ``V`` volts.
+        Drive of 1 V peak (``u_rms = 1/sqrt(2)``) at ``resonance_hz``, the frequency the
+        runtime drives at, through the shunt into the motional branch at contact force
+        ``force_n``. Multiply by ``V**2`` for a peak drive of ``V`` volts.
         """
         l_h, c_f, r_ohm = self.motional(force_n)
-        freq_hz = electromech.resonance_hz(l_h, c_f)
-        return electromech.real_power_exact(1 / math.sqrt(2), freq_hz, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
+        return electromech.real_power_exact(
+            1 / math.sqrt(2), self.resonance_hz, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm
+        )
 
     def quality_factor(self, force_n: npt.ArrayLike) -> FloatOrArray:
         """Quality factor ``sqrt(L / C) / R`` of the motional branch at contact force ``force_n``."""
