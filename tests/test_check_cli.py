@@ -10,19 +10,13 @@ from pathlib import Path
 
 import pytest
 
+from test_config_bad_files import expected_lines
 from tpad_rt.cli import main
 from tpad_rt.config import schema_json
 
 TESTS = Path(__file__).parent
 GOOD = TESTS / "good_files"
 BAD = TESTS / "bad_files"
-_EXPECT = "# expect: "
-
-
-def _expected(path: Path) -> list[str]:
-    folder = str(path.parent)
-    lines = path.read_text().splitlines()
-    return [f"{path}: " + line.removeprefix(_EXPECT).replace("{dir}", folder) for line in lines if line.startswith(_EXPECT)]
 
 
 def _run(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
@@ -54,7 +48,7 @@ def test_mixed_files_report_every_error_and_a_summary(capsys: pytest.CaptureFixt
     assert main(["check", str(GOOD / "layers.yaml"), *map(str, bad)]) == 1
     out, err = capsys.readouterr()
     assert out.splitlines() == [f"ok  {GOOD / 'layers.yaml'} (texture: layers)", "3 files checked: 1 ok, 2 with errors"]
-    assert err.splitlines() == _expected(bad[0]) + _expected(bad[1])
+    assert err.splitlines() == expected_lines(bad[0]) + expected_lines(bad[1])
 
 
 def test_quiet_prints_only_errors(capsys: pytest.CaptureFixture[str]) -> None:
@@ -62,7 +56,7 @@ def test_quiet_prints_only_errors(capsys: pytest.CaptureFixture[str]) -> None:
     assert capsys.readouterr() == ("", "")
     assert main(["check", "-q", str(GOOD / "grating.yaml"), str(BAD / "nan.yaml")]) == 1
     out, err = capsys.readouterr()
-    assert out == "" and err.splitlines() == _expected(BAD / "nan.yaml")
+    assert out == "" and err.splitlines() == expected_lines(BAD / "nan.yaml")
 
 
 def test_check_needs_a_file(capsys: pytest.CaptureFixture[str]) -> None:
@@ -85,7 +79,7 @@ def test_subprocess_prints_only_breadcrumbs_and_exits_1(names: list[str]) -> Non
     result = _run("check", "--quiet", *map(str, paths))
     assert result.returncode == 1
     assert result.stdout == ""
-    assert result.stderr.splitlines() == [line for path in paths for line in _expected(path)]
+    assert result.stderr.splitlines() == [line for path in paths for line in expected_lines(path)]
     assert "Traceback" not in result.stderr
 
 

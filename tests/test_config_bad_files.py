@@ -16,16 +16,17 @@ BAD_FILES = Path(__file__).parent / "bad_files"
 _EXPECT = "# expect: "
 
 
-def _expected(path: Path) -> list[str]:
+def expected_lines(path: Path) -> list[str]:
     """The ``# expect:`` lines of ``path``, prefixed with the path as the loader shows it."""
     folder = str(path.parent)
     lines = path.read_text().splitlines()
-    return [f"{path}: " + line.removeprefix(_EXPECT).replace("{dir}", folder) for line in lines if line.startswith(_EXPECT)]
+    expected = [line.removeprefix(_EXPECT).replace("{dir}", folder) for line in lines if line.startswith(_EXPECT)]
+    return [f"{path}: {line}" for line in expected]
 
 
 @pytest.mark.parametrize("path", sorted(BAD_FILES.glob("*.yaml")), ids=lambda path: path.stem)
 def test_bad_file_reports_exactly_its_expected_lines(path: Path) -> None:
-    expected = _expected(path)
+    expected = expected_lines(path)
     assert expected, f"{path.name} has no '# expect:' header"
     with pytest.raises(ConfigError) as caught:
         load_any(path)

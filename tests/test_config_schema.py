@@ -25,7 +25,8 @@ def test_schema_header(kind: str) -> None:
 def test_texture_schema_is_a_union_on_kind() -> None:
     schema = schema_json("texture")
     assert schema["discriminator"]["propertyName"] == "kind"
-    assert set(schema["discriminator"]["mapping"]) == {"grating", "bitmap", "gradient", "bumps", "edges", "temporal", "layers"}
+    kinds = {"grating", "bitmap", "gradient", "bumps", "edges", "temporal", "layers"}
+    assert set(schema["discriminator"]["mapping"]) == kinds
     assert schema["$defs"]["Grating"]["additionalProperties"] is False
 
 

@@ -72,7 +72,8 @@ def test_depth_at_the_limit_is_fine_and_one_more_is_not(tmp_path: Path) -> None:
     inner = MAX_DEPTH - 1
     assert _load(tmp_path, "a: " + "[" * inner + "]" * inner + "\n").data["a"] is not None
     more = inner + 1
-    assert _errors(tmp_path, "a: " + "[" * more + "]" * more + "\n") == ["f.yaml: nested deeper than 32 levels (line 1)"]
+    errors = _errors(tmp_path, "a: " + "[" * more + "]" * more + "\n")
+    assert errors == ["f.yaml: nested deeper than 32 levels (line 1)"]
 
 
 def test_depth_counts_expanded_aliases(tmp_path: Path) -> None:
@@ -87,8 +88,14 @@ def test_depth_counts_expanded_aliases(tmp_path: Path) -> None:
         ("a: 2024-13-01\n", "invalid YAML: bad value: month must be in 1..12 (line 1)"),
         ("a: !!int x\n", "invalid YAML: bad value: invalid literal for int() with base 10: 'x' (line 1)"),
         ("a: *nowhere\n", "invalid YAML: found undefined alias 'nowhere' (line 1)"),
-        ("a: 1\n---\nb: 2\n", "invalid YAML: expected a single document in the stream: but found another document (line 2)"),
-        ("a: [1, 2\n", "invalid YAML: while parsing a flow sequence: expected ',' or ']', but got '<stream end>' (line 2)"),
+        (
+            "a: 1\n---\nb: 2\n",
+            "invalid YAML: expected a single document in the stream: but found another document (line 2)",
+        ),
+        (
+            "a: [1, 2\n",
+            "invalid YAML: while parsing a flow sequence: expected ',' or ']', but got '<stream end>' (line 2)",
+        ),
         ("plain text\n", "top level must be a mapping of keys to values, got the single value 'plain text'"),
         ("!!set {a, b}\n", "top level must be a mapping of keys to values, got a !!set collection"),
     ],

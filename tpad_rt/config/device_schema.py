@@ -63,7 +63,8 @@ class _ForceTables(StrictModel):
         for index in range(1, len(self.force_n)):
             previous, force = self.force_n[index - 1], self.force_n[index]
             if force <= previous:
-                raise rule_error(f"must be > {previous:g} (forces must be strictly increasing), got {force:g}", "force_n", index)
+                message = f"must be > {previous:g} (forces must be strictly increasing), got {force:g}"
+                raise rule_error(message, "force_n", index)
         for name in self.tables:
             count = len(getattr(self, name))
             if count != len(self.force_n):

@@ -76,7 +76,8 @@ def _explain_length(error: ErrorDetails, spot: Spot, spots: list[Spot]) -> str:
     if count is not None:
         return f"must be a list of exactly {count} items{_got(error)}"
     if error["type"] == "too_short":
-        return f"must have at least {ctx['min_length']} item{'s' * (ctx['min_length'] != 1)}, got {ctx['actual_length']}"
+        least = ctx["min_length"]
+        return f"must have at least {least} item{'s' * (least != 1)}, got {ctx['actual_length']}"
     return f"must have at most {ctx['max_length']} items, got {ctx['actual_length']}"
 
 

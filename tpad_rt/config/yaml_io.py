@@ -81,7 +81,8 @@ def _compose_and_construct(text: bytes, source: str) -> YamlDocument:
     try:
         root = loader.get_single_node()
         if not isinstance(root, MappingNode) or root.tag != _MAP_TAG:
-            raise ConfigError(breadcrumb(source, (), f"top level must be a mapping of keys to values, got {_kind(root)}"))
+            message = f"top level must be a mapping of keys to values, got {_kind(root)}"
+            raise ConfigError(breadcrumb(source, (), message))
         problems = _check_nodes(root, (), source, set())
         if problems:
             raise ConfigError(problems)
