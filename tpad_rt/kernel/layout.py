@@ -1,0 +1,79 @@
+"""Index constants of the kernel's shared arrays (docs/kernel.md "State layout").
+
+Module-level ints: numba freezes them into the compiled kernels as constants.
+The kernel owns ``STATE_*``; ``CFG_*``, ``DEV_*``, ``FINGER_*``, ``TEL_*`` and the
+flags are the contract with the Python side that fills and reads the arrays.
+"""
+
+# --- cfg: float64[CFG_SIZE], written by Python -------------------------------
+CFG_FS_HZ = 0                 # output sample rate
+CFG_CARRIER_HZ = 1            # device resonance (drive frequency)
+CFG_VOLTS_PER_FS = 2          # drive volts at DAC sample 1.0
+CFG_MAX_VOLTAGE_V = 3         # peak drive never exceeded
+CFG_POWER_CAP_W = 4           # instantaneous power cap
+CFG_POWER_AVG_W = 5           # average power budget over the window
+CFG_WINDOW_STEPS = 6          # M: control steps in the averaging window (== len(power_ring))
+CFG_SPEED_FLOOR_M_S = 7       # speed used in the inversion when slower
+CFG_MU0 = 8                   # friction model (paper Eqs. 2-3)
+CFG_POISSON = 9
+CFG_PSI_STAR = 10
+CFG_MU_FLOOR = 11             # lowest relative friction the kernel asks for
+CFG_CONTROL_INTERVAL = 12     # samples between control steps
+CFG_SMOOTHING_S = 13          # envelope one-pole time constant
+CFG_PREEMPHASIS = 14          # 1.0: shape the drive to speed up the plate envelope
+CFG_HORIZON_S = 15            # extra extrapolation lead (latency compensation)
+CFG_VELOCITY_WINDOW_S = 16    # finger velocity estimated over this span
+CFG_WATCHDOG_S = 17           # no finger sample for longer: gate closes
+CFG_RAMP_S = 18               # gain ramp time (start, stop, watchdog, lift)
+CFG_DEFAULT_FORCE_N = 19      # contact force when a sample carries none (NaN)
+CFG_FORCE_GRID_START_N = 20   # dev tables: force of column 0
+CFG_FORCE_GRID_STEP_N = 21    # dev tables: force step between columns
+CFG_RUN = 22                  # 1.0 while running, 0.0 to ramp down and stay silent
+CFG_TEXTURE_T0_S = 23         # stream time the current texture was set (temporal kinds)
+CFG_SIZE = 24
+
+# --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
+DEV_AMP_M_PER_V = 0           # plate amplitude (m) per peak drive volt
+DEV_POWER_W_PER_V2 = 1        # exact-circuit real power (W) at 1 V peak, at the carrier
+DEV_TAU_S = 2                 # plate envelope time constant Q / (pi f0)
+DEV_ROWS = 3
+
+# --- finger: float64[R, FINGER_COLS], single producer (Python) ---------------
+FINGER_T_S = 0
+FINGER_X_MM = 1
+FINGER_Y_MM = 2
+FINGER_FORCE_N = 3            # NaN: unknown, use CFG_DEFAULT_FORCE_N
+FINGER_DOWN = 4               # 1.0 touching, 0.0 lifted
+FINGER_COLS = 5
+
+# --- telem: float64[T, TEL_COLS], one row per rendered block -----------------
+TEL_T_S = 0
+TEL_X_MM = 1
+TEL_Y_MM = 2
+TEL_SPEED_MM_S = 3
+TEL_FORCE_N = 4
+TEL_TARGET_MU = 5
+TEL_AMPLITUDE_UM = 6          # commanded plate amplitude after the limits
+TEL_VOLTAGE_V = 7             # peak drive envelope in the block
+TEL_POWER_W = 8               # mean estimated power in the block
+TEL_FLAGS = 9                 # OR of the FLAG_* bits over the block
+TEL_COLS = 10
+TEL_NAMES = ("t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu",
+             "amplitude_um", "voltage_v", "power_w", "saturated")
+
+# --- flags -------------------------------------------------------------------
+FLAG_VOLTAGE = 1              # drive limited by max_voltage_v
+FLAG_POWER = 2                # drive limited by the power cap or average budget
+FLAG_SPEED_FLOOR = 4          # finger slower than the speed floor
+FLAG_WATCHDOG = 8             # no fresh finger sample, or finger lifted: gate closed
+
+# --- texture program: int64[N, 4] rows (opcode, params_offset, aux0, aux1) ---
+OP_PUSH_ONE = 0
+OP_GRATING = 1
+OP_BITMAP = 2
+OP_GRADIENT = 3
+OP_BUMPS = 4
+OP_EDGES = 5
+OP_TEMPORAL = 6
+OP_COMBINE = 7
+TEX_PROG_COLS = 4
