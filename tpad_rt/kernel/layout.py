@@ -77,3 +77,31 @@ OP_EDGES = 5
 OP_TEMPORAL = 6
 OP_COMBINE = 7
 TEX_PROG_COLS = 4
+# Codes in the aux columns and parameter records of the texture program (records:
+# tpad_rt/kernel/texture_eval.py docstring; written by tpad_rt/texture.py).
+WAVE_SINE = 0                 # OP_GRATING / OP_TEMPORAL aux0
+WAVE_SQUARE = 1
+WAVE_TRIANGLE = 2
+WAVE_SAWTOOTH = 3
+COMBINE_REPLACE = 0           # OP_COMBINE aux0
+COMBINE_MULTIPLY = 1
+COMBINE_MIN = 2
+COMBINE_MAX = 3
+COMBINE_ADD = 4
+SHAPE_EVERYWHERE = 0          # OP_COMBINE aux1 (region); edges shape records
+SHAPE_RECT = 1
+SHAPE_CIRCLE = 2
+SHAPE_LINE = 3
+SHAPE_RECORD_SIZE = 6         # floats per edges shape record
+WRAP_TILE = 0                 # image maps: outside the image
+WRAP_CLAMP = 1
+HEIGHT_BUMP = 0               # OP_GRADIENT aux0
+HEIGHT_RIDGE = 1
+HEIGHT_SINE = 2
+HEIGHT_IMAGE = 3
+PROFILE_COSINE = 0            # OP_BUMPS / OP_EDGES aux0
+PROFILE_GAUSSIAN = 1
+PROFILE_DISK = 2
+PROFILE_STEP = 3
+GAUSSIAN_REACH_SIGMAS = 3.0   # gaussian bumps end at 3 sigma (sigma = radius / 2)
+LAYER_FLOOR = 0.01            # every COMBINE result is clamped to [LAYER_FLOOR, 1]
