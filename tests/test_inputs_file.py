@@ -1,0 +1,88 @@
+"""file:// input: CSV trajectories, optional columns, and errors with file:line breadcrumbs."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tpad_rt.errors import ConfigError
+from tpad_rt.inputs import open_input
+
+
+def _write(tmp_path: Path, text: str, name: str = "traj.csv") -> Path:
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_reads_every_column_skipping_comments_and_blank_lines(tmp_path: Path) -> None:
+    text = "# a recorded stroke\n\nx_mm, t ,y_mm,down,force_n\n10,0,30,1,0.5\n\n# gap\n11,0.01,31,0,0.25\n"
+    path = _write(tmp_path, text)
+    source = open_input(f"file://{path}")
+    rows = source.samples_between(-math.inf, 1.0)
+    assert rows["t_s"].tolist() == [0.0, 0.01]
+    assert rows["x_mm"].tolist() == [10.0, 11.0] and rows["y_mm"].tolist() == [30.0, 31.0]
+    assert rows["force_n"].tolist() == [0.5, 0.25] and rows["down"].tolist() == [True, False]
+    assert source.duration_s == 0.01
+
+
+def test_optional_columns_default_to_unknown_force_and_touching(tmp_path: Path) -> None:
+    _write(tmp_path, "t,x_mm,y_mm\n0,1,2\n0.5,3,4\n1.0,5,6\n")
+    source = open_input(f"file://{tmp_path}/traj.csv")
+    rows = source.samples_between(0.0, 1.0)  # (0, 1]: the first sample is excluded
+    assert rows["t_s"].tolist() == [0.5, 1.0]
+    assert np.isnan(rows["force_n"]).all() and rows["down"].all()
+
+
+def test_relative_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    _write(tmp_path, "t,x_mm,y_mm\n0,1,2\n")
+    monkeypatch.chdir(tmp_path)
+    assert open_input("file://traj.csv").duration_s == 0.0
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("t,x_mm,y_mm\n0,1,2\n0.1,abc,2\n", "traj.csv:3: column x_mm: must be a number, got 'abc'"),
+        ("t,x_mm,y_mm\n0,1,2\n0.1,1,inf\n", "traj.csv:3: column y_mm: must be a number, got 'inf'"),
+        ("t,x_mm,y_mm\n0,1,2\n# c\n0,1,2\n", "traj.csv:4: column t: must be greater than the previous line's 0, got 0"),
+        ("t,x_mm,y_mm\n0.2,1,2\n0.1,1,2\n",
+         "traj.csv:3: column t: must be greater than the previous line's 0.2, got 0.1"),
+        ("t,x_mm,y_mm\n-1,1,2\n", "traj.csv:2: column t: must be a number >= 0, got '-1'"),
+        ("t,x_mm,y_mm\n0,1\n", "traj.csv:2: 2 fields, expected 3 (t,x_mm,y_mm)"),
+        ("t,x_mm,y_mm,down\n0,1,2,yes\n", "traj.csv:2: column down: must be 0 or 1, got 'yes'"),
+        ("t,x_mm,y_mm,force_n\n0,1,2,-0.5\n", "traj.csv:2: column force_n: must be a number >= 0, got '-0.5'"),
+        ("t,x_mm,y_mm,forse_n\n", "traj.csv:1: header: unknown column 'forse_n'; did you mean 'force_n'?"),
+        ("# c\nt,x,y_mm\n", "traj.csv:2: header: unknown column 'x'"),
+        ("t,x_mm,t\n", "traj.csv:1: header: column 't' appears twice"),
+        ("t,x_mm\n0,1\n", "traj.csv:1: header: missing column y_mm; expected t,x_mm,y_mm[,force_n][,down]"),
+        ("t,x_mm,y_mm\n", "traj.csv: no samples after the header"),
+        ("# only a comment\n\n", "traj.csv: empty; expected a header line t,x_mm,y_mm[,force_n][,down]"),
+    ],
+)
+def test_errors_name_the_file_and_line(tmp_path: Path, text: str, expected: str) -> None:
+    path = _write(tmp_path, text)
+    with pytest.raises(ConfigError) as caught:
+        open_input(f"file://{path}")
+    assert str(caught.value).startswith(f"{tmp_path}/{expected}")
+
+
+def test_unreadable_files(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"missing\.csv: no such file"):
+        open_input(f"file://{tmp_path}/missing.csv")
+    (tmp_path / "latin1.csv").write_bytes(b"t,x_mm,y_mm\n0,1,2\xe9\n")
+    with pytest.raises(ConfigError, match=r"latin1\.csv:2: not UTF-8 text"):
+        open_input(f"file://{tmp_path}/latin1.csv")
+    with pytest.raises(ConfigError, match="cannot read"):
+        open_input(f"file://{tmp_path}")
+
+
+def test_url_errors(tmp_path: Path) -> None:
+    expected = r"input URL 'file://': missing the file path; expected file:///path/trajectory\.csv"
+    with pytest.raises(ConfigError, match=expected):
+        open_input("file://")
+    with pytest.raises(ConfigError, match=r"unknown option 'rate_hz' \(options: none\)"):
+        open_input(f"file://{tmp_path}/x.csv?rate_hz=5")
