@@ -1,0 +1,87 @@
+"""``sim://``: a simulated TPaD driven by the drive samples (no hardware needed).
+
+The plate is the resonator of :mod:`tpad_rt.kernel.sim` at the device's resonance,
+with the device's quality factor at the block's contact force (``?q=`` holds it fixed
+instead) and the calibration gain ``amplitude_m_per_v(force)``. Per block it records
+the plate's mean vibration amplitude ``plate_amplitude_um`` and the relative friction
+the finger would feel, ``achieved_mu``: the forward friction model (paper Eqs. 2-3) at
+that amplitude and the block's finger speed, raised to the device's speed floor when
+slower (or unknown).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+import numpy.typing as npt
+
+from tpad_rt.device import Device
+from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, resonate, resonator_coefficients
+from tpad_rt.outputs.base import Output
+from tpad_rt.physics.friction import relative_friction_core
+from tpad_rt.urls import Option, Url, UrlForm, number
+
+_Q_NUMBER = number(0.5, low_closed=False)
+
+
+def _quality_factor(text: str) -> float | str:
+    """``device`` (the device's Q at each block's force) or a number > 0.5."""
+    if text == "device":
+        return text
+    try:
+        return _Q_NUMBER(text)
+    except ValueError:
+        raise ValueError("must be device or a number > 0.5") from None
+
+
+#: The accepted URL.
+FORMS = (UrlForm("sim", "", (Option("q", "device", _quality_factor),)),)
+
+
+class SimOutput(Output):
+    """A simulated plate for ``device`` at ``fs_hz`` (Hz); ``q``: fixed quality factor, or None."""
+
+    def __init__(self, device: Device, fs_hz: int, q: float | None = None):
+        super().__init__(fs_hz)
+        self.device = device
+        self.q = q
+        self._state = np.zeros(SIM_STATE_SIZE)
+        self._coef = np.zeros(COEF_SIZE)
+        self._envelope_m = np.zeros(0)
+        self._amplitude_um: list[float] = []
+        self._achieved_mu: list[float] = []
+
+    def write(self, samples: npt.NDArray[np.float32], block: Mapping[str, float]) -> None:
+        """Drive the plate with ``samples`` (at least one); ``block`` must carry ``force_n`` (N) and ``speed_mm_s``."""
+        force_n = float(block["force_n"])
+        device = self.device
+        q = self.q if self.q is not None else float(device.quality_factor(force_n))
+        resonator_coefficients(device.resonance_hz, q, float(device.amplitude_m_per_v(force_n)),
+                               float(self.fs_hz), self._coef)
+        if len(self._envelope_m) < len(samples):
+            self._envelope_m = np.zeros(len(samples))
+        envelope_m = self._envelope_m[:len(samples)]
+        resonate(samples, device.volts_per_full_scale, self._coef, self._state, envelope_m)
+        amplitude_m = float(envelope_m.mean())
+        speed_m_s = float(block["speed_mm_s"]) * 1e-3
+        speed_m_s = max(speed_m_s, device.speed_floor_m_s) if math.isfinite(speed_m_s) else device.speed_floor_m_s
+        self._amplitude_um.append(amplitude_m * 1e6)
+        self._achieved_mu.append(relative_friction_core(
+            amplitude_m, device.resonance_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
+
+    def measurements(self) -> dict[str, npt.NDArray[np.float64]]:
+        """``plate_amplitude_um`` (mean envelope, um) and ``achieved_mu`` per block written."""
+        return {
+            "plate_amplitude_um": np.array(self._amplitude_um, dtype=np.float64),
+            "achieved_mu": np.array(self._achieved_mu, dtype=np.float64),
+        }
+
+
+def open_url(url: Url, *, device: Device, fs_hz: int) -> SimOutput:
+    """A SimOutput for ``device``; ConfigError for an unknown option, a bad ``q`` or a target."""
+    values = FORMS[0].read(url)
+    if url.target:
+        raise url.fail(f"unexpected '{url.target}' after sim://", FORMS)
+    return SimOutput(device, fs_hz, q=None if values["q"] == "device" else values["q"])

@@ -1,0 +1,94 @@
+"""``wav:///path/out.wav``: the drive as a mono 32-bit float WAV file, streamed to disk.
+
+``wav:///abs/path.wav`` or ``wav://relative/path.wav``. The stdlib ``wave`` module
+writes only integer PCM, so the header is written here: RIFF/WAVE with a ``fmt ``
+chunk of format 3 (IEEE float), a ``fact`` chunk (required for non-PCM formats) and
+the ``data`` chunk; the sizes are filled in on :meth:`WavOutput.close`. Samples are
+the DAC values as they are (full scale 1.0 = ``volts_per_full_scale``).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from tpad_rt.device import Device
+from tpad_rt.errors import BackendError
+from tpad_rt.outputs.base import Output
+from tpad_rt.urls import Url, UrlForm
+
+#: The accepted URL.
+FORMS = (UrlForm("wav", "/path/out.wav"),)
+
+_FORMAT_IEEE_FLOAT = 3
+_BYTES_PER_SAMPLE = 4
+# Byte offsets of the sizes patched on close (header: RIFF 12 + fmt 26 + fact 12 + data 8).
+_RIFF_SIZE_AT = 4
+_FACT_FRAMES_AT = 46
+_DATA_SIZE_AT = 54
+_HEADER_BYTES = 58
+#: RIFF sizes are 32-bit.
+MAX_DATA_BYTES = 2**32 - 1 - (_HEADER_BYTES - 8)
+
+
+def _header(fs_hz: int, data_bytes: int) -> bytes:
+    frames = data_bytes // _BYTES_PER_SAMPLE
+    fmt = struct.pack("<HHIIHHH", _FORMAT_IEEE_FLOAT, 1, fs_hz, fs_hz * _BYTES_PER_SAMPLE,
+                      _BYTES_PER_SAMPLE, 8 * _BYTES_PER_SAMPLE, 0)
+    return b"".join([
+        b"RIFF", struct.pack("<I", _HEADER_BYTES - 8 + data_bytes), b"WAVE",
+        b"fmt ", struct.pack("<I", len(fmt)), fmt,
+        b"fact", struct.pack("<II", 4, frames),
+        b"data", struct.pack("<I", data_bytes),
+    ])
+
+
+class WavOutput(Output):
+    """Streams blocks into a 32-bit float mono WAV file at ``path``, sample rate ``fs_hz`` (Hz)."""
+
+    def __init__(self, path: str | Path, fs_hz: int):
+        super().__init__(fs_hz)
+        self.path = Path(path)
+        self.data_bytes = 0
+        try:
+            self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+            self._file.write(_header(fs_hz, 0))
+        except OSError as error:
+            raise BackendError(f"wav: cannot write {self.path} ({error.strerror})") from None
+
+    def write(self, samples: npt.NDArray[np.float32], block: Mapping[str, float]) -> None:
+        """Append ``samples``; BackendError when the file would pass the 4 GiB RIFF limit or a write fails."""
+        data = np.asarray(samples, dtype="<f4").tobytes()
+        if self.data_bytes + len(data) > MAX_DATA_BYTES:
+            raise BackendError(f"wav: {self.path} would exceed the 4 GiB WAV size limit; render a shorter span")
+        try:
+            self._file.write(data)
+        except OSError as error:
+            raise BackendError(f"wav: cannot write {self.path} ({error.strerror})") from None
+        self.data_bytes += len(data)
+
+    def close(self) -> None:
+        """Fill in the header's sizes and close the file (again: nothing)."""
+        if self._file.closed:
+            return
+        try:
+            header = _header(self.fs_hz, self.data_bytes)
+            for offset in (_RIFF_SIZE_AT, _FACT_FRAMES_AT, _DATA_SIZE_AT):
+                self._file.seek(offset)
+                self._file.write(header[offset:offset + 4])
+        except OSError as error:
+            raise BackendError(f"wav: cannot finish {self.path} ({error.strerror})") from None
+        finally:
+            self._file.close()
+
+
+def open_url(url: Url, *, device: Device, fs_hz: int) -> WavOutput:
+    """A WavOutput writing the file ``url`` names; ConfigError without a path or with an option."""
+    FORMS[0].read(url)
+    if not url.target:
+        raise url.fail("missing the file path", FORMS)
+    return WavOutput(url.target, fs_hz)
