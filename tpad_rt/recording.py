@@ -1,0 +1,172 @@
+"""Recordings: a render's drive, per-block telemetry and metadata in one ``.npz`` file.
+
+Entries (NumPy arrays; no pickled objects, so ``np.load(path, allow_pickle=False)``
+reads every one):
+
+- ``format`` (0-d str, ``"tpad-rt recording"``) and ``format_version`` (0-d int);
+- ``fs`` (0-d int): sample rate (Hz) of ``drive``;
+- ``drive`` (float32 ``[samples]``): the DAC samples, in ``[-1, 1]``;
+- one 1-D array per block, all the same length: the telemetry columns ``t, x_mm, y_mm,
+  speed_mm_s, force_n, target_mu, amplitude_um, voltage_v, power_w, saturated``
+  (``tpad_rt.kernel.layout.TEL_NAMES``), plus ``achieved_mu`` and
+  ``plate_amplitude_um`` when the output was the simulated plate;
+- ``metadata_json`` (0-d str): a JSON object with at least the keys in
+  :data:`REQUIRED_METADATA` (texture path and description, device label, carrier,
+  volts per full scale, max voltage, power budgets, block size, tpad-rt version).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.kernel.layout import TEL_NAMES
+
+FORMAT = "tpad-rt recording"
+FORMAT_VERSION = 1
+#: Per-block arrays the simulated plate adds (both or neither).
+SIM_NAMES = ("achieved_mu", "plate_amplitude_um")
+#: Metadata keys every recording has (values: JSON numbers, text or null).
+REQUIRED_METADATA = (
+    "texture_path", "texture_description", "device_label", "carrier_hz", "volts_per_full_scale",
+    "max_voltage_v", "power_budget_w", "power_avg_w", "power_window_s", "block_frames", "tpad_rt_version",
+)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A render: ``fs_hz`` (Hz), ``drive`` (float32 DAC samples), ``blocks`` (name -> per-block array)
+    and ``metadata`` (a JSON-compatible dict)."""
+
+    fs_hz: int
+    drive: npt.NDArray[np.float32]
+    blocks: dict[str, np.ndarray]
+    metadata: dict[str, Any]
+
+    @property
+    def has_sim(self) -> bool:
+        """True when the plate was simulated (``achieved_mu`` and ``plate_amplitude_um`` present)."""
+        return all(name in self.blocks for name in SIM_NAMES)
+
+
+def write_recording(path: str | Path, recording: Recording) -> None:
+    """Write ``recording`` to ``path`` (exactly that name); BackendError when it cannot be written.
+
+    Raises ConfigError when ``recording`` itself breaks the format (see :func:`read_recording`).
+    """
+    path = Path(path)
+    entries = {
+        "format": np.array(FORMAT),
+        "format_version": np.array(FORMAT_VERSION),
+        "fs": np.array(recording.fs_hz, dtype=np.int64),
+        "drive": np.asarray(recording.drive),
+        "metadata_json": np.array(json.dumps(recording.metadata, allow_nan=False)),
+        **recording.blocks,
+    }
+    _check(str(path), entries)
+    try:
+        with open(path, "wb") as file:
+            np.savez(file, **entries)
+    except OSError as error:
+        raise BackendError(f"{path}: cannot write the recording ({error.strerror})") from None
+
+
+def read_recording(path: str | Path) -> Recording:
+    """The recording in the ``.npz`` file at ``path``.
+
+    Raises ConfigError naming the file when it is missing or unreadable, not an ``.npz``
+    archive, holds pickled objects, or is not a valid recording of this format version
+    (each problem found is one line).
+    """
+    try:
+        loaded = np.load(path, allow_pickle=False)
+        if isinstance(loaded, np.ndarray):
+            raise ConfigError(f"{path}: not a tpad-rt recording (a single .npy array, not an .npz archive)")
+        with loaded as archive:
+            entries = {name: archive[name] for name in archive.files}
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except (zipfile.BadZipFile, EOFError, OSError, ValueError) as error:
+        reason = "holds pickled objects" if "Object arrays" in str(error) else "not an .npz archive"
+        raise ConfigError(f"{path}: not a tpad-rt recording ({reason})") from None
+    _check(str(path), entries)
+    blocks = {name: entries[name] for name in (*TEL_NAMES, *SIM_NAMES) if name in entries}
+    return Recording(
+        fs_hz=int(entries["fs"]),
+        drive=entries["drive"],
+        blocks=blocks,
+        metadata=json.loads(str(entries["metadata_json"])),
+    )
+
+
+def _check(where: str, entries: dict[str, np.ndarray]) -> None:
+    """ConfigError listing every way ``entries`` break the format."""
+    if "format" not in entries or entries["format"].shape != () or str(entries["format"]) != FORMAT:
+        raise ConfigError(f"{where}: not a tpad-rt recording (no 'format' entry saying '{FORMAT}')")
+    version = entries.get("format_version")
+    if version is None or version.shape != () or version.dtype.kind not in "iu" or int(version) != FORMAT_VERSION:
+        raise ConfigError(f"{where}: format_version: must be {FORMAT_VERSION}, got {_show(version)}")
+    problems = [*_check_header(entries), *_check_blocks(entries), *_check_metadata(entries)]
+    if problems:
+        raise ConfigError([f"{where}: {problem}" for problem in problems])
+
+
+def _show(value: np.ndarray | None) -> str:
+    return "nothing" if value is None else f"{value.dtype} array of shape {value.shape}"
+
+
+def _check_header(entries: dict[str, np.ndarray]) -> list[str]:
+    problems = []
+    fs = entries.get("fs")
+    if fs is None or fs.shape != () or fs.dtype.kind not in "iu" or int(fs) <= 0:
+        problems.append(f"fs: must be a whole number > 0, got {_show(fs)}")
+    drive = entries.get("drive")
+    if drive is None or drive.dtype != np.float32 or drive.ndim != 1:
+        problems.append(f"drive: must be a 1-D float32 array, got {_show(drive)}")
+    elif len(drive) and not (np.all(np.isfinite(drive)) and float(np.max(np.abs(drive))) <= 1.0):
+        problems.append("drive: samples must be finite and in [-1, 1]")
+    return problems
+
+
+def _check_blocks(entries: dict[str, np.ndarray]) -> list[str]:
+    problems = [f"{name}: missing" for name in TEL_NAMES if name not in entries]
+    present_sim = [name for name in SIM_NAMES if name in entries]
+    if present_sim and len(present_sim) != len(SIM_NAMES):
+        problems.append(f"{' and '.join(SIM_NAMES)}: must both be present or both absent")
+    names = [name for name in (*TEL_NAMES, *SIM_NAMES) if name in entries]
+    lengths = set()
+    for name in names:
+        array = entries[name]
+        if array.ndim != 1 or array.dtype.kind not in "biuf":
+            problems.append(f"{name}: must be a 1-D numeric array, got {_show(array)}")
+        lengths.add(len(array) if array.ndim else -1)
+    if len(lengths) > 1:
+        problems.append("per-block arrays: must all have the same length, got " +
+                        ", ".join(f"{name} {len(entries[name]) if entries[name].ndim else 'scalar'}" for name in names))
+    return problems
+
+
+def _check_metadata(entries: dict[str, np.ndarray]) -> list[str]:
+    text = entries.get("metadata_json")
+    if text is None or text.shape != () or text.dtype.kind != "U":
+        return [f"metadata_json: must be a JSON text, got {_show(text)}"]
+    try:
+        metadata = json.loads(str(text))
+    except json.JSONDecodeError as error:
+        return [f"metadata_json: not valid JSON ({error.msg} at character {error.pos})"]
+    if not isinstance(metadata, dict):
+        return ["metadata_json: must be a JSON object"]
+    problems = [f"metadata_json: {key}: missing" for key in REQUIRED_METADATA if key not in metadata]
+    for key in REQUIRED_METADATA:
+        value = metadata.get(key)
+        if isinstance(value, float) and not math.isfinite(value):
+            problems.append(f"metadata_json: {key}: must be finite, got {value}")
+    return problems
