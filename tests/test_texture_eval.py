@@ -25,8 +25,11 @@ GOOD = REPO / "tests" / "good_files"
 EXAMPLES = sorted((REPO / "textures").glob("*.yaml"))
 GOOD_TEXTURES = sorted(path for path in GOOD.glob("*.yaml") if path.name != "device.yaml")
 TOLERANCE = 1e-9
-#: Step (mm, s) to the neighbours a value on a discontinuity may take its value from.
-NUDGE = 1e-6
+#: Relative steps (of max(1, |value|)) to the neighbours whose value a point on a discontinuity may take.
+NUDGES = 10.0 ** -np.arange(6, 16)
+#: Every combination of -1, 0, 1 for x, y and t, at every step.
+_SIGNS = np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=3)))
+_NEIGHBOURS = (_SIGNS[None] * NUDGES[:, None, None]).reshape(-1, 3)
 JIT_DISABLED = os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0")
 
 _TEXTURE = TypeAdapter(TextureFile)
@@ -51,20 +54,30 @@ def assert_kernel_matches_reference(model: Any, x, y, ux, uy, t) -> np.ndarray:
     """Kernel == reference to TOLERANCE at every point; returns the kernel values.
 
     Where they differ, the point must sit on a discontinuity that the two sides round
-    differently: the kernel's value must then be the reference's at a neighbour
-    (x, y and t each moved by -NUDGE, 0 or +NUDGE).
+    differently: the kernel's value must then be the reference's at a neighbour (x, y
+    and t each moved by -1, 0 or +1 step, steps from 1e-6 down to 1e-15 relative: small
+    enough that a steep but continuous part of the texture barely changes).
     """
     x, y, ux, uy, t = (np.asarray(a, dtype=np.float64).ravel() for a in np.broadcast_arrays(x, y, ux, uy, t))
     kernel = kernel_friction(compile_texture(model), x, y, ux, uy, t)
     reference = reference_friction(model, x, y, ux, uy, t)
     for i in np.flatnonzero(np.abs(kernel - reference) > TOLERANCE):
-        steps = np.array(list(itertools.product((-NUDGE, 0.0, NUDGE), repeat=3)))
-        around = reference_friction(model, x[i] + steps[:, 0], y[i] + steps[:, 1], ux[i], uy[i], t[i] + steps[:, 2])
+        x_i, y_i, t_i = (v[i] + _NEIGHBOURS[:, k] * max(1.0, abs(v[i])) for k, v in enumerate((x, y, t)))
+        around = reference_friction(model, x_i, y_i, ux[i], uy[i], t_i)
         assert np.min(np.abs(around - kernel[i])) <= TOLERANCE, (
             f"kernel {kernel[i]!r} != reference {reference[i]!r} at x={x[i]!r}, y={y[i]!r}, "
             f"u=({ux[i]!r}, {uy[i]!r}), t={t[i]!r}, nor at any neighbour"
         )
     return kernel
+
+
+def test_a_point_on_a_discontinuity_may_take_either_side() -> None:
+    # The kernel's 49 * (1 / 49) rounds below 1 (top of the sawtooth), the reference's 49 / 49 is 1 (bottom).
+    model = texture_model({"description": "t", "kind": "grating", "waveform": "sawtooth", "period_mm": 49.0,
+                           "friction": {"low": 0.5, "high": 1.0}})
+    kernel = kernel_friction(compile_texture(model), 49.0, 0.0, 0.0, 0.0, 0.0)
+    assert kernel - reference_friction(model, 49.0, 0.0, 0.0, 0.0, 0.0) == pytest.approx(0.5)
+    assert_kernel_matches_reference(model, 49.0, 0.0, 0.0, 0.0, 0.0)
 
 
 def _grid_inputs() -> tuple[np.ndarray, ...]:
