@@ -40,6 +40,10 @@ class Output(ABC):
         """Per-block arrays the output measured so far, by name (none by default)."""
         return {}
 
+    def latest(self) -> dict[str, float]:
+        """The last block's measurements, by name (none by default); cheap, for status lines."""
+        return {}
+
     def close(self) -> None:
         """Finish and release what the output holds (nothing by default)."""
 

@@ -71,6 +71,12 @@ class SimOutput(Output):
         self._achieved_mu.append(relative_friction_core(
             amplitude_m, device.resonance_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
 
+    def latest(self) -> dict[str, float]:
+        """``plate_amplitude_um`` and ``achieved_mu`` of the last block written (none before the first)."""
+        if not self._achieved_mu:
+            return {}
+        return {"plate_amplitude_um": self._amplitude_um[-1], "achieved_mu": self._achieved_mu[-1]}
+
     def measurements(self) -> dict[str, npt.NDArray[np.float64]]:
         """``plate_amplitude_um`` (mean envelope, um) and ``achieved_mu`` per block written."""
         return {
