@@ -1,0 +1,253 @@
+"""``tpad-rt show TEXTURE --out FILE.png``: a texture drawn over the plate, with what it costs to render.
+
+Three maps over the device's plate (length x width, y down as on the screen), for a
+finger sliding at ``--speed-mm-s`` towards ``--direction-deg`` with ``--force-n``
+at ``--t-s`` seconds after the texture was set:
+
+1. the target relative friction, evaluated by the compiled texture kernel;
+2. the peak drive volts that friction asks for (inverse friction model at the finger
+   speed, at least the device's speed floor, divided by the plate's amplitude per
+   volt at that force), clipped at the device's ``max_voltage_v``; where it would
+   exceed it, the area is hatched and outlined (saturated);
+3. the estimated electrical power of the clipped drive, with a contour at the
+   device's power budget.
+
+Prints one line: the file written and the share of the plate that saturates.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+
+from tpad_rt.device import Device
+from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.physics.friction import amplitude_for
+from tpad_rt.texture import CompiledTexture, load_compiled
+
+_FORMATS = (".png", ".pdf", ".svg")
+#: Most grid points a figure evaluates (a 130 x 60 mm plate at 0.02 mm).
+MAX_POINTS = 20_000_000
+_BUDGET_COLOUR = "#00c8ff"
+
+
+@dataclass(frozen=True)
+class Finger:
+    """How the finger moves: speed (mm/s, >= 0), direction (degrees, counter-clockwise on screen), force (N, >= 0)."""
+
+    speed_mm_s: float
+    direction_deg: float
+    force_n: float
+
+    @property
+    def unit_direction(self) -> tuple[float, float]:
+        """Unit direction of motion in plate coordinates (y down); (0, 0) for a still finger."""
+        if self.speed_mm_s == 0.0:
+            return 0.0, 0.0
+        angle = math.radians(self.direction_deg)
+        return math.cos(angle), -math.sin(angle)
+
+
+@dataclass(frozen=True)
+class PlateMaps:
+    """Maps over the plate, rows along y: ``x_mm`` (columns) and ``y_mm`` (rows) are the cell centres.
+
+    ``friction`` target relative friction; ``volts_asked`` peak drive volts the target
+    needs (unclipped); ``volts`` the same clipped at ``max_voltage_v``; ``power_w`` the
+    estimated power of ``volts``; ``saturated`` where ``volts_asked > max_voltage_v``.
+    """
+
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    friction: np.ndarray
+    volts_asked: np.ndarray
+    volts: np.ndarray
+    power_w: np.ndarray
+    saturated: np.ndarray
+
+    @property
+    def saturated_percent(self) -> float:
+        """Share of the plate (%) where the drive saturates at ``max_voltage_v``."""
+        return 100.0 * float(np.mean(self.saturated))
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Register ``show``."""
+    parser = subparsers.add_parser(
+        "show",
+        help="draw a texture over the plate: target friction, drive volts and power",
+        description="Draw a texture's target friction over the device's plate, the drive volts it asks for "
+        "at a finger speed and force (clipped at the device's maximum, saturated area hatched) and the "
+        "estimated power against the device's power budget.",
+    )
+    parser.add_argument("texture", metavar="TEXTURE", help="texture file (.yaml)")
+    parser.add_argument("--device", metavar="FILE", help="device file (default: calibration/default.yaml)")
+    parser.add_argument("--speed-mm-s", type=float, default=100.0, help="finger speed, mm/s (default 100)")
+    parser.add_argument("--force-n", type=float, default=0.5, help="contact force, N (default 0.5)")
+    parser.add_argument("--direction-deg", type=float, default=0.0,
+                        help="direction of finger motion, degrees counter-clockwise from +x on screen (default 0)")
+    parser.add_argument("--t-s", type=float, default=0.0, help="seconds since the texture was set (default 0)")
+    parser.add_argument("--resolution-mm", type=float, default=0.25, help="grid step, mm (default 0.25)")
+    parser.add_argument("--out", metavar="FILE.png", required=True, help="figure to write (.png, .pdf or .svg)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the figure and print a one-line summary; 0 on success.
+
+    Raises ConfigError for a bad texture or device file or a bad option value,
+    BackendError when the figure cannot be written.
+    """
+    finger = Finger(
+        speed_mm_s=_checked("--speed-mm-s", args.speed_mm_s, minimum=0.0),
+        direction_deg=_checked("--direction-deg", args.direction_deg),
+        force_n=_checked("--force-n", args.force_n, minimum=0.0),
+    )
+    t_s = _checked("--t-s", args.t_s, minimum=0.0)
+    resolution_mm = _checked("--resolution-mm", args.resolution_mm, minimum=0.0, inclusive=False)
+    out = Path(args.out)
+    if out.suffix.lower() not in _FORMATS:
+        raise ConfigError(f"--out: must end in {', '.join(_FORMATS)}, got '{args.out}'")
+    device = Device.from_file(args.device) if args.device else Device.default()
+    texture = load_compiled(args.texture)
+    maps = plate_maps(texture, device, finger, t_s, resolution_mm)
+    figure = draw(maps, texture, device, finger, t_s, source=Path(args.texture).name)
+    try:
+        figure.savefig(out, dpi=150)
+    except OSError as error:
+        raise BackendError(f"{out}: cannot write the figure ({error.strerror or error})") from None
+    _summary(out, maps, device)
+    return 0
+
+
+def _checked(option: str, value: float, minimum: float | None = None, inclusive: bool = True) -> float:
+    """``value`` if finite and at least (or, not ``inclusive``, above) ``minimum``; else ConfigError naming ``option``."""
+    below = minimum is not None and (value < minimum if inclusive else value <= minimum)
+    if not math.isfinite(value) or below:
+        bound = "" if minimum is None else f" {'>=' if inclusive else '>'} {minimum:g}"
+        raise ConfigError(f"{option}: must be a finite number{bound}, got {value:g}")
+    return value
+
+
+def plate_maps(
+    texture: CompiledTexture, device: Device, finger: Finger, t_s: float, resolution_mm: float
+) -> PlateMaps:
+    """Friction, drive volts and power at the centres of a ``resolution_mm`` grid over the plate.
+
+    Raises ConfigError if the grid would have more than MAX_POINTS points.
+    """
+    length_mm, width_mm = device.plate.length_m * 1e3, device.plate.width_m * 1e3
+    columns, rows = math.ceil(length_mm / resolution_mm), math.ceil(width_mm / resolution_mm)
+    if columns * rows > MAX_POINTS:
+        finest = math.sqrt(length_mm * width_mm / MAX_POINTS)
+        raise ConfigError(f"--resolution-mm: {resolution_mm:g} gives {columns} x {rows} points; use >= {finest:.3g}")
+    x_mm = (np.arange(columns) + 0.5) * (length_mm / columns)
+    y_mm = (np.arange(rows) + 0.5) * (width_mm / rows)
+    ux, uy = finger.unit_direction
+    friction = texture.evaluate(x_mm[None, :], y_mm[:, None], ux, uy, t_s)
+    speed_m_s = max(finger.speed_mm_s * 1e-3, device.speed_floor_m_s)
+    amplitude_m = amplitude_for(friction, device.resonance_hz, speed_m_s, device.mu0, device.poisson, device.psi_star)
+    volts_asked = amplitude_m / device.amplitude_m_per_v(finger.force_n)
+    volts = np.minimum(volts_asked, device.max_voltage_v)
+    return PlateMaps(
+        x_mm=x_mm,
+        y_mm=y_mm,
+        friction=friction,
+        volts_asked=volts_asked,
+        volts=volts,
+        power_w=device.power_w_per_v2(finger.force_n) * volts**2,
+        saturated=volts_asked > device.max_voltage_v,
+    )
+
+
+def draw(maps: PlateMaps, texture: CompiledTexture, device: Device, finger: Finger, t_s: float, source: str) -> Any:
+    """A matplotlib Figure of the three maps (module docstring), titled with the texture's description."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+
+    figure, panels = plt.subplots(3, 1, figsize=(8.6, 11.0), layout="constrained", sharex=True)
+    figure.suptitle(texture.description, fontsize=12, fontweight="bold")
+    moving = f"towards {finger.direction_deg:g}°" if finger.speed_mm_s > 0 else "(still)"
+    figure.supxlabel(f"{source} ({texture.kind}) on {device.label}: finger {finger.speed_mm_s:g} mm/s {moving}, "
+                     f"{finger.force_n:g} N, t = {t_s:g} s", fontsize=9, color="0.3")
+    extent = (0.0, device.plate.length_m * 1e3, device.plate.width_m * 1e3, 0.0)
+    _friction_panel(figure, panels[0], maps, extent)
+    if finger.speed_mm_s > 0:
+        _direction_arrow(panels[0], finger.direction_deg)
+    _volts_panel(figure, panels[1], maps, device, extent)
+    _power_panel(figure, panels[2], maps, device, extent)
+    panels[2].set_xlabel("x (mm)")
+    return figure
+
+
+def _map(figure: Any, axes: Any, values: np.ndarray, extent: tuple[float, ...], cmap: str, vmax: float,
+         label: str) -> Any:
+    """Draw ``values`` over the plate on ``axes`` (y down, 0 to ``vmax``) with a colourbar; returns it."""
+    image = axes.imshow(values, extent=extent, origin="upper", cmap=cmap, vmin=0.0, vmax=vmax,
+                        interpolation="nearest", aspect="equal")
+    axes.set_ylabel("y (mm)")
+    return figure.colorbar(image, ax=axes, label=label, shrink=0.9, pad=0.02)
+
+
+def _friction_panel(figure: Any, axes: Any, maps: PlateMaps, extent: tuple[float, ...]) -> None:
+    _map(figure, axes, maps.friction, extent, "viridis", 1.0, "relative friction μ'")
+    axes.set_title(f"target friction (1: vibration off): {maps.friction.min():.3g} to {maps.friction.max():.3g}",
+                   fontsize=10, loc="left")
+
+
+def _direction_arrow(axes: Any, direction_deg: float) -> None:
+    """A 28-point arrow near the top-right corner of ``axes`` pointing where the finger moves (screen angle)."""
+    from matplotlib import patheffects
+    from matplotlib.text import OffsetFrom
+
+    angle = math.radians(direction_deg)
+    half = (14.0 * math.cos(angle), 14.0 * math.sin(angle))  # points, y up on the screen
+    centre = OffsetFrom(axes, (0.93, 0.78), unit="points")
+    outline = [patheffects.withStroke(linewidth=3.5, foreground="black")]
+    axes.annotate("", xy=half, xycoords=centre, xytext=(-half[0], -half[1]), textcoords=centre,
+                  arrowprops={"arrowstyle": "-|>", "color": "white", "lw": 2.0, "path_effects": outline})
+    axes.annotate("finger", xy=(0.0, -18.0), xycoords=centre, ha="center", va="top", color="white", fontsize=8,
+                  path_effects=outline)
+
+
+def _volts_panel(figure: Any, axes: Any, maps: PlateMaps, device: Device, extent: tuple[float, ...]) -> None:
+    _map(figure, axes, maps.volts, extent, "magma", device.max_voltage_v, "drive (V peak)")
+    if maps.saturated.any():
+        axes.contourf(maps.x_mm, maps.y_mm, maps.saturated.astype(float), levels=[0.5, 1.5], colors="none",
+                      hatches=["////"])
+        axes.contour(maps.x_mm, maps.y_mm, maps.saturated.astype(float), levels=[0.5], colors="#00c853",
+                     linewidths=1.0)
+    axes.set_title(f"drive asked for, clipped at {device.max_voltage_v:g} V; hatched: saturated, "
+                   f"{maps.saturated_percent:.1f} % of the plate (asks up to {maps.volts_asked.max():.3g} V)",
+                   fontsize=10, loc="left")
+
+
+def _power_panel(figure: Any, axes: Any, maps: PlateMaps, device: Device, extent: tuple[float, ...]) -> None:
+    budget_w = device.power_budget_w
+    top_w = max(float(maps.power_w.max()), budget_w) * 1.05
+    colourbar = _map(figure, axes, maps.power_w, extent, "inferno", top_w, "estimated power (W)")
+    colourbar.ax.axhline(budget_w, color=_BUDGET_COLOUR, linewidth=2.0)
+    over = maps.power_w > budget_w
+    if over.any():
+        axes.contour(maps.x_mm, maps.y_mm, maps.power_w, levels=[budget_w], colors=_BUDGET_COLOUR, linewidths=1.2)
+        state = f"over it on {100.0 * over.mean():.1f} % of the plate"
+    else:
+        state = "not reached"
+    axes.set_title(f"estimated power, peak {maps.power_w.max():.3g} W; budget {budget_w:g} W (cyan): {state}",
+                   fontsize=10, loc="left")
+
+
+def _summary(out: Path, maps: PlateMaps, device: Device) -> None:
+    """One line on stdout: the file written and the saturated share of the plate."""
+    console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
+    console.print(f"wrote {out}: {maps.saturated_percent:.1f} % of the plate saturated "
+                  f"(drive > {device.max_voltage_v:g} V), peak power {maps.power_w.max():.3g} W "
+                  f"of a {device.power_budget_w:g} W budget")
