@@ -1,0 +1,122 @@
+"""``tpad-rt show``: the figure, the maps behind it, and one clear line for every bad input."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from tpad_rt.cli import main
+from tpad_rt.cli.show import Finger, plate_maps
+from tpad_rt.device import Device
+from tpad_rt.physics.friction import relative_friction
+from tpad_rt.texture import load_compiled
+
+REPO = Path(__file__).resolve().parents[1]
+TEXTURES = REPO / "textures"
+GOOD = REPO / "tests" / "good_files"
+#: figsize (8.6, 11.0) inches at 150 dpi.
+FIGURE_PX = (1290, 1650)
+
+
+@pytest.mark.parametrize(
+    ("texture", "extra"),
+    [
+        (TEXTURES / "layers_window.yaml", []),
+        (GOOD / "gradient_image.yaml", ["--device", str(GOOD / "device.yaml"), "--direction-deg", "135"]),
+        (TEXTURES / "temporal_pulse.yaml", ["--speed-mm-s", "0", "--t-s", "0.02"]),
+    ],
+    ids=["layers", "gradient-other-device", "still-finger"],
+)
+def test_show_writes_a_png(texture: Path, extra: list[str], tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / "figure.png"
+    assert main(["show", str(texture), "--resolution-mm", "2", "--out", str(out), *extra]) == 0
+    with Image.open(out) as image:
+        image.load()
+        assert image.format == "PNG" and image.size == FIGURE_PX
+    stdout = capsys.readouterr().out
+    assert stdout.startswith(f"wrote {out}: ") and "% of the plate saturated" in stdout
+    assert stdout.count("\n") == 1
+
+
+def _maps(texture: str, speed_mm_s: float = 100.0, force_n: float = 0.5):  # type: ignore[no-untyped-def]
+    device = Device.default()
+    return device, plate_maps(load_compiled(TEXTURES / texture), device, Finger(speed_mm_s, 0.0, force_n), 0.0, 1.0)
+
+
+def test_maps_cover_the_plate_and_invert_the_friction_model() -> None:
+    device, maps = _maps("grating.yaml")
+    assert maps.friction.shape == (60, 130) == maps.volts.shape == maps.power_w.shape
+    assert maps.x_mm[0] == 0.5 and maps.y_mm[-1] == 59.5
+    amplitude_m = maps.volts_asked * device.amplitude_m_per_v(0.5)
+    achieved = relative_friction(amplitude_m, device.resonance_hz, 0.1, device.mu0, device.poisson, device.psi_star)
+    assert np.allclose(achieved, maps.friction, atol=1e-12)
+    assert np.array_equal(maps.saturated, maps.volts_asked > device.max_voltage_v)
+    assert maps.volts.max() == device.max_voltage_v and maps.saturated.any()
+    assert np.allclose(maps.power_w, device.power_w_per_v2(0.5) * maps.volts**2)
+
+
+def test_a_slow_finger_is_inverted_at_the_speed_floor() -> None:
+    _, still = _maps("grating.yaml", speed_mm_s=0.0)
+    _, crawling = _maps("grating.yaml", speed_mm_s=1.0)
+    assert np.array_equal(still.volts_asked, crawling.volts_asked)
+    assert still.saturated_percent == 0.0
+
+
+def test_show_runs_as_a_program_and_prints_one_line(tmp_path: Path) -> None:
+    out = tmp_path / "grating.png"
+    done = subprocess.run(
+        [sys.executable, "-m", "tpad_rt", "show", str(TEXTURES / "grating.yaml"), "--resolution-mm", "2",
+         "--out", str(out)],
+        capture_output=True, text=True, check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert out.is_file() and done.stdout.startswith("wrote ")
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["missing.yaml"], "missing.yaml"),
+        ([str(GOOD / "device.yaml")], "device.yaml"),
+        ([str(GOOD / "grating.yaml"), "--device", str(GOOD / "grating.yaml")], "grating.yaml"),
+        ([str(GOOD / "grating.yaml"), "--speed-mm-s", "-1"], "--speed-mm-s: must be a finite number >= 0, got -1"),
+        ([str(GOOD / "grating.yaml"), "--force-n", "nan"], "--force-n: must be a finite number >= 0, got nan"),
+        ([str(GOOD / "grating.yaml"), "--direction-deg", "inf"], "--direction-deg: must be a finite number, got inf"),
+        ([str(GOOD / "grating.yaml"), "--t-s", "-0.5"], "--t-s: must be a finite number >= 0, got -0.5"),
+        ([str(GOOD / "grating.yaml"), "--resolution-mm", "0"], "--resolution-mm: must be a finite number > 0, got 0"),
+        ([str(GOOD / "grating.yaml"), "--resolution-mm", "0.001"], "--resolution-mm: 0.001 gives 130000 x 60000"),
+    ],
+    ids=["missing", "device-as-texture", "texture-as-device", "speed", "force", "direction", "time", "resolution",
+         "too-fine"],
+)
+def test_bad_input_is_one_line_and_exit_1(
+    arguments: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    assert main(["show", *arguments, "--out", str(tmp_path / "x.png")]) == 1
+    stderr = capsys.readouterr().err
+    assert message in stderr and "Traceback" not in stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+@pytest.mark.parametrize(
+    ("out", "message"),
+    [("figure.jpg", "--out: must end in .png, .pdf, .svg"), ("no/such/folder/figure.png", "cannot write the figure")],
+)
+def test_bad_output_path_is_one_line_and_exit_1(
+    out: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    assert main(["show", str(GOOD / "grating.yaml"), "--resolution-mm", "5", "--out", str(tmp_path / out)]) == 1
+    stderr = capsys.readouterr().err
+    assert message in stderr and "Traceback" not in stderr and stderr.count("\n") == 1
+
+
+def test_a_value_that_is_not_a_number_is_a_usage_error(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["show", str(GOOD / "grating.yaml"), "--speed-mm-s", "fast", "--out", "x.png"])
+    assert exit_info.value.code == 1
+    assert "argument --speed-mm-s: invalid float value: 'fast'" in capsys.readouterr().err
