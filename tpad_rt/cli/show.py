@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _checked(option: str, value: float, minimum: float | None = None, inclusive: bool = True) -> float:
-    """``value`` if finite and at least (or, not ``inclusive``, above) ``minimum``; else ConfigError naming ``option``."""
+    """``value`` if finite and at least (not ``inclusive``: above) ``minimum``; else ConfigError naming ``option``."""
     below = minimum is not None and (value < minimum if inclusive else value <= minimum)
     if not math.isfinite(value) or below:
         bound = "" if minimum is None else f" {'>=' if inclusive else '>'} {minimum:g}"
