@@ -105,3 +105,45 @@ PROFILE_DISK = 2
 PROFILE_STEP = 3
 GAUSSIAN_REACH_SIGMAS = 3.0   # gaussian bumps end at 3 sigma (sigma = radius / 2)
 LAYER_FLOOR = 0.01            # every COMBINE result is clamped to [LAYER_FLOOR, 1]
+
+# --- state: float64[STATE_SIZE], written by the render kernel only ------------
+# All zeros is a fresh stream (tpad_rt/kernel/render.py says how the values are used).
+# The open control step (the one whose samples are being rendered):
+STATE_NEXT_INDEX = 0          # sample index after the last rendered block
+STATE_STEP_OPEN = 1           # 1.0 once a control step has run
+STATE_STEP_SAMPLES = 2        # samples rendered in the open step so far
+STATE_STEP_NUMBER = 3         # its first sample // control_interval (power_ring slot: % M)
+STATE_STEP_FLAGS = 4          # FLAG_* bits of the open step
+STATE_GATE = 5                # 1.0: gain ramps up during the open step, 0.0: down
+STATE_COMMAND_V = 6           # commanded envelope volts (peak), after the limits
+STATE_CAP_V = 7               # the step's cap on the envelope (volts peak)
+STATE_SMOOTH_START_V = 8      # smoothed volts before the step's first sample
+STATE_RAMP_START = 9          # gain ramp position before it (samples, 0..ramp length)
+STATE_RAMP_SAMPLES = 10       # gain ramp length (samples)
+STATE_PREEMPHASIS_GAIN = 11   # tau(force) / smoothing_s; 0.0 without pre-emphasis
+STATE_POWER_PER_V2 = 12       # p1(force): W per squared peak volt
+STATE_CARRIER_COS = 13        # carrier phasor at the step's first sample
+STATE_CARRIER_SIN = 14
+STATE_WINDOW_SUM_W = 15       # sum of power_ring (W)
+STATE_X_MM = 16               # the step's finger (extrapolated) and target, for telemetry
+STATE_Y_MM = 17
+STATE_SPEED_MM_S = 18
+STATE_FORCE_N = 19
+STATE_TARGET_MU = 20          # relative friction asked for, clamped to [mu_floor, 1]
+STATE_AMPLITUDE_M = 21        # plate amplitude of STATE_COMMAND_V
+# Finger samples are numbered by the count written before them; stored as number + 1 (0: none):
+STATE_FINGER_SAMPLE = 22      # the newest sample at or before the last control step
+STATE_VELOCITY_SAMPLE = 23    # the sample the cached velocity below was computed for
+STATE_VX_MM_S = 24
+STATE_VY_MM_S = 25
+# The cfg values the per-sample tables were built from (rebuilt when one changes):
+STATE_TABLE_FS_HZ = 26
+STATE_TABLE_CARRIER_HZ = 27
+STATE_TABLE_SMOOTHING_S = 28
+# Per-sample tables, indexed by j, the sample's offset in its control step:
+MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
+STATE_COS_TABLE = 32          # cos(j w), w the carrier's phase step (rad)
+STATE_SIN_TABLE = STATE_COS_TABLE + MAX_CONTROL_INTERVAL       # sin(j w)
+STATE_DECAY_TABLE = STATE_SIN_TABLE + MAX_CONTROL_INTERVAL     # d^(j + 1), d the smoothing decay
+STATE_ENVELOPE = STATE_DECAY_TABLE + MAX_CONTROL_INTERVAL      # the open step's envelope e_j (V)
+STATE_SIZE = STATE_ENVELOPE + MAX_CONTROL_INTERVAL

@@ -1,0 +1,551 @@
+"""The render kernel: finger samples and a compiled texture in, carrier drive samples out.
+
+API map
+-------
+render_block(out, start_index, cfg, dev, state, power_ring, finger, finger_count,
+             prog, params, img, stack, telem, telem_count) -> None
+    fill ``out`` (float32 DAC samples, 1 = ``volts_per_full_scale``) with samples
+    ``start_index .. start_index + len(out) - 1`` of the stream; write one telemetry row
+carrier_phase_units(n, step_units) -> int
+    the carrier phase of sample ``n`` in units of 2**-60 cycles (exact integer arithmetic)
+carrier_step_units(carrier_hz, fs_hz) -> int
+    the carrier's phase advance per sample in those units
+
+docs/kernel.md is the design; ``tpad_rt.kernel.layout`` names every array slot.
+Arguments are arrays and scalars only, so that a numba ``@cfunc`` (the real-time audio
+callback) can call :func:`render_block` with arrays rebuilt from raw pointers.
+
+How the doc's per-sample recurrences are evaluated: within a control step the command
+``v``, the cap, the pre-emphasis gain ``g`` and the gate are constant, so the
+recurrences have closed forms in ``j``, the sample's offset from the step's first
+sample. With ``a0`` the smoothed volts before the step and ``d`` the one-pole decay,
+``a_j = v + (a0 - v) d^(j+1)`` and the pre-emphasised drive is
+``u_j = a_j + g (v - a_j) = v + (1 - g)(a0 - v) d^(j+1)``; the gain ramp position is
+``r_j = clip(r0 +- (j + 1), 0, N)`` samples; the carrier is
+``sin(theta0 + j w) = sin(theta0) cos(j w) + cos(theta0) sin(j w)`` with ``theta0``
+computed exactly from the absolute index at each control step. ``d^(j+1)``,
+``cos(j w)`` and ``sin(j w)`` are tables in ``state``, rebuilt only when the sample
+rate, carrier or smoothing change. So no transcendental function runs per sample,
+and no sample depends on the one before it: the loop vectorises. Each sample's
+envelope ``e_j`` is kept in ``state`` until the step closes; the step's power is
+then summed from them in a fixed order, whatever blocks the step was rendered in.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from tpad_rt.kernel.layout import (
+    CFG_CARRIER_HZ,
+    CFG_CONTROL_INTERVAL,
+    CFG_DEFAULT_FORCE_N,
+    CFG_FORCE_GRID_START_N,
+    CFG_FORCE_GRID_STEP_N,
+    CFG_FS_HZ,
+    CFG_HORIZON_S,
+    CFG_MAX_VOLTAGE_V,
+    CFG_MU0,
+    CFG_MU_FLOOR,
+    CFG_POISSON,
+    CFG_POWER_AVG_W,
+    CFG_POWER_CAP_W,
+    CFG_PREEMPHASIS,
+    CFG_PSI_STAR,
+    CFG_RAMP_S,
+    CFG_RUN,
+    CFG_SMOOTHING_S,
+    CFG_SPEED_FLOOR_M_S,
+    CFG_TEXTURE_T0_S,
+    CFG_VELOCITY_WINDOW_S,
+    CFG_VOLTS_PER_FS,
+    CFG_WATCHDOG_S,
+    DEV_AMP_M_PER_V,
+    DEV_POWER_W_PER_V2,
+    DEV_TAU_S,
+    FINGER_DOWN,
+    FINGER_FORCE_N,
+    FINGER_T_S,
+    FINGER_X_MM,
+    FINGER_Y_MM,
+    FLAG_POWER,
+    FLAG_SPEED_FLOOR,
+    FLAG_VOLTAGE,
+    FLAG_WATCHDOG,
+    MAX_CONTROL_INTERVAL,
+    STATE_AMPLITUDE_M,
+    STATE_CAP_V,
+    STATE_CARRIER_COS,
+    STATE_CARRIER_SIN,
+    STATE_COMMAND_V,
+    STATE_COS_TABLE,
+    STATE_DECAY_TABLE,
+    STATE_ENVELOPE,
+    STATE_FINGER_SAMPLE,
+    STATE_FORCE_N,
+    STATE_GATE,
+    STATE_NEXT_INDEX,
+    STATE_POWER_PER_V2,
+    STATE_PREEMPHASIS_GAIN,
+    STATE_RAMP_SAMPLES,
+    STATE_RAMP_START,
+    STATE_SIN_TABLE,
+    STATE_SMOOTH_START_V,
+    STATE_SPEED_MM_S,
+    STATE_STEP_FLAGS,
+    STATE_STEP_NUMBER,
+    STATE_STEP_OPEN,
+    STATE_STEP_SAMPLES,
+    STATE_TABLE_CARRIER_HZ,
+    STATE_TABLE_FS_HZ,
+    STATE_TABLE_SMOOTHING_S,
+    STATE_TARGET_MU,
+    STATE_VELOCITY_SAMPLE,
+    STATE_VX_MM_S,
+    STATE_VY_MM_S,
+    STATE_WINDOW_SUM_W,
+    STATE_X_MM,
+    STATE_Y_MM,
+    TEL_AMPLITUDE_UM,
+    TEL_FLAGS,
+    TEL_FORCE_N,
+    TEL_POWER_W,
+    TEL_SPEED_MM_S,
+    TEL_T_S,
+    TEL_TARGET_MU,
+    TEL_VOLTAGE_V,
+    TEL_X_MM,
+    TEL_Y_MM,
+)
+from tpad_rt.kernel.texture_eval import eval_texture
+from tpad_rt.physics.friction import amplitude_for_core
+
+#: Relative margin every limit keeps against rounding: the cap is ``max_voltage_v``
+#: and the budgets times ``1 - SAFETY_MARGIN``, so float32 output rounding (2**-24
+#: relative) and sums of rounded powers stay under the true limits.
+SAFETY_MARGIN = 1e-6
+#: Carrier phase resolution: phases are integers in units of 2**-PHASE_BITS cycles.
+PHASE_BITS = 60
+_HALF_BITS = PHASE_BITS // 2
+_HALF_MASK = (1 << _HALF_BITS) - 1
+_PHASE_MASK = (1 << PHASE_BITS) - 1
+_CYCLES_PER_UNIT = 2.0**-PHASE_BITS
+_TWO_PI = 2.0 * math.pi
+
+# error_model="numpy": a division by zero gives inf/nan instead of raising, so no
+# exception checks are compiled in (nothing here may raise inside an audio callback).
+_kernel = numba.njit(cache=True, nogil=True, error_model="numpy")
+# Helpers are inlined into render_block at numba IR level: one function, in which numba
+# drops the reference counting of the array arguments the calls would otherwise do.
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+
+
+@_kernel
+def carrier_step_units(carrier_hz: float, fs_hz: float) -> int:
+    """The carrier's phase advance per sample, ``round(carrier_hz / fs_hz * 2**60)`` (2**-60 cycles).
+
+    Exact for any ratio above 2**-8 (the ratio is a float64, so scaling it by 2**60
+    is an integer); the carrier then runs at ``step * fs_hz / 2**60`` Hz, within
+    2**-61 fs of ``carrier_hz``. Needs ``0 <= carrier_hz < fs_hz``.
+    """
+    return round(carrier_hz / fs_hz * 2.0**PHASE_BITS)
+
+
+@_kernel
+def carrier_phase_units(n: int, step_units: int) -> int:
+    """``(n * step_units) mod 2**60``: the carrier phase of sample ``n`` in 2**-60 cycles.
+
+    Exact for any ``n >= 0`` and ``0 <= step_units < 2**60``: the product is built
+    from 30-bit halves so that no intermediate exceeds 2**61 (no int64 overflow).
+    """
+    n_lo = n & _HALF_MASK
+    n_hi = (n >> _HALF_BITS) & _HALF_MASK
+    s_lo = step_units & _HALF_MASK
+    s_hi = step_units >> _HALF_BITS
+    cross = (n_hi * s_lo + n_lo * s_hi) & _HALF_MASK
+    return (n_lo * s_lo + (cross << _HALF_BITS)) & _PHASE_MASK
+
+
+@_inline
+def _device_value(dev: np.ndarray, row: int, cfg: np.ndarray, force_n: float) -> float:
+    """``dev[row]`` linearly interpolated at ``force_n`` (N) on the uniform grid, clamped at the ends."""
+    last = dev.shape[1] - 1
+    position = (force_n - cfg[CFG_FORCE_GRID_START_N]) / cfg[CFG_FORCE_GRID_STEP_N]
+    position = min(max(position, 0.0), float(last))
+    i = min(int(position), max(last - 1, 0))
+    i_next = min(i + 1, last)
+    return dev[row, i] + (position - i) * (dev[row, i_next] - dev[row, i])
+
+
+@_inline
+def _refresh_tables(cfg: np.ndarray, state: np.ndarray) -> None:
+    """Rebuild the per-sample tables (carrier rotation, smoothing decay) if their cfg values changed.
+
+    ``cos(j w)``, ``sin(j w)`` with ``j w`` from the exact integer phase of ``j``, and
+    ``d^(j+1) = exp(-(j+1) / (smoothing_s fs))``, for every ``j < MAX_CONTROL_INTERVAL``.
+    """
+    fs_hz = cfg[CFG_FS_HZ]
+    carrier_hz = cfg[CFG_CARRIER_HZ]
+    smoothing_s = cfg[CFG_SMOOTHING_S]
+    if (
+        state[STATE_TABLE_FS_HZ] == fs_hz
+        and state[STATE_TABLE_CARRIER_HZ] == carrier_hz
+        and state[STATE_TABLE_SMOOTHING_S] == smoothing_s
+    ):
+        return
+    step_units = carrier_step_units(carrier_hz, fs_hz)
+    smoothing_samples = smoothing_s * fs_hz
+    for j in range(MAX_CONTROL_INTERVAL):
+        angle = _TWO_PI * (carrier_phase_units(j, step_units) * _CYCLES_PER_UNIT)
+        state[STATE_COS_TABLE + j] = math.cos(angle)
+        state[STATE_SIN_TABLE + j] = math.sin(angle)
+        state[STATE_DECAY_TABLE + j] = math.exp(-(j + 1.0) / smoothing_samples)
+    state[STATE_TABLE_FS_HZ] = fs_hz
+    state[STATE_TABLE_CARRIER_HZ] = carrier_hz
+    state[STATE_TABLE_SMOOTHING_S] = smoothing_s
+
+
+@_inline
+def _ring_sum(power_ring: np.ndarray) -> float:
+    """Sum of the power ring in slot order (W)."""
+    total = 0.0
+    for slot in range(power_ring.shape[0]):
+        total += power_ring[slot]
+    return total
+
+
+@_inline
+def _envelope_sums(state: np.ndarray, first: int, stop: int) -> tuple[float, float]:
+    """Peak (V) and sum of squares (V^2) of the open step's envelope ``e_j``, ``first <= j < stop``.
+
+    Summed in four interleaved partial sums (independent chains, so fast) combined
+    as ``(s0 + s1) + (s2 + s3)``: a fixed order for given ``first, stop``.
+    """
+    peak_v = 0.0
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    j = STATE_ENVELOPE + first
+    end = STATE_ENVELOPE + stop
+    while j + 4 <= end:
+        e0 = state[j]
+        e1 = state[j + 1]
+        e2 = state[j + 2]
+        e3 = state[j + 3]
+        s0 += e0 * e0
+        s1 += e1 * e1
+        s2 += e2 * e2
+        s3 += e3 * e3
+        peak_v = max(peak_v, max(max(e0, e1), max(e2, e3)))
+        j += 4
+    while j < end:
+        e0 = state[j]
+        s0 += e0 * e0
+        peak_v = max(peak_v, e0)
+        j += 1
+    return peak_v, (s0 + s1) + (s2 + s3)
+
+
+@_inline
+def _close_step(state: np.ndarray, power_ring: np.ndarray) -> None:
+    """Account for the open control step: its power into the ring, its smoothing and ramp advanced.
+
+    The step's power is ``p1(force) * mean(e^2)`` over its rendered samples. The ring's
+    running sum is recomputed from scratch each time the last slot is written, so its
+    rounding error never accumulates beyond one window.
+    """
+    samples = int(state[STATE_STEP_SAMPLES])
+    if state[STATE_STEP_OPEN] == 0.0 or samples == 0:
+        return
+    power_w = state[STATE_POWER_PER_V2] * _envelope_sums(state, 0, samples)[1] / samples
+    slots = power_ring.shape[0]
+    slot = int(state[STATE_STEP_NUMBER]) % slots
+    state[STATE_WINDOW_SUM_W] += power_w - power_ring[slot]
+    power_ring[slot] = power_w
+    if slot == slots - 1:
+        state[STATE_WINDOW_SUM_W] = _ring_sum(power_ring)
+    command_v = state[STATE_COMMAND_V]
+    decay = state[STATE_DECAY_TABLE + samples - 1]
+    state[STATE_SMOOTH_START_V] = command_v + (state[STATE_SMOOTH_START_V] - command_v) * decay
+    direction = 1.0 if state[STATE_GATE] != 0.0 else -1.0
+    ramp = state[STATE_RAMP_START] + direction * samples
+    state[STATE_RAMP_START] = min(max(ramp, 0.0), state[STATE_RAMP_SAMPLES])
+
+
+@_inline
+def _newest_sample(finger: np.ndarray, count: int, t_s: float, hint: int) -> int:
+    """Index (samples written before it) of the newest finger sample with ``t <= t_s``, or -1.
+
+    Only rows the producer cannot be overwriting are read: the newest ``R - 1`` (slot
+    ``count % R`` may be half-written). Finger times are non-decreasing, so the search
+    runs forward from ``hint`` (the previous step's answer) when that is still
+    readable and not later than ``t_s``: O(1) per step however far ahead the producer
+    writes; otherwise backwards from the newest.
+    """
+    rows = finger.shape[0]
+    oldest = max(0, count - rows + 1)
+    if oldest <= hint < count and finger[hint % rows, FINGER_T_S] <= t_s:
+        i = hint
+        while i + 1 < count and finger[(i + 1) % rows, FINGER_T_S] <= t_s:
+            i += 1
+        return i
+    i = count - 1
+    while i >= oldest and finger[i % rows, FINGER_T_S] > t_s:
+        i -= 1
+    return i if i >= oldest else -1
+
+
+@_inline
+def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, window_s: float) -> tuple[float, float]:
+    """Finger velocity (mm/s) from sample ``newest`` and the oldest one of the same touch within ``window_s``.
+
+    The touch runs back while samples are down; ``(0, 0)`` without an older sample
+    or when the two samples share a time.
+    """
+    rows = finger.shape[0]
+    oldest = max(0, count - rows + 1)
+    t_newest = finger[newest % rows, FINGER_T_S]
+    first = newest
+    k = newest - 1
+    while k >= oldest:
+        row = k % rows
+        if finger[row, FINGER_DOWN] == 0.0 or t_newest - finger[row, FINGER_T_S] > window_s:
+            break
+        first = k
+        k -= 1
+    dt_s = t_newest - finger[first % rows, FINGER_T_S]
+    if not dt_s > 0.0:
+        return 0.0, 0.0
+    a = newest % rows
+    b = first % rows
+    return (finger[a, FINGER_X_MM] - finger[b, FINGER_X_MM]) / dt_s, (
+        finger[a, FINGER_Y_MM] - finger[b, FINGER_Y_MM]
+    ) / dt_s
+
+
+@_inline
+def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndarray, count: int) -> bool:
+    """Update the step's finger in ``state`` (position extrapolated, speed, force); True if it is active.
+
+    Active: a sample at or before ``t_s``, down, at most ``watchdog_s`` old. When not
+    active the previous step's finger is kept.
+    """
+    newest = _newest_sample(finger, count, t_s, int(state[STATE_FINGER_SAMPLE]) - 1)
+    state[STATE_FINGER_SAMPLE] = newest + 1.0
+    if newest < 0:
+        return False
+    row = newest % finger.shape[0]
+    age_s = t_s - finger[row, FINGER_T_S]
+    watchdog_s = cfg[CFG_WATCHDOG_S]
+    if finger[row, FINGER_DOWN] == 0.0 or age_s > watchdog_s:
+        return False
+    if state[STATE_VELOCITY_SAMPLE] != newest + 1.0:
+        vx, vy = _velocity_mm_s(finger, count, newest, cfg[CFG_VELOCITY_WINDOW_S])
+        state[STATE_VX_MM_S] = vx
+        state[STATE_VY_MM_S] = vy
+        state[STATE_VELOCITY_SAMPLE] = newest + 1.0
+    vx = state[STATE_VX_MM_S]
+    vy = state[STATE_VY_MM_S]
+    lead_s = min(age_s + cfg[CFG_HORIZON_S], watchdog_s)
+    state[STATE_X_MM] = finger[row, FINGER_X_MM] + vx * lead_s
+    state[STATE_Y_MM] = finger[row, FINGER_Y_MM] + vy * lead_s
+    state[STATE_SPEED_MM_S] = math.sqrt(vx * vx + vy * vy)
+    force_n = finger[row, FINGER_FORCE_N]
+    state[STATE_FORCE_N] = cfg[CFG_DEFAULT_FORCE_N] if math.isnan(force_n) else force_n
+    return True
+
+
+@_inline
+def _command_volts(
+    t_s: float, cfg: np.ndarray, dev: np.ndarray, state: np.ndarray,
+    prog: np.ndarray, params: np.ndarray, img: np.ndarray, stack: np.ndarray,
+) -> tuple[float, int]:
+    """Envelope volts (peak) the texture asks for at the step's finger, and FLAG_SPEED_FLOOR if floored.
+
+    Writes the clamped target friction to ``state``.
+    """
+    speed_mm_s = state[STATE_SPEED_MM_S]
+    ux = 0.0
+    uy = 0.0
+    if speed_mm_s > 0.0:
+        ux = state[STATE_VX_MM_S] / speed_mm_s
+        uy = state[STATE_VY_MM_S] / speed_mm_s
+    mu = eval_texture(
+        prog, params, img, stack, state[STATE_X_MM], state[STATE_Y_MM], ux, uy, t_s - cfg[CFG_TEXTURE_T0_S]
+    )
+    mu = min(max(mu, cfg[CFG_MU_FLOOR]), 1.0)
+    state[STATE_TARGET_MU] = mu
+    speed_m_s = speed_mm_s * 1e-3
+    flags = 0
+    if speed_m_s < cfg[CFG_SPEED_FLOOR_M_S]:
+        speed_m_s = cfg[CFG_SPEED_FLOOR_M_S]
+        flags = FLAG_SPEED_FLOOR
+    amplitude_m = amplitude_for_core(
+        mu, cfg[CFG_CARRIER_HZ], speed_m_s, cfg[CFG_MU0], cfg[CFG_POISSON], cfg[CFG_PSI_STAR]
+    )
+    return amplitude_m / _device_value(dev, DEV_AMP_M_PER_V, cfg, state[STATE_FORCE_N]), flags
+
+
+@_inline
+def _cap_volts(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray, p1_w: float, step: int) -> tuple[float, int]:
+    """The step's envelope cap (volts peak) and the FLAG_* of the bound that sets it.
+
+    ``min(max_voltage_v, sqrt(power_cap_w / p1), sqrt(allowance / p1))``, each limit
+    times ``1 - SAFETY_MARGIN``; ``allowance = M * power_avg_w`` less the previous
+    ``M - 1`` steps' powers (the ring without the slot this step will overwrite).
+    """
+    keep = 1.0 - SAFETY_MARGIN
+    slots = power_ring.shape[0]
+    previous_w = state[STATE_WINDOW_SUM_W] - power_ring[step % slots]
+    allowance_w = max(slots * cfg[CFG_POWER_AVG_W] * keep - previous_w, 0.0)
+    power_v = math.sqrt(min(cfg[CFG_POWER_CAP_W] * keep, allowance_w) / p1_w)
+    voltage_v = cfg[CFG_MAX_VOLTAGE_V] * keep
+    if voltage_v <= power_v:
+        return voltage_v, FLAG_VOLTAGE
+    return power_v, FLAG_POWER
+
+
+@_inline
+def _control_step(
+    n: int, interval: int, cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, power_ring: np.ndarray,
+    finger: np.ndarray, finger_count: np.ndarray,
+    prog: np.ndarray, params: np.ndarray, img: np.ndarray, stack: np.ndarray,
+) -> None:
+    """Close the open step and open one at sample ``n``: finger, texture, inverse model, limits, carrier."""
+    _close_step(state, power_ring)
+    _refresh_tables(cfg, state)
+    fs_hz = cfg[CFG_FS_HZ]
+    t_s = n / fs_hz
+    step = n // interval
+    active = _read_finger(t_s, cfg, state, finger, finger_count[0])
+    if active:
+        command_v, flags = _command_volts(t_s, cfg, dev, state, prog, params, img, stack)
+    else:
+        command_v = state[STATE_COMMAND_V]
+        flags = FLAG_WATCHDOG
+    force_n = state[STATE_FORCE_N]
+    p1_w = _device_value(dev, DEV_POWER_W_PER_V2, cfg, force_n)
+    cap_v, limit_flag = _cap_volts(cfg, state, power_ring, p1_w, step)
+    if command_v > cap_v:
+        command_v = cap_v
+        flags |= limit_flag
+    state[STATE_COMMAND_V] = command_v
+    state[STATE_CAP_V] = cap_v
+    state[STATE_AMPLITUDE_M] = command_v * _device_value(dev, DEV_AMP_M_PER_V, cfg, force_n)
+    state[STATE_POWER_PER_V2] = p1_w
+    tau_s = _device_value(dev, DEV_TAU_S, cfg, force_n)
+    state[STATE_PREEMPHASIS_GAIN] = tau_s / cfg[CFG_SMOOTHING_S] if cfg[CFG_PREEMPHASIS] != 0.0 else 0.0
+    state[STATE_GATE] = 1.0 if active and cfg[CFG_RUN] != 0.0 else 0.0
+    state[STATE_RAMP_SAMPLES] = max(1.0, float(round(cfg[CFG_RAMP_S] * fs_hz)))
+    angle = _TWO_PI * (carrier_phase_units(n, carrier_step_units(cfg[CFG_CARRIER_HZ], fs_hz)) * _CYCLES_PER_UNIT)
+    state[STATE_CARRIER_COS] = math.cos(angle)
+    state[STATE_CARRIER_SIN] = math.sin(angle)
+    state[STATE_STEP_NUMBER] = step
+    state[STATE_STEP_SAMPLES] = 0.0
+    state[STATE_STEP_FLAGS] = flags
+    state[STATE_STEP_OPEN] = 1.0
+
+
+@_inline
+def _render_samples(out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float) -> None:
+    """Render ``out[first:stop]``, all inside the open step, and store their envelope in ``state``.
+
+    No value is carried from one sample to the next, so the loop vectorises.
+    """
+    command_v = state[STATE_COMMAND_V]
+    cap_v = state[STATE_CAP_V]
+    offset_v = (1.0 - state[STATE_PREEMPHASIS_GAIN]) * (state[STATE_SMOOTH_START_V] - command_v)
+    ramp_samples = state[STATE_RAMP_SAMPLES]
+    per_ramp_sample = 1.0 / ramp_samples
+    ramp_direction = 1.0 if state[STATE_GATE] != 0.0 else -1.0
+    ramp_start = state[STATE_RAMP_START] + ramp_direction
+    sin0 = state[STATE_CARRIER_SIN] * out_per_v
+    cos0 = state[STATE_CARRIER_COS] * out_per_v
+    j0 = int(state[STATE_STEP_SAMPLES])
+    count = stop - first
+    decay = state[STATE_DECAY_TABLE + j0 : STATE_DECAY_TABLE + j0 + count]
+    cos_jw = state[STATE_COS_TABLE + j0 : STATE_COS_TABLE + j0 + count]
+    sin_jw = state[STATE_SIN_TABLE + j0 : STATE_SIN_TABLE + j0 + count]
+    envelope = state[STATE_ENVELOPE + j0 : STATE_ENVELOPE + j0 + count]
+    samples = out[first:stop]
+    for k in range(count):
+        drive_v = min(max(command_v + offset_v * decay[k], 0.0), cap_v)
+        ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
+        e_v = ramp * per_ramp_sample * drive_v
+        samples[k] = e_v * (sin0 * cos_jw[k] + cos0 * sin_jw[k])
+        envelope[k] = e_v
+    state[STATE_STEP_SAMPLES] = j0 + count
+
+
+@_inline
+def _write_telemetry(
+    telem: np.ndarray, telem_count: np.ndarray, t_s: float, state: np.ndarray,
+    peak_v: float, power_w: float, flags: int,
+) -> None:
+    """Append one telemetry row (slot ``telem_count % T``), then bump ``telem_count``."""
+    row = telem_count[0] % telem.shape[0]
+    telem[row, TEL_T_S] = t_s
+    telem[row, TEL_X_MM] = state[STATE_X_MM]
+    telem[row, TEL_Y_MM] = state[STATE_Y_MM]
+    telem[row, TEL_SPEED_MM_S] = state[STATE_SPEED_MM_S]
+    telem[row, TEL_FORCE_N] = state[STATE_FORCE_N]
+    telem[row, TEL_TARGET_MU] = state[STATE_TARGET_MU]
+    telem[row, TEL_AMPLITUDE_UM] = state[STATE_AMPLITUDE_M] * 1e6
+    telem[row, TEL_VOLTAGE_V] = peak_v
+    telem[row, TEL_POWER_W] = power_w
+    telem[row, TEL_FLAGS] = flags
+    telem_count[0] += 1
+
+
+@_kernel
+def render_block(
+    out: np.ndarray,
+    start_index: int,
+    cfg: np.ndarray,
+    dev: np.ndarray,
+    state: np.ndarray,
+    power_ring: np.ndarray,
+    finger: np.ndarray,
+    finger_count: np.ndarray,
+    prog: np.ndarray,
+    params: np.ndarray,
+    img: np.ndarray,
+    stack: np.ndarray,
+    telem: np.ndarray,
+    telem_count: np.ndarray,
+) -> None:
+    """Render stream samples ``start_index ..`` into ``out`` (float32, any length >= 1).
+
+    ``start_index`` (>= 0) continues where the previous call ended
+    (``state[STATE_NEXT_INDEX]``); a control step runs at every ``n`` with
+    ``n % control_interval == 0``, and also at ``n`` when no step is open or the open
+    one has run its full interval (a fresh or discontinuous stream). Array arguments as
+    in docs/kernel.md "State layout" (``state`` all zeros for a fresh stream). Writes
+    ``out``, ``state``, ``power_ring``, ``stack``, one ``telem`` row and
+    ``telem_count``; allocates nothing.
+    """
+    interval = min(max(int(cfg[CFG_CONTROL_INTERVAL]), 1), MAX_CONTROL_INTERVAL)
+    out_per_v = 1.0 / cfg[CFG_VOLTS_PER_FS]
+    total = out.shape[0]
+    peak_v = 0.0
+    energy_w = 0.0
+    flags = 0
+    i = 0
+    while i < total:
+        n = start_index + i
+        phase = n % interval
+        if phase == 0 or state[STATE_STEP_OPEN] == 0.0 or state[STATE_STEP_SAMPLES] >= interval:
+            _control_step(n, interval, cfg, dev, state, power_ring, finger, finger_count, prog, params, img, stack)
+        j0 = int(state[STATE_STEP_SAMPLES])
+        stop = min(total, i + interval - phase, i + interval - j0)
+        _render_samples(out, i, stop, state, out_per_v)
+        segment_peak_v, segment_v2 = _envelope_sums(state, j0, j0 + stop - i)
+        peak_v = max(peak_v, segment_peak_v)
+        energy_w += state[STATE_POWER_PER_V2] * segment_v2
+        flags |= int(state[STATE_STEP_FLAGS])
+        i = stop
+    state[STATE_NEXT_INDEX] = start_index + total
+    _write_telemetry(telem, telem_count, start_index / cfg[CFG_FS_HZ], state, peak_v, energy_w / max(total, 1), flags)
