@@ -1,0 +1,394 @@
+"""The rendering pipeline: a device, a texture and options turned into the render kernel's arrays.
+
+API map
+-------
+RenderOptions(power_budget_w=None, power_avg_w=None, power_window_s=1.0, control_interval=32,
+              smoothing_ms=1.0, preemphasis=None, horizon_ms=0.0, velocity_window_ms=10.0,
+              watchdog_ms=50.0, ramp_ms=5.0, default_force_n=0.5, mu_floor=0.01,
+              finger_ring=1024, telemetry_ring=8192)
+    the renderer's settings (frozen; ConfigError naming each bad field)
+Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
+    ``.fs_hz``, ``.sample_index``, ``.time_s``, ``.device``, ``.texture``, ``.options``, ``.running``
+    ``.push_finger(t_s, x_mm, y_mm, force_n=nan, down=True)``, ``.lift(t_s)``
+    ``.set_texture(texture, t_s=None)``, ``.start()``, ``.stop()``
+    ``.render(out)``: the next ``len(out)`` float32 samples (1.0 = ``volts_per_full_scale``)
+    ``.drain_telemetry() -> dict[str, np.ndarray]``: rows since the last drain, keyed by TEL_NAMES
+    ``.warm_up()``, ``.arrays`` (KernelArrays: every array ``render_block`` takes, in its order)
+KernelArrays
+    NamedTuple ``cfg, dev, state, power_ring, finger, finger_count, prog, params, img, stack,
+    telem, telem_count``
+
+docs/kernel.md is the design. One thread produces finger samples (:meth:`Pipeline.push_finger`
+writes the row, then bumps the count); rendering may run in another thread.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from tpad_rt.device import Device
+from tpad_rt.errors import ConfigError, TpadError
+from tpad_rt.kernel import layout
+from tpad_rt.kernel.render import render_block
+from tpad_rt.texture import CompiledTexture
+
+#: Highest carrier frequency, as a fraction of the sample rate, the pipeline renders.
+MAX_CARRIER_FRACTION = 0.45
+#: Longest block ``render`` accepts (samples).
+MAX_BLOCK = 65536
+#: Force-grid intervals: at most this many (a grid holding every table knot is sought up
+#: to it) and at least this many (the power and tau tables are smooth between knots).
+MAX_GRID_INTERVALS = 4096
+MIN_GRID_INTERVALS = 1024
+#: Relative tolerance for a force-table knot to count as lying on a grid point.
+_KNOT_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """Settings of the renderer (units in the names). ``None`` means "the device's value".
+
+    - ``power_budget_w``: instantaneous power cap (W); None: ``device.power_budget_w``.
+    - ``power_avg_w``: average power budget (W) over every ``power_window_s`` window;
+      None: the same as the cap.
+    - ``power_window_s``: averaging window (s), rounded to whole control steps.
+    - ``control_interval``: samples between control steps (1 to 256). The plate's
+      envelope follows the drive with ``tau = Q / (pi f0)``: about 3 ms (2.3 ms at 2 N)
+      on the default device, a bandwidth near 50-70 Hz; with pre-emphasis the envelope
+      follows the 1 ms smoothing instead (160 Hz). 32 samples at 192 kHz is a 6 kHz
+      control rate: over 35x that bandwidth, command steps 6x shorter than the
+      smoothing time constant (no staircase reaches the plate), a texture edge placed
+      within 17 um at 100 mm/s, and the control step's cost (finger, texture, inverse
+      model, limits, carrier anchor) shared by 32 samples.
+    - ``smoothing_ms``: one-pole time constant of the commanded envelope (ms).
+    - ``preemphasis``: shape the drive so the plate envelope follows the smoothing
+      instead of its own ``tau``; None: ``device.preemphasis``.
+    - ``horizon_ms``: extra extrapolation lead of the finger position (ms; latency compensation).
+    - ``velocity_window_ms``: span the finger velocity is estimated over (ms).
+    - ``watchdog_ms``: no finger sample for longer than this and the drive ramps to 0 (ms).
+    - ``ramp_ms``: linear gain ramp on start, stop, lift and watchdog (ms).
+    - ``default_force_n``: contact force (N) when a finger sample carries none.
+    - ``mu_floor``: lowest relative friction asked of the plate, in (0, 1].
+    - ``finger_ring``: finger samples the ring holds (the newest ``finger_ring - 1`` are read).
+    - ``telemetry_ring``: telemetry rows (one per rendered block) kept between drains.
+
+    Raises ConfigError, one line per bad field, for a value out of its range.
+    """
+
+    power_budget_w: float | None = None
+    power_avg_w: float | None = None
+    power_window_s: float = 1.0
+    control_interval: int = 32
+    smoothing_ms: float = 1.0
+    preemphasis: bool | None = None
+    horizon_ms: float = 0.0
+    velocity_window_ms: float = 10.0
+    watchdog_ms: float = 50.0
+    ramp_ms: float = 5.0
+    default_force_n: float = 0.5
+    mu_floor: float = 0.01
+    finger_ring: int = 1024
+    telemetry_ring: int = 8192
+
+    def __post_init__(self) -> None:
+        problems = [f"RenderOptions.{name}: {problem}" for name, problem in self._problems()]
+        if problems:
+            raise ConfigError(problems)
+
+    def _problems(self) -> list[tuple[str, str]]:
+        """``(field, what is wrong)`` for every field out of its range."""
+        positive = ["power_window_s", "smoothing_ms", "velocity_window_ms", "watchdog_ms", "ramp_ms"]
+        positive += [name for name in ("power_budget_w", "power_avg_w") if getattr(self, name) is not None]
+        found = [(name, _number_problem(getattr(self, name), "> 0", lambda v: v > 0)) for name in positive]
+        found += [
+            ("horizon_ms", _number_problem(self.horizon_ms, ">= 0", lambda v: v >= 0)),
+            ("default_force_n", _number_problem(self.default_force_n, ">= 0", lambda v: v >= 0)),
+            ("mu_floor", _number_problem(self.mu_floor, "in (0, 1]", lambda v: 0 < v <= 1)),
+            ("control_interval", _count_problem(self.control_interval, 1, layout.MAX_CONTROL_INTERVAL)),
+            ("finger_ring", _count_problem(self.finger_ring, 2, None)),
+            ("telemetry_ring", _count_problem(self.telemetry_ring, 1, None)),
+        ]
+        if self.preemphasis is not None and not isinstance(self.preemphasis, bool):
+            found.append(("preemphasis", f"must be true, false or None, got {self.preemphasis!r}"))
+        return [(name, problem) for name, problem in found if problem]
+
+
+def _number_problem(value: object, rule: str, holds: object) -> str:
+    """'' if ``value`` is a finite real number satisfying ``holds``, else what is wrong."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+        return f"must be a finite number {rule}, got {value!r}"
+    return "" if holds(value) else f"must be {rule}, got {value:g}"  # type: ignore[operator]
+
+
+def _count_problem(value: object, low: int, high: int | None) -> str:
+    """'' if ``value`` is a whole number in ``[low, high]`` (no upper bound when None), else what is wrong."""
+    rule = f">= {low}" if high is None else f"in [{low}, {high}]"
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        return f"must be a whole number {rule}, got {value!r}"
+    return "" if low <= value and (high is None or value <= high) else f"must be {rule}, got {value}"
+
+
+class KernelArrays(NamedTuple):
+    """Every array :func:`tpad_rt.kernel.render.render_block` takes, in its argument order."""
+
+    cfg: np.ndarray
+    dev: np.ndarray
+    state: np.ndarray
+    power_ring: np.ndarray
+    finger: np.ndarray
+    finger_count: np.ndarray
+    prog: np.ndarray
+    params: np.ndarray
+    img: np.ndarray
+    stack: np.ndarray
+    telem: np.ndarray
+    telem_count: np.ndarray
+
+
+def force_grid(device: Device) -> tuple[float, float, int]:
+    """``(start_n, step_n, intervals)``: the uniform force grid the device tables are sampled on.
+
+    It spans every knot of the calibration and circuit force tables. When all knots lie
+    on a common grid of at most ``MAX_GRID_INTERVALS`` intervals (true of every shipped
+    device: multiples of 0.1 N), the grid is that one, so linear interpolation on it
+    reproduces ``np.interp`` of the amplitude table exactly (to rounding). That grid is
+    then halved until it has at least ``MIN_GRID_INTERVALS`` intervals, because power
+    and envelope time constant, smooth functions of the interpolated circuit, are
+    sampled on it too. Without a common grid: ``MAX_GRID_INTERVALS`` intervals.
+    """
+    knots = np.union1d(device.force_table_n, device.motional_force_table_n)
+    start_n = float(knots[0])
+    span_n = float(knots[-1]) - start_n
+    if span_n == 0.0:
+        return start_n, 1.0, 1
+    offsets = (knots - start_n) / span_n
+    intervals = next(
+        (
+            count
+            for count in range(1, MAX_GRID_INTERVALS + 1)
+            if np.all(np.abs(offsets * count - np.round(offsets * count)) <= _KNOT_TOLERANCE * count)
+        ),
+        MAX_GRID_INTERVALS,
+    )
+    while intervals < MIN_GRID_INTERVALS:
+        intervals *= 2
+    return start_n, span_n / intervals, intervals
+
+
+def device_tables(device: Device) -> tuple[np.ndarray, float, float]:
+    """``(dev, start_n, step_n)``: the kernel's device tables on :func:`force_grid`'s grid.
+
+    ``dev[DEV_AMP_M_PER_V]`` plate amplitude per peak volt (m/V), ``dev[DEV_POWER_W_PER_V2]``
+    exact-circuit power at 1 V peak at the carrier (W), ``dev[DEV_TAU_S]`` envelope time
+    constant (s); forces ``start_n + k * step_n``.
+    """
+    start_n, step_n, intervals = force_grid(device)
+    forces_n = start_n + step_n * np.arange(intervals + 1)
+    dev = np.empty((layout.DEV_ROWS, intervals + 1))
+    dev[layout.DEV_AMP_M_PER_V] = device.amplitude_m_per_v(forces_n)
+    dev[layout.DEV_POWER_W_PER_V2] = device.power_w_per_v2(forces_n)
+    dev[layout.DEV_TAU_S] = device.envelope_time_constant_s(forces_n)
+    return dev, start_n, step_n
+
+
+def _check_rate(device: Device, fs_hz: float) -> None:
+    """ConfigError unless ``fs_hz`` is a finite rate > 0 at least ``resonance_hz / 0.45``."""
+    problem = _number_problem(fs_hz, "> 0", lambda v: v > 0)
+    if problem:
+        raise ConfigError(f"fs_hz: {problem}")
+    needed_hz = device.resonance_hz / MAX_CARRIER_FRACTION
+    if fs_hz < needed_hz:
+        raise ConfigError(
+            f"fs_hz: device {device.label}'s carrier ({device.resonance_hz:g} Hz) needs a sample rate of at "
+            f"least {math.ceil(needed_hz)} Hz (carrier <= {MAX_CARRIER_FRACTION} x fs), got {fs_hz:g}"
+        )
+
+
+def _writable(array: np.ndarray, dtype: type, size_at_least: int = 0) -> np.ndarray:
+    """A C-contiguous writable copy of ``array`` (padded with zeros to ``size_at_least`` items)."""
+    copy = np.array(array, dtype=dtype, order="C", copy=True)
+    if copy.size < size_at_least:
+        copy = np.concatenate([copy, np.zeros(size_at_least - copy.size, dtype=dtype)])
+    return copy
+
+
+class Pipeline:
+    """One stream of drive samples for ``device`` rendering ``texture`` at ``fs_hz``; owns every array.
+
+    Created stopped (silent): :meth:`start` ramps the drive up once a finger slides.
+    Raises ConfigError for a sample rate below ``resonance_hz / 0.45`` or not > 0.
+    """
+
+    def __init__(
+        self,
+        device: Device,
+        texture: CompiledTexture,
+        fs_hz: float = 192000,
+        options: RenderOptions = RenderOptions(),
+    ):
+        _check_rate(device, fs_hz)
+        self.device = device
+        self.options = options
+        self.fs_hz = fs_hz
+        self.sample_index = 0
+        self._drained = 0
+        dev, start_n, step_n = device_tables(device)
+        window_steps = max(1, round(options.power_window_s * fs_hz / options.control_interval))
+        self._arrays = KernelArrays(
+            cfg=self._config(start_n, step_n, window_steps),
+            dev=dev,
+            state=np.zeros(layout.STATE_SIZE),
+            power_ring=np.zeros(window_steps),
+            finger=np.zeros((options.finger_ring, layout.FINGER_COLS)),
+            finger_count=np.zeros(1, dtype=np.int64),
+            prog=np.zeros((0, layout.TEX_PROG_COLS), dtype=np.int64),
+            params=np.zeros(0),
+            img=np.zeros(0),
+            stack=np.zeros(1),
+            telem=np.zeros((options.telemetry_ring, layout.TEL_COLS)),
+            telem_count=np.zeros(1, dtype=np.int64),
+        )
+        self.set_texture(texture, 0.0)
+
+    def _config(self, grid_start_n: float, grid_step_n: float, window_steps: int) -> np.ndarray:
+        """The ``cfg`` array (layout.CFG_*), RUN off."""
+        device, options = self.device, self.options
+        cap_w = device.power_budget_w if options.power_budget_w is None else options.power_budget_w
+        preemphasis = device.preemphasis if options.preemphasis is None else options.preemphasis
+        cfg = np.zeros(layout.CFG_SIZE)
+        for index, value in {
+            layout.CFG_FS_HZ: self.fs_hz,
+            layout.CFG_CARRIER_HZ: device.resonance_hz,
+            layout.CFG_VOLTS_PER_FS: device.volts_per_full_scale,
+            layout.CFG_MAX_VOLTAGE_V: device.max_voltage_v,
+            layout.CFG_POWER_CAP_W: cap_w,
+            layout.CFG_POWER_AVG_W: cap_w if options.power_avg_w is None else options.power_avg_w,
+            layout.CFG_WINDOW_STEPS: window_steps,
+            layout.CFG_SPEED_FLOOR_M_S: device.speed_floor_m_s,
+            layout.CFG_MU0: device.mu0,
+            layout.CFG_POISSON: device.poisson,
+            layout.CFG_PSI_STAR: device.psi_star,
+            layout.CFG_MU_FLOOR: options.mu_floor,
+            layout.CFG_CONTROL_INTERVAL: options.control_interval,
+            layout.CFG_SMOOTHING_S: options.smoothing_ms * 1e-3,
+            layout.CFG_PREEMPHASIS: 1.0 if preemphasis else 0.0,
+            layout.CFG_HORIZON_S: options.horizon_ms * 1e-3,
+            layout.CFG_VELOCITY_WINDOW_S: options.velocity_window_ms * 1e-3,
+            layout.CFG_WATCHDOG_S: options.watchdog_ms * 1e-3,
+            layout.CFG_RAMP_S: options.ramp_ms * 1e-3,
+            layout.CFG_DEFAULT_FORCE_N: options.default_force_n,
+            layout.CFG_FORCE_GRID_START_N: grid_start_n,
+            layout.CFG_FORCE_GRID_STEP_N: grid_step_n,
+        }.items():
+            cfg[index] = value
+        return cfg
+
+    @property
+    def arrays(self) -> KernelArrays:
+        """Every array ``render_block`` takes after ``(out, start_index)``, in its order."""
+        return self._arrays
+
+    @property
+    def texture(self) -> CompiledTexture:
+        """The texture being rendered."""
+        return self._texture
+
+    @property
+    def time_s(self) -> float:
+        """Stream time (s) of the next sample :meth:`render` produces."""
+        return self.sample_index / self.fs_hz
+
+    @property
+    def running(self) -> bool:
+        """True between :meth:`start` and :meth:`stop`."""
+        return self._arrays.cfg[layout.CFG_RUN] != 0.0
+
+    def start(self) -> None:
+        """Let the drive ramp up (from the next control step) while a finger slides."""
+        self._arrays.cfg[layout.CFG_RUN] = 1.0
+
+    def stop(self) -> None:
+        """Ramp the drive down to 0 (from the next control step) and keep it silent."""
+        self._arrays.cfg[layout.CFG_RUN] = 0.0
+
+    def push_finger(
+        self, t_s: float, x_mm: float, y_mm: float, force_n: float = math.nan, down: bool = True
+    ) -> None:
+        """Append a finger sample: stream time (s, non-decreasing), plate position (mm), force (N; NaN: unknown).
+
+        Writes the ring row first, then bumps the count the kernel reads (single producer).
+        """
+        finger, count = self._arrays.finger, self._arrays.finger_count
+        finger[count[0] % finger.shape[0]] = (t_s, x_mm, y_mm, force_n, 1.0 if down else 0.0)
+        count[0] += 1
+
+    def lift(self, t_s: float) -> None:
+        """The finger leaves the plate at stream time ``t_s`` (s): the drive ramps to 0."""
+        finger, count = self._arrays.finger, self._arrays.finger_count
+        last = finger[(count[0] - 1) % finger.shape[0]]
+        self.push_finger(t_s, last[layout.FINGER_X_MM], last[layout.FINGER_Y_MM], down=False)
+
+    def set_texture(self, texture: CompiledTexture, t_s: float | None = None) -> None:
+        """Render ``texture`` from the next block; temporal textures start at ``t_s`` (s; None: now).
+
+        The carrier is unaffected (its phase follows the sample index).
+        """
+        self._texture = texture
+        self._arrays = self._arrays._replace(
+            prog=_writable(texture.prog, np.int64),
+            params=_writable(texture.params, np.float64),
+            img=_writable(texture.img, np.float64),
+            stack=np.zeros(max(texture.stack_depth, 1)),
+        )
+        self._arrays.cfg[layout.CFG_TEXTURE_T0_S] = self.time_s if t_s is None else t_s
+
+    def render(self, out: np.ndarray) -> None:
+        """Fill ``out`` with the next ``len(out)`` drive samples (float32, 1.0 = ``volts_per_full_scale``).
+
+        Raises TypeError unless ``out`` is a writable C-contiguous 1-D float32 array,
+        ValueError unless it holds 1 to 65536 samples.
+        """
+        if not (
+            isinstance(out, np.ndarray) and out.dtype == np.float32 and out.ndim == 1
+            and out.flags.c_contiguous and out.flags.writeable
+        ):
+            raise TypeError("out: must be a writable C-contiguous 1-D float32 NumPy array")
+        if not 1 <= out.size <= MAX_BLOCK:
+            raise ValueError(f"out: must hold 1 to {MAX_BLOCK} samples, got {out.size}")
+        render_block(out, self.sample_index, *self._arrays)
+        self.sample_index += out.size
+
+    def drain_telemetry(self) -> dict[str, np.ndarray]:
+        """The telemetry rows written since the last drain, one array per ``layout.TEL_NAMES`` column.
+
+        ``saturated`` holds the FLAG_* bits as int64; the others are float64. Raises
+        TpadError if more rows were written than the ring holds (they are lost; the
+        next drain starts afresh): drain more often or raise ``telemetry_ring``.
+        """
+        telem, count = self._arrays.telem, self._arrays.telem_count
+        first, end = self._drained, int(count[0])
+        rows = telem[np.arange(first, end) % telem.shape[0]]
+        written = int(count[0]) - first  # re-read: rows copied while the kernel wrote must not be overwritten
+        if written > telem.shape[0]:
+            self._drained = int(count[0])
+            raise TpadError(
+                f"telemetry ring overflowed: {written} rows since the last drain, it holds {telem.shape[0]}; "
+                "drain more often or raise RenderOptions.telemetry_ring"
+            )
+        self._drained = end
+        drained = {name: rows[:, column].copy() for column, name in enumerate(layout.TEL_NAMES)}
+        drained[layout.TEL_NAMES[layout.TEL_FLAGS]] = rows[:, layout.TEL_FLAGS].astype(np.int64)
+        return drained
+
+    def warm_up(self) -> None:
+        """Compile (or load from cache) and run the kernel once on copies of the arrays.
+
+        The pipeline's own state is untouched; the first real :meth:`render` is then fast.
+        """
+        scratch = KernelArrays(*(array.copy() for array in self._arrays))
+        render_block(np.zeros(self.options.control_interval + 1, dtype=np.float32), self.sample_index, *scratch)
