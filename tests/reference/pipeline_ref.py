@@ -1,0 +1,201 @@
+"""Reference render pipeline: a slow, sample-by-sample Python loop written from docs/kernel.md.
+
+``render_reference(device, textures, fs_hz, options, fingers, n_samples, run=...)``
+renders a stream from sample 0 and returns its drive samples and, per control step,
+what the kernel's telemetry reports. It uses the Device's own methods (np.interp of
+its tables, the exact circuit) and the physics' public functions, the texture
+reference (``reference_friction`` on the texture models), and none of the kernel's
+arrays, tables or layout. It is written in the doc's recurrent form (one-pole
+update per sample, carrier phase from an exact fraction, ring sums recomputed), not
+in the kernel's closed forms.
+
+What it shares with the kernel is the contract: control steps at ``n % C == 0``; the
+finger read at control steps only (so is RUN); limits with the relative margin
+``SAFETY_MARGIN``; until a finger is first active the step's finger values (and force
+for the power estimate) are 0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Any, Sequence
+
+import numpy as np
+from reference.texture_ref import reference_friction
+
+from tpad_rt.device import Device
+from tpad_rt.physics.friction import amplitude_for
+from tpad_rt.pipeline import RenderOptions
+
+#: docs/kernel.md: every limit is kept with this relative margin against rounding.
+SAFETY_MARGIN = 1e-6
+VOLTAGE, POWER, SPEED_FLOOR, WATCHDOG = 1, 2, 4, 8
+STEP_FIELDS = (
+    "t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu", "amplitude_um", "command_v", "cap_v",
+    "gate", "flags", "power_w", "peak_v",
+)
+
+
+@dataclass
+class Reference:
+    """A rendered stream: ``samples`` (float32), ``envelope`` (V per sample), ``steps`` (per control step)."""
+
+    samples: np.ndarray
+    envelope: np.ndarray
+    steps: dict[str, np.ndarray]
+
+
+@dataclass
+class _Finger:
+    """The finger as the control step sees it."""
+
+    active: bool
+    x_mm: float = 0.0
+    y_mm: float = 0.0
+    vx_mm_s: float = 0.0
+    vy_mm_s: float = 0.0
+    force_n: float = 0.0
+
+
+def _finger_at(fingers: np.ndarray, t_s: float, options: RenderOptions) -> _Finger:
+    """The newest sample at or before ``t_s``, its velocity over the touch, position extrapolated."""
+    earlier = np.flatnonzero(fingers[:, 0] <= t_s)
+    if earlier.size == 0:
+        return _Finger(False)
+    i = earlier[-1]
+    t_i, x_i, y_i, force_n, down = fingers[i]
+    watchdog_s = options.watchdog_ms / 1000
+    if down == 0 or t_s - t_i > watchdog_s:
+        return _Finger(False)
+    j = i
+    while j > 0 and fingers[j - 1, 4] != 0 and t_i - fingers[j - 1, 0] <= options.velocity_window_ms / 1000:
+        j -= 1
+    vx = vy = 0.0
+    if t_i > fingers[j, 0]:
+        vx = (x_i - fingers[j, 1]) / (t_i - fingers[j, 0])
+        vy = (y_i - fingers[j, 2]) / (t_i - fingers[j, 0])
+    lead_s = min(t_s - t_i + options.horizon_ms / 1000, watchdog_s)
+    force_n = options.default_force_n if math.isnan(force_n) else force_n
+    return _Finger(True, x_i + vx * lead_s, y_i + vy * lead_s, vx, vy, force_n)
+
+
+class _Stream:
+    """The carried state of the reference renderer (what the kernel keeps in ``state``)."""
+
+    def __init__(self, device: Device, fs_hz: float, options: RenderOptions):
+        self.device, self.fs_hz, self.options = device, fs_hz, options
+        self.cap_w = device.power_budget_w if options.power_budget_w is None else options.power_budget_w
+        self.avg_w = self.cap_w if options.power_avg_w is None else options.power_avg_w
+        self.window_steps = max(1, round(options.power_window_s * fs_hz / options.control_interval))
+        self.ramp_samples = max(1, round(options.ramp_ms / 1000 * fs_hz))
+        self.k_smooth = 1 - math.exp(-1 / (options.smoothing_ms / 1000 * fs_hz))
+        self.preemphasis = device.preemphasis if options.preemphasis is None else options.preemphasis
+        self.carrier = Fraction(device.resonance_hz) / Fraction(fs_hz)
+        self.step_powers: list[float] = []
+        self.finger = _Finger(False)
+        self.target_mu = 0.0
+        self.command_v = 0.0
+        self.smoothed_v = 0.0
+        self.ramp = 0
+
+    def control_step(self, n: int, fingers: np.ndarray, texture: Any, t0_s: float, run: bool) -> dict[str, float]:
+        """Finger, texture, inverse model and limits at sample ``n``; the step's record."""
+        device, options = self.device, self.options
+        t_s = n / self.fs_hz
+        finger = _finger_at(fingers, t_s, options)
+        flags = 0
+        if finger.active:
+            self.finger = finger
+            speed_mm_s = math.hypot(finger.vx_mm_s, finger.vy_mm_s)
+            ux, uy = (finger.vx_mm_s / speed_mm_s, finger.vy_mm_s / speed_mm_s) if speed_mm_s > 0 else (0.0, 0.0)
+            mu = float(reference_friction(texture, finger.x_mm, finger.y_mm, ux, uy, t_s - t0_s))
+            self.target_mu = min(max(mu, options.mu_floor), 1.0)
+            speed_m_s = speed_mm_s / 1000
+            if speed_m_s < device.speed_floor_m_s:
+                speed_m_s, flags = device.speed_floor_m_s, SPEED_FLOOR
+            alpha_m = amplitude_for(self.target_mu, device.resonance_hz, speed_m_s, device.mu0, device.poisson,
+                                    device.psi_star)
+            self.command_v = float(alpha_m / device.amplitude_m_per_v(max(finger.force_n, 0.0)))
+        else:
+            flags = WATCHDOG
+        force_n = max(self.finger.force_n, 0.0)
+        self.p1_w = float(device.power_w_per_v2(force_n))
+        keep = 1 - SAFETY_MARGIN
+        previous_w = sum(self.step_powers[-(self.window_steps - 1):]) if self.window_steps > 1 else 0.0
+        allowance_w = max(self.window_steps * self.avg_w * keep - previous_w, 0.0)
+        power_v = math.sqrt(min(self.cap_w * keep, allowance_w) / self.p1_w)
+        voltage_v = device.max_voltage_v * keep
+        self.cap_v, bound = (voltage_v, VOLTAGE) if voltage_v <= power_v else (power_v, POWER)
+        if self.command_v > self.cap_v:
+            self.command_v, flags = self.cap_v, flags | bound
+        tau_s = float(device.envelope_time_constant_s(force_n))
+        self.preemphasis_gain = tau_s / (options.smoothing_ms / 1000) if self.preemphasis else 0.0
+        self.gate = finger.active and run
+        self.energy_v2: list[float] = []
+        f = self.finger
+        return dict(
+            t=t_s, x_mm=f.x_mm, y_mm=f.y_mm, speed_mm_s=math.hypot(f.vx_mm_s, f.vy_mm_s), force_n=f.force_n,
+            target_mu=self.target_mu,
+            amplitude_um=self.command_v * float(device.amplitude_m_per_v(force_n)) * 1e6,
+            command_v=self.command_v, cap_v=self.cap_v, gate=float(self.gate), flags=flags,
+        )
+
+    def sample(self, n: int) -> tuple[float, float]:
+        """Drive envelope (V) and DAC sample of sample ``n`` (the doc's per-sample recurrences)."""
+        self.smoothed_v += self.k_smooth * (self.command_v - self.smoothed_v)
+        drive_v = self.smoothed_v + self.preemphasis_gain * (self.command_v - self.smoothed_v)
+        drive_v = min(max(drive_v, 0.0), self.cap_v)
+        self.ramp = min(max(self.ramp + (1 if self.gate else -1), 0), self.ramp_samples)
+        envelope_v = self.ramp / self.ramp_samples * drive_v
+        phase = n * self.carrier
+        sine = math.sin(2 * math.pi * float(phase - math.floor(phase)))
+        self.energy_v2.append(envelope_v * envelope_v)
+        return envelope_v, envelope_v / self.device.volts_per_full_scale * sine
+
+    def close_step(self) -> tuple[float, float]:
+        """The finished step's power ``p1 * mean(e^2)`` (W), remembered for the window, and its peak (V)."""
+        power_w = self.p1_w * sum(self.energy_v2) / len(self.energy_v2)
+        self.step_powers.append(power_w)
+        return power_w, math.sqrt(max(self.energy_v2))
+
+
+def _in_effect(schedule: Sequence[tuple[Any, ...]], n: int) -> tuple[Any, ...]:
+    """The last entry of ``schedule`` (sorted by first sample) starting at or before sample ``n``."""
+    return [entry for entry in schedule if entry[0] <= n][-1]
+
+
+def render_reference(
+    device: Device,
+    textures: Sequence[tuple[int, Any, float]],
+    fs_hz: float,
+    options: RenderOptions,
+    fingers: np.ndarray,
+    n_samples: int,
+    run: Sequence[tuple[int, bool]] = ((0, True),),
+) -> Reference:
+    """Samples ``0 .. n_samples - 1`` of a stream.
+
+    ``textures``: ``(first_sample, texture_model, t0_s)``, the texture in effect from that
+    sample on (the first at sample 0); ``run``: ``(first_sample, running)``, the RUN
+    flag from that sample on (the first at sample 0); ``fingers``: rows ``(t_s, x_mm, y_mm, force_n, down)``,
+    all known from the start. ``steps`` holds one entry per control step of
+    :data:`STEP_FIELDS` (``power_w`` and ``peak_v`` over the step's samples).
+    """
+    stream = _Stream(device, fs_hz, options)
+    interval = options.control_interval
+    samples = np.zeros(n_samples, dtype=np.float32)
+    envelope = np.zeros(n_samples)
+    steps: list[dict[str, float]] = []
+    for n in range(n_samples):
+        if n % interval == 0:
+            if steps:
+                steps[-1]["power_w"], steps[-1]["peak_v"] = stream.close_step()
+            _, texture, t0_s = _in_effect(textures, n)
+            _, running = _in_effect(run, n)
+            steps.append(stream.control_step(n, fingers, texture, t0_s, running))
+        envelope[n], value = stream.sample(n)
+        samples[n] = np.float32(value)
+    steps[-1]["power_w"], steps[-1]["peak_v"] = stream.close_step()
+    return Reference(samples, envelope, {name: np.array([step[name] for step in steps]) for name in STEP_FIELDS})
