@@ -199,8 +199,9 @@ def _map(figure: Any, axes: Any, values: np.ndarray, extent: tuple[float, ...], 
 
 def _friction_panel(figure: Any, axes: Any, maps: PlateMaps, extent: tuple[float, ...]) -> None:
     _map(figure, axes, maps.friction, extent, "viridis", 1.0, "relative friction μ'")
-    axes.set_title(f"target friction (1: vibration off): {maps.friction.min():.3g} to {maps.friction.max():.3g}",
-                   fontsize=10, loc="left")
+    low, high = maps.friction.min(), maps.friction.max()
+    levels = f"{low:.3g} everywhere" if low == high else f"{low:.3g} to {high:.3g}"
+    axes.set_title(f"target friction (1: vibration off): {levels}", fontsize=10, loc="left")
 
 
 def _direction_arrow(axes: Any, direction_deg: float) -> None:
