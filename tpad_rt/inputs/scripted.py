@@ -67,6 +67,9 @@ class _Scripted(Input):
 
     def samples_between(self, t0_s: float, t1_s: float) -> np.ndarray:
         """The samples with ``t0_s < t_s <= t1_s`` (see :meth:`Input.samples_between`)."""
+        margin = 1e-6  # of a sample period: no sample index can hide in float noise
+        if t0_s > -math.inf and math.floor(t1_s * self.rate_hz + margin) == math.floor(t0_s * self.rate_hz - margin):
+            return np.empty(0, dtype=FINGER_DTYPE)  # the common case: a span shorter than a sample period
         first = 0 if t0_s == -math.inf else max(0, math.floor(t0_s * self.rate_hz))
         stop = max(first, math.floor(t1_s * self.rate_hz) + 2)
         last = self._last_index()

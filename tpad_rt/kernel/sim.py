@@ -76,12 +76,13 @@ def resonator_coefficients(f0_hz: float, q: float, gain_m_per_v: float, fs_hz: f
 @numba.njit(cache=True, nogil=True)
 def resonate(
     drive: np.ndarray, volts_per_full_scale: float, coef: np.ndarray, state: np.ndarray, envelope_m: np.ndarray
-) -> None:
-    """Advance the plate over the DAC samples ``drive`` (float32, full scale 1).
+) -> float:
+    """Advance the plate over the DAC samples ``drive`` (float32, full scale 1); the mean envelope (m).
 
     Sample ``i`` drives with ``drive[i] * volts_per_full_scale`` volts for one sample
     period; ``envelope_m[i]`` (m, at least ``len(drive)`` long) receives the envelope
     ``sqrt(x**2 + (v / w0)**2)`` at the end of that period. ``state`` carries ``(x, v)``.
+    Returns 0.0 for an empty ``drive``.
     """
     phi_xx = coef[COEF_PHI_XX]
     phi_xv = coef[COEF_PHI_XV]
@@ -92,6 +93,7 @@ def resonate(
     inv_omega_s = coef[COEF_INV_OMEGA_S]
     x_m = state[SIM_X_M]
     v_m_s = state[SIM_V_M_S]
+    total_m = 0.0
     for i in range(drive.shape[0]):
         volts = drive[i] * volts_per_full_scale
         x_next = phi_xx * x_m + phi_xv * v_m_s + gamma_x * volts
@@ -99,5 +101,7 @@ def resonate(
         x_m = x_next
         v_scaled_m = v_m_s * inv_omega_s
         envelope_m[i] = math.sqrt(x_m * x_m + v_scaled_m * v_scaled_m)
+        total_m += envelope_m[i]
     state[SIM_X_M] = x_m
     state[SIM_V_M_S] = v_m_s
+    return total_m / max(drive.shape[0], 1)

@@ -49,6 +49,7 @@ class SimOutput(Output):
         self.q = q
         self._state = np.zeros(SIM_STATE_SIZE)
         self._coef = np.zeros(COEF_SIZE)
+        self._coef_force_n = math.nan  # the force self._coef was computed for
         self._envelope_m = np.zeros(0)
         self._amplitude_um: list[float] = []
         self._achieved_mu: list[float] = []
@@ -57,14 +58,14 @@ class SimOutput(Output):
         """Drive the plate with ``samples`` (at least one); ``block`` must carry ``force_n`` (N) and ``speed_mm_s``."""
         force_n = float(block["force_n"])
         device = self.device
-        q = self.q if self.q is not None else float(device.quality_factor(force_n))
-        resonator_coefficients(device.resonance_hz, q, float(device.amplitude_m_per_v(force_n)),
-                               float(self.fs_hz), self._coef)
+        if force_n != self._coef_force_n:
+            q = self.q if self.q is not None else float(device.quality_factor(force_n))
+            resonator_coefficients(device.resonance_hz, q, float(device.amplitude_m_per_v(force_n)),
+                                   float(self.fs_hz), self._coef)
+            self._coef_force_n = force_n
         if len(self._envelope_m) < len(samples):
             self._envelope_m = np.zeros(len(samples))
-        envelope_m = self._envelope_m[:len(samples)]
-        resonate(samples, device.volts_per_full_scale, self._coef, self._state, envelope_m)
-        amplitude_m = float(envelope_m.mean())
+        amplitude_m = resonate(samples, device.volts_per_full_scale, self._coef, self._state, self._envelope_m)
         speed_m_s = float(block["speed_mm_s"]) * 1e-3
         speed_m_s = max(speed_m_s, device.speed_floor_m_s) if math.isfinite(speed_m_s) else device.speed_floor_m_s
         self._amplitude_um.append(amplitude_m * 1e6)
