@@ -1,0 +1,156 @@
+"""The offline render loop: an input drives a pipeline, block by block, into outputs.
+
+Per block: push the input's finger samples up to the block's end time into the
+pipeline, render the block, hand the drive and the block's telemetry row to every
+output, keep the row (and the drive, if asked). After ``input_s`` seconds of input the
+pipeline is stopped and rendered for a tail long enough for its ramp to reach silence.
+Nothing here waits for a clock: ``tpad-rt render`` runs it as fast as it goes, the
+interim ``tpad-rt play`` paces it.
+
+API map
+-------
+OfflineRender(pipeline, source, outputs, block_frames=, input_s=, tail_s=, force_n=, keep_drive=)
+    ``.step()`` renders one block; ``.done``, ``.blocks_done``, ``.total_blocks``,
+    ``.stop_early()``; ``.latest`` (the last block's telemetry row and output
+    measurements); ``.result()`` -> RenderResult
+RenderResult
+    ``fs_hz``, ``block_frames``, ``drive`` (float32 or None), ``blocks`` (name -> array),
+    ``seconds`` of audio rendered
+input_span_s(source, duration_s) -> float
+    how long to follow the input; ConfigError for an endless input without a duration
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from tpad_rt.errors import ConfigError
+from tpad_rt.inputs import Input
+from tpad_rt.kernel.layout import TEL_NAMES
+from tpad_rt.outputs import Output
+from tpad_rt.pipeline import Pipeline
+
+
+@dataclass(frozen=True)
+class RenderResult:
+    """What a render produced: per-block arrays (telemetry, then output measurements) and the drive."""
+
+    fs_hz: int
+    block_frames: int
+    drive: npt.NDArray[np.float32] | None
+    blocks: dict[str, np.ndarray]
+
+    @property
+    def seconds(self) -> float:
+        """Audio rendered (s)."""
+        return len(self.blocks["t"]) * self.block_frames / self.fs_hz
+
+
+def input_span_s(source: Input, duration_s: float | None) -> float:
+    """``duration_s`` if given, else the input's natural duration (s).
+
+    Raises ConfigError when the input is endless and no duration is given, or the
+    duration is not a finite number > 0.
+    """
+    span_s = source.duration_s if duration_s is None else duration_s
+    if span_s is None:
+        raise ConfigError("the input never ends (an endless pattern); give a duration (--duration SECONDS)")
+    if not (math.isfinite(span_s) and span_s > 0):
+        raise ConfigError(f"duration: must be a number > 0, got {span_s:g}")
+    return span_s
+
+
+class OfflineRender:
+    """Renders ``input_s`` (s, ``inf``: until :meth:`stop_early`) of ``source`` through ``pipeline``
+    into ``outputs``, then a ``tail_s`` (s) tail.
+
+    ``block_frames`` samples per block; ``force_n`` (N) replaces every finger sample's
+    force when given; ``keep_drive`` keeps every drive sample for :meth:`result`. The
+    pipeline is started on the first :meth:`step`.
+    """
+
+    def __init__(
+        self,
+        pipeline: Pipeline,
+        source: Input,
+        outputs: Sequence[Output],
+        *,
+        block_frames: int,
+        input_s: float,
+        tail_s: float,
+        force_n: float | None = None,
+        keep_drive: bool = False,
+    ):
+        self.pipeline = pipeline
+        self.source = source
+        self.outputs = list(outputs)
+        self.block_frames = block_frames
+        self.force_n = force_n
+        fs_hz = pipeline.fs_hz
+        self.input_blocks: float = math.ceil(input_s * fs_hz / block_frames) if math.isfinite(input_s) else math.inf
+        self.tail_blocks = math.ceil(tail_s * fs_hz / block_frames)
+        self.blocks_done = 0
+        self._block = np.zeros(block_frames, dtype=np.float32)
+        self._drive: list[np.ndarray] | None = [] if keep_drive else None
+        self._rows: dict[str, list[np.ndarray]] = {name: [] for name in TEL_NAMES}
+        self._pushed_until_s = -math.inf
+        self.latest: dict[str, float] = {}
+
+    @property
+    def total_blocks(self) -> float:
+        """Blocks in the whole render (``inf`` while following an endless input)."""
+        return self.input_blocks + self.tail_blocks
+
+    @property
+    def done(self) -> bool:
+        """True once every block has been rendered."""
+        return self.blocks_done >= self.total_blocks
+
+    def stop_early(self) -> None:
+        """Stop following the input now: the remaining blocks are only the ramp tail."""
+        self.input_blocks = min(self.input_blocks, self.blocks_done)
+
+    def step(self) -> None:
+        """Render the next block (see the module docstring); does nothing once :attr:`done`."""
+        if self.done:
+            return
+        pipeline, block = self.pipeline, self._block
+        if self.blocks_done == 0:
+            pipeline.start()
+        if self.blocks_done == self.input_blocks:
+            pipeline.stop()
+        self._push_until((pipeline.sample_index + self.block_frames) / pipeline.fs_hz)
+        pipeline.render(block)
+        telemetry = pipeline.drain_telemetry()
+        row = {name: float(values[-1]) for name, values in telemetry.items()}
+        for output in self.outputs:
+            output.write(block, row)
+            row.update(output.latest())
+        for name in TEL_NAMES:
+            self._rows[name].append(telemetry[name])
+        if self._drive is not None:
+            self._drive.append(block.copy())
+        self.latest = row
+        self.blocks_done += 1
+
+    def _push_until(self, end_s: float) -> None:
+        for sample in self.source.samples_between(self._pushed_until_s, end_s):
+            force_n = sample["force_n"] if self.force_n is None else self.force_n
+            self.pipeline.push_finger(float(sample["t_s"]), float(sample["x_mm"]), float(sample["y_mm"]),
+                                      force_n=float(force_n), down=bool(sample["down"]))
+        self._pushed_until_s = end_s
+
+    def result(self) -> RenderResult:
+        """The blocks rendered so far: telemetry, every output's measurements, and the drive if kept."""
+        blocks = {name: np.concatenate(arrays) for name, arrays in self._rows.items()}
+        for output in self.outputs:
+            blocks.update(output.measurements())
+        drive = None
+        if self._drive is not None:
+            drive = np.concatenate(self._drive) if self._drive else np.zeros(0, dtype=np.float32)
+        return RenderResult(self.pipeline.fs_hz, self.block_frames, drive, blocks)
