@@ -1,0 +1,217 @@
+"""``tpad-rt render TEXTURE --input URL --out FILE.npz|FILE.wav``: render offline.
+
+Runs the pipeline over the input's finger samples as fast as it goes (no audio
+device), into the output (default ``sim://``, the simulated plate, so the recording
+says what friction the finger would feel). ``--out FILE.npz`` writes a recording
+(:mod:`tpad_rt.recording`: drive, per-block telemetry, plate amplitude and achieved
+friction, metadata); ``--out FILE.wav`` writes the drive as a 32-bit float WAV. A
+progress bar shows on a terminal; a summary follows.
+
+The session helpers here (:func:`add_session_arguments`, :func:`open_session`,
+:func:`summary_lines`) are shared with the interim ``tpad-rt play``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
+
+from tpad_rt import __version__
+from tpad_rt.device import Device
+from tpad_rt.errors import ConfigError
+from tpad_rt.inputs import open_input
+from tpad_rt.kernel.layout import CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
+from tpad_rt.offline import OfflineRender, RenderResult, input_span_s
+from tpad_rt.outputs import open_output
+from tpad_rt.outputs.wav import WavOutput
+from tpad_rt.pipeline import Pipeline, RenderOptions
+from tpad_rt.recording import Recording, write_recording
+from tpad_rt.texture import load_compiled
+
+#: The default input of ``play`` (``render`` requires one).
+DEFAULT_INPUT = "scripted://swipe?speed_mm_s=100"
+DEFAULT_OUTPUT = "sim://"
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number > 0, got '{text}'")
+    return value
+
+
+def _number(low: float, low_closed: bool) -> Any:
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and (value >= low if low_closed else value > low)):
+            raise argparse.ArgumentTypeError(f"must be a number {'>=' if low_closed else '>'} {low:g}, got '{text}'")
+        return value
+
+    return parse
+
+
+def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str | None) -> None:
+    """The arguments ``render`` and ``play`` share (``--input`` required when ``input_default`` is None)."""
+    parser.add_argument("texture", metavar="TEXTURE", help="texture file (YAML)")
+    parser.add_argument("--device", metavar="FILE", help="device file (default: calibration/default.yaml)")
+    parser.add_argument("--input", metavar="URL", required=input_default is None, default=input_default,
+                        help="finger input, e.g. scripted://swipe?speed_mm_s=100 or file:///path/trajectory.csv"
+                        + (f" (default {input_default})" if input_default else ""))
+    parser.add_argument("--output", metavar="URL", default=DEFAULT_OUTPUT,
+                        help=f"output: sim://, wav:///path/out.wav or null:// (default {DEFAULT_OUTPUT})")
+    parser.add_argument("--rate", metavar="HZ", type=_positive_int, default=192000, help="sample rate (default 192000)")
+    parser.add_argument("--block", metavar="N", type=_positive_int, default=64, help="samples per block (default 64)")
+    parser.add_argument("--duration", metavar="S", type=_number(0, False),
+                        help="seconds of input to render (default: the input's own duration)")
+    parser.add_argument("--power-budget", metavar="W", type=_number(0, False),
+                        help="instantaneous power cap (default: the device's power_budget_w)")
+    parser.add_argument("--power-avg", metavar="W", type=_number(0, False), help="average power budget")
+    parser.add_argument("--force", metavar="N", type=_number(0, True),
+                        help="contact force (N) for every finger sample, overriding the input's")
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Register ``render``."""
+    parser = subparsers.add_parser(
+        "render",
+        help="render a texture offline into a recording (.npz) or a WAV file",
+        description="Render TEXTURE for the finger path of --input, faster than real time, into --out "
+        "(.npz: recording with telemetry and the simulated plate; .wav: the drive).",
+    )
+    add_session_arguments(parser, input_default=None)
+    parser.add_argument("--out", metavar="FILE", required=True, help="FILE.npz (recording) or FILE.wav (drive)")
+    parser.set_defaults(func=run)
+
+
+@dataclass
+class Session:
+    """An opened render: its loop, and the metadata the summary and the recording need."""
+
+    render: OfflineRender
+    metadata: dict[str, Any]
+
+
+def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_drive: bool,
+                 wav_path: Path | None = None, endless_ok: bool = False) -> Session:
+    """Load, open and wire everything ``args`` name; resources close with ``stack``.
+
+    An endless input without ``--duration`` is followed until stopped when
+    ``endless_ok``, else it is an error. Raises ConfigError for a bad file, URL or
+    value, BackendError when an output cannot open.
+    """
+    device = Device.from_file(args.device) if args.device else Device.default()
+    texture = load_compiled(args.texture)
+    source = stack.enter_context(open_input(args.input))
+    endless = endless_ok and args.duration is None and source.duration_s is None
+    input_s = math.inf if endless else input_span_s(source, args.duration)
+    options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
+                            **({} if args.force is None else {"default_force_n": args.force}))
+    pipeline = Pipeline(device, texture, fs_hz=args.rate, options=options)
+    outputs = [stack.enter_context(open_output(args.output, device=device, fs_hz=args.rate))]
+    if wav_path is not None:
+        outputs.append(stack.enter_context(WavOutput(wav_path, args.rate)))
+    pipeline.warm_up()
+    # The ramp down starts at the first control step after the stop and lasts ramp_ms:
+    # one control interval plus the ramp, and a whole block more, end in silence.
+    tail_s = options.ramp_ms * 1e-3 + (options.control_interval + args.block) / args.rate
+    render = OfflineRender(pipeline, source, outputs, block_frames=args.block, input_s=input_s,
+                           tail_s=tail_s, force_n=args.force, keep_drive=keep_drive)
+    cfg = pipeline.arrays.cfg  # the limits the kernel applies, defaults resolved
+    metadata = {
+        "texture_path": str(args.texture),
+        "texture_description": texture.description,
+        "device_label": device.label,
+        "carrier_hz": device.resonance_hz,
+        "volts_per_full_scale": device.volts_per_full_scale,
+        "max_voltage_v": device.max_voltage_v,
+        "power_budget_w": float(cfg[CFG_POWER_CAP_W]),
+        "power_avg_w": float(cfg[CFG_POWER_AVG_W]),
+        "power_window_s": options.power_window_s,
+        "block_frames": args.block,
+        "input_url": args.input,
+        "output_url": args.output,
+        "render_options": asdict(options),
+        "tpad_rt_version": __version__,
+    }
+    return Session(render, metadata)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Render (module docstring); 0 on success."""
+    out = Path(args.out)
+    if out.suffix.lower() not in (".npz", ".wav"):
+        raise ConfigError(f"--out: must end in .npz (recording) or .wav (drive), got '{args.out}'")
+    console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
+    with contextlib.ExitStack() as stack:
+        session = open_session(args, stack, keep_drive=out.suffix.lower() == ".npz",
+                               wav_path=out if out.suffix.lower() == ".wav" else None)
+        started = time.perf_counter()
+        _run_with_progress(session.render, console)
+        wall_s = time.perf_counter() - started
+    result = session.render.result()
+    if result.drive is not None:
+        write_recording(out, Recording(result.fs_hz, result.drive, result.blocks, session.metadata))
+    for line in summary_lines(result, session.metadata, wall_s):
+        console.print(line)
+    console.print(f"wrote {out}")
+    return 0
+
+
+def _run_with_progress(render: OfflineRender, console: Console) -> None:
+    """Render every block, with a progress bar in audio seconds when ``console`` is a terminal."""
+    seconds_per_block = render.block_frames / render.pipeline.fs_hz
+    with Progress(TextColumn("rendering"), BarColumn(), TaskProgressColumn(),
+                  TextColumn("{task.fields[audio]}"), TimeRemainingColumn(),
+                  console=console, transient=True, disable=not console.is_terminal) as progress:
+        task = progress.add_task("render", total=render.total_blocks, audio="")
+        while not render.done:
+            render.step()
+            if render.blocks_done % 256 == 0 or render.done:
+                audio = f"{render.blocks_done * seconds_per_block:.2f} s of audio"
+                progress.update(task, completed=render.blocks_done, total=render.total_blocks, audio=audio)
+
+
+def _percent(mask: np.ndarray) -> str:
+    return f"{100 * np.count_nonzero(mask) / max(len(mask), 1):.1f} %"
+
+
+def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float) -> list[str]:
+    """The end-of-render summary: speed, peak volts, power vs budgets, saturation, friction error."""
+    blocks = result.blocks
+    flags = blocks["saturated"].astype(np.int64)
+    touching = (flags & FLAG_WATCHDOG) == 0
+    saturated = (flags & (FLAG_VOLTAGE | FLAG_POWER)) != 0
+    avg_budget = metadata["power_avg_w"]
+    speed = result.seconds / max(wall_s, 1e-9)
+    lines = [
+        f"rendered {result.seconds:.3f} s of audio in {wall_s:.2f} s ({speed:.1f}x real time), "
+        f"{len(flags)} blocks of {result.block_frames} at {result.fs_hz} Hz",
+        f"drive: peak {blocks['voltage_v'].max(initial=0.0):.2f} V of {metadata['max_voltage_v']:g} V max",
+        f"power: mean {blocks['power_w'].mean():.3f} W, peak {blocks['power_w'].max(initial=0.0):.3f} W "
+        f"(cap {metadata['power_budget_w']:g} W"
+        + (f", average budget {avg_budget:g} W over {metadata['power_window_s']:g} s)" if avg_budget else ")"),
+        f"saturated: {_percent(saturated)} of blocks (voltage {_percent((flags & FLAG_VOLTAGE) != 0)}, "
+        f"power {_percent((flags & FLAG_POWER) != 0)}); finger touching in {_percent(touching)}",
+    ]
+    if "achieved_mu" in blocks:
+        compared = touching & ~saturated
+        error = np.abs(blocks["target_mu"] - blocks["achieved_mu"])[compared]
+        if len(error):
+            lines.append(f"friction |target - achieved| (simulated plate; blocks touching, not saturated): "
+                         f"mean {error.mean():.4f}, 95th percentile {np.percentile(error, 95):.4f}")
+    return lines
