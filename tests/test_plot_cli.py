@@ -1,0 +1,57 @@
+"""tpad-rt plot: a recording becomes a decodable image; bad inputs are one-line errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from tpad_rt.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A short render of the grating on the simulated plate."""
+    out = tmp_path_factory.mktemp("plot") / "g.npz"
+    grating = str(REPO / "textures" / "grating.yaml")
+    assert main(["render", grating, "--input", "scripted://swipe?to_mm=40", "--out", str(out)]) == 0
+    return out
+
+
+@pytest.mark.parametrize("extra", [[], ["--along", "x"], ["--start", "0.05", "--end", "0.1"]])
+def test_writes_a_png(recording: Path, tmp_path: Path, extra: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "g.png"
+    assert main(["plot", str(recording), "--out", str(out), *extra]) == 0
+    assert capsys.readouterr().out.endswith(f"wrote {out}\n")
+    with Image.open(out) as image:
+        assert image.format == "PNG" and image.size == (1650, 1425)
+        pixels = np.asarray(image.convert("RGB"))
+    assert len(np.unique(pixels.reshape(-1, 3), axis=0)) > 100  # lines, shading and text, not a blank canvas
+
+
+def test_other_formats(recording: Path, tmp_path: Path) -> None:
+    assert main(["plot", str(recording), "--out", str(tmp_path / "g.svg")]) == 0
+    assert (tmp_path / "g.svg").read_text().lstrip().startswith("<?xml")
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["--out", "g.jpg"], "tpad-rt plot: --out: must end in .png, .pdf, .svg, got 'g.jpg'"),
+        (["--out", "g.png", "--start", "5"], "tpad-rt plot: --start/--end: no block between 5 s and inf s"),
+    ],
+)
+def test_argument_errors(recording: Path, args: list[str], expected: str, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["plot", str(recording), *args]) == 1
+    assert capsys.readouterr().err.startswith(expected)
+
+
+def test_not_a_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "x.npz").write_text("not an archive")
+    assert main(["plot", str(tmp_path / "x.npz"), "--out", str(tmp_path / "x.png")]) == 1
+    assert capsys.readouterr().err == f"tpad-rt plot: {tmp_path}/x.npz: not a tpad-rt recording (not an .npz archive)\n"
+    assert not (tmp_path / "x.png").exists()

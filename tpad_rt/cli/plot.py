@@ -1,0 +1,140 @@
+"""``tpad-rt plot FILE.npz --out FILE.png``: a recording as a figure.
+
+Four panels against time (or, with ``--along x``, the finger's x): relative friction
+(target, and achieved when the plate was simulated), plate amplitude (commanded, and
+simulated), drive volts against the device maximum, and power against the cap and the
+average budget (instantaneous, and averaged over the budget's window). Blocks where
+the drive saturated are shaded red, blocks without a touching finger grey.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
+from tpad_rt.recording import Recording, read_recording
+
+_FORMATS = (".png", ".pdf", ".svg")
+_TARGET, _ACHIEVED, _LIMIT, _AVERAGE = "#1f5fa8", "#e07b00", "#c0392b", "#6a3d9a"
+_SATURATED, _LIFTED = "#e74c3c", "#7f8c8d"
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Register ``plot``."""
+    parser = subparsers.add_parser(
+        "plot",
+        help="plot a recording: friction, amplitude, volts and power",
+        description="Plot a recording made by 'tpad-rt render --out FILE.npz' (or 'play --record').",
+    )
+    parser.add_argument("recording", metavar="FILE.npz", help="recording to plot")
+    parser.add_argument("--out", metavar="FILE", required=True, help="image to write (.png, .pdf or .svg)")
+    parser.add_argument("--along", choices=("time", "x"), default="time",
+                        help="horizontal axis: time (default) or the finger's x position")
+    parser.add_argument("--start", metavar="S", type=float, default=-math.inf, help="plot from this time (s)")
+    parser.add_argument("--end", metavar="S", type=float, default=math.inf, help="plot up to this time (s)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Plot the recording; 0 on success. ConfigError for a bad recording or image name."""
+    out = Path(args.out)
+    if out.suffix.lower() not in _FORMATS:
+        raise ConfigError(f"--out: must end in {', '.join(_FORMATS)}, got '{args.out}'")
+    figure = plot_recording(read_recording(args.recording), along=args.along, start_s=args.start, end_s=args.end)
+    try:
+        figure.savefig(out, dpi=150)
+    except OSError as error:
+        raise BackendError(f"{out}: cannot write the figure ({error.strerror})") from None
+    print(f"wrote {out}")
+    return 0
+
+
+def plot_recording(recording: Recording, along: str = "time", start_s: float = -math.inf,
+                   end_s: float = math.inf) -> Any:
+    """A matplotlib Figure of ``recording``'s blocks from ``start_s`` to ``end_s`` (s) (module docstring).
+
+    ``along`` is ``time`` or ``x``. Raises ConfigError when no block lies in the span.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+    from matplotlib.patches import Patch
+
+    meta = recording.metadata
+    inside = (recording.blocks["t"] >= start_s) & (recording.blocks["t"] <= end_s)
+    if not inside.any():
+        raise ConfigError(f"--start/--end: no block between {start_s:g} s and {end_s:g} s "
+                          f"(the recording spans {recording.blocks['t'][0]:g} to {recording.blocks['t'][-1]:g} s)")
+    power_average = _trailing_mean(recording.blocks["power_w"],
+                                   meta["power_window_s"] * recording.fs_hz / meta["block_frames"])[inside]
+    blocks = {name: values[inside] for name, values in recording.blocks.items()}
+    flags = blocks["saturated"].astype(np.int64)
+    touching = (flags & FLAG_WATCHDOG) == 0
+    saturated = (flags & (FLAG_VOLTAGE | FLAG_POWER)) != 0
+    if along == "x":
+        position = np.where(touching, blocks["x_mm"], np.nan)  # no lines to where a lifted finger was
+        axis, label = position, "finger x (mm)"
+    else:
+        axis, label = blocks["t"], "time (s)"
+
+    figure, panels = plt.subplots(4, 1, sharex=True, figsize=(11, 9.5), layout="constrained")
+    friction, amplitude, volts, power = panels
+    friction.plot(axis, blocks["target_mu"], color=_TARGET, lw=1.4, label="target")
+    amplitude.plot(axis, blocks["amplitude_um"], color=_TARGET, lw=1.4, label="commanded")
+    if recording.has_sim:
+        friction.plot(axis, blocks["achieved_mu"], color=_ACHIEVED, lw=1.2, label="achieved (simulated plate)")
+        amplitude.plot(axis, blocks["plate_amplitude_um"], color=_ACHIEVED, lw=1.2, label="simulated plate")
+    lowest = min(values.min() for name, values in blocks.items() if name in ("target_mu", "achieved_mu"))
+    friction.set(ylabel="relative friction μ'", ylim=(max(0.0, math.floor(10 * lowest - 1) / 10), 1.04))
+    amplitude.set(ylabel="amplitude (µm)")
+
+    volts.plot(axis, blocks["voltage_v"], color=_TARGET, lw=1.2, label="drive (peak per block)")
+    volts.axhline(meta["max_voltage_v"], color=_LIMIT, ls="--", lw=1.2, label=f"max {meta['max_voltage_v']:g} V")
+    volts.set(ylabel="drive (V peak)", ylim=(0, meta["max_voltage_v"] * 1.12))
+
+    power.plot(axis, blocks["power_w"], color=_TARGET, lw=0.8, alpha=0.8, label="instantaneous (per block)")
+    power.plot(axis, power_average, color=_AVERAGE, lw=1.6, label=f"average over {meta['power_window_s']:g} s")
+    cap_w, average_w = meta["power_budget_w"], meta["power_avg_w"]
+    if average_w == cap_w:
+        power.axhline(cap_w, color=_LIMIT, ls="--", lw=1.2, label=f"cap and average budget {cap_w:g} W")
+    else:
+        power.axhline(cap_w, color=_LIMIT, ls="--", lw=1.2, label=f"cap {cap_w:g} W")
+        power.axhline(average_w, color=_AVERAGE, ls=":", lw=1.4, label=f"average budget {average_w:g} W")
+    power.set(ylabel="power (W)", xlabel=label, ylim=(0, max(cap_w, blocks["power_w"].max()) * 1.15))
+
+    shading = [Patch(color=_SATURATED, alpha=0.3, label="saturated"),
+               Patch(color=_LIFTED, alpha=0.25, label="finger lifted")]
+    for panel in panels:
+        _shade(panel, axis, saturated, _SATURATED, 0.14)
+        _shade(panel, axis, ~touching, _LIFTED, 0.10)
+        panel.grid(True, color="#dddddd", lw=0.6)
+        panel.spines[["top", "right"]].set_visible(False)
+        handles, _ = panel.get_legend_handles_labels()
+        panel.legend(handles=handles + (shading if panel is friction else []),
+                     loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    figure.suptitle(f"{meta['texture_description']}  ·  {meta['device_label']}  ·  "
+                    f"{meta.get('input_url', '')}", fontsize=11)
+    return figure
+
+
+def _trailing_mean(values: np.ndarray, window_blocks: float) -> np.ndarray:
+    """Mean of each block and the ones before it over ``window_blocks`` (fewer at the start)."""
+    width = max(int(round(window_blocks)), 1)
+    sums = np.cumsum(np.concatenate([[0.0], values]))
+    index = np.arange(1, len(values) + 1)
+    start = np.maximum(index - width, 0)
+    return (sums[index] - sums[start]) / (index - start)
+
+
+def _shade(panel: Any, axis: np.ndarray, mask: np.ndarray, color: str, alpha: float) -> None:
+    """Shade the panel's full height where ``mask`` holds."""
+    if mask.any():
+        panel.fill_between(axis, 0, 1, where=mask, color=color, alpha=alpha, lw=0,
+                           transform=panel.get_xaxis_transform(), step="post")
