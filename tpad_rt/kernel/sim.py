@@ -95,7 +95,7 @@ def resonate(
     v_m_s = state[SIM_V_M_S]
     total_m = 0.0
     for i in range(drive.shape[0]):
-        volts = drive[i] * volts_per_full_scale
+        volts = float(drive[i]) * volts_per_full_scale  # float64 (NumPy 2 keeps float32 * float in float32)
         x_next = phi_xx * x_m + phi_xv * v_m_s + gamma_x * volts
         v_m_s = phi_vx * x_m + phi_vv * v_m_s + gamma_v * volts
         x_m = x_next
