@@ -80,7 +80,8 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
                         help="seconds of input to render (default: the input's own duration)")
     parser.add_argument("--power-budget", metavar="W", type=_number(0, False),
                         help="instantaneous power cap (default: the device's power_budget_w)")
-    parser.add_argument("--power-avg", metavar="W", type=_number(0, False), help="average power budget")
+    parser.add_argument("--power-avg", metavar="W", type=_number(0, False),
+                        help="average power budget over the window (default: the cap)")
     parser.add_argument("--force", metavar="N", type=_number(0, True),
                         help="contact force (N) for every finger sample, overriding the input's")
 
