@@ -86,12 +86,14 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
 
     figure, panels = plt.subplots(4, 1, sharex=True, figsize=(11, 9.5), layout="constrained")
     friction, amplitude, volts, power = panels
-    friction.plot(axis, blocks["target_mu"], color=_TARGET, lw=1.4, label="target")
-    amplitude.plot(axis, blocks["amplitude_um"], color=_TARGET, lw=1.4, label="commanded")
+    felt = {name: np.where(touching, blocks[name], np.nan)  # no finger, no friction (or command) to show
+            for name in ("target_mu", "achieved_mu", "amplitude_um") if name in blocks}
+    friction.plot(axis, felt["target_mu"], color=_TARGET, lw=1.4, label="target")
+    amplitude.plot(axis, felt["amplitude_um"], color=_TARGET, lw=1.4, label="commanded")
     if recording.has_sim:
-        friction.plot(axis, blocks["achieved_mu"], color=_ACHIEVED, lw=1.2, label="achieved (simulated plate)")
+        friction.plot(axis, felt["achieved_mu"], color=_ACHIEVED, lw=1.2, label="achieved (simulated plate)")
         amplitude.plot(axis, blocks["plate_amplitude_um"], color=_ACHIEVED, lw=1.2, label="simulated plate")
-    lowest = min(values.min() for name, values in blocks.items() if name in ("target_mu", "achieved_mu"))
+    lowest = min(np.nanmin(values, initial=1.0) for name, values in felt.items() if name != "amplitude_um")
     friction.set(ylabel="relative friction μ'", ylim=(max(0.0, math.floor(10 * lowest - 1) / 10), 1.04))
     amplitude.set(ylabel="amplitude (µm)")
 
