@@ -8,6 +8,7 @@ the kernel runs as plain Python.
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import math
 import re
 from dataclasses import dataclass, field, replace
@@ -26,7 +27,10 @@ from reference.pipeline_ref import SAFETY_MARGIN, render_reference
 from tpad_rt.config import TextureFile, load_texture
 from tpad_rt.device import Device
 from tpad_rt.kernel import layout
+from tpad_rt.kernel import render as render_module
+from tpad_rt.kernel import texture_eval
 from tpad_rt.kernel.render import PHASE_BITS, carrier_phase_units, carrier_step_units, render_block
+from tpad_rt.physics import friction
 from tpad_rt.physics.friction import relative_friction
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.texture import compile_texture
@@ -228,7 +232,9 @@ def test_block_split_gives_bit_identical_samples(pattern: tuple[int, ...]) -> No
     one_step = render_kernel(scenario, blocks=(32,))
     other = render_kernel(scenario, blocks=pattern)
     assert np.array_equal(one_step.samples, other.samples)
-    assert np.array_equal(one_step.pipeline.arrays.state, other.pipeline.arrays.state)
+    carried = np.ones(layout.STATE_SIZE, dtype=bool)
+    carried[[layout.STATE_FIRST_SEGMENT_SAMPLES, layout.STATE_FIRST_SEGMENT_V2]] = False  # depend on the split
+    assert np.array_equal(one_step.pipeline.arrays.state[carried], other.pipeline.arrays.state[carried])
     assert np.array_equal(one_step.pipeline.arrays.power_ring, other.pipeline.arrays.power_ring)
 
 
@@ -283,6 +289,13 @@ def test_carrier_phase_is_exact_for_huge_sample_indices(n: int) -> None:
     assert step == round(Fraction(31360.0 / 192000.0) * 2**PHASE_BITS)
     assert carrier_phase_units(n, step) == (n * step) % 2**PHASE_BITS
     assert carrier_phase_units(n, 2**PHASE_BITS - 1) == (n * (2**PHASE_BITS - 1)) % 2**PHASE_BITS
+
+
+@pytest.mark.parametrize("units", [0, 1, 2**52 - 1, 2**52, 2**59 + 7, 2**60 - 1, 123_456_789_123_456_789])
+def test_carrier_phasor_matches_libm(units: int) -> None:
+    angle = 2 * math.pi * float(Fraction(units, 2**PHASE_BITS))
+    cos, sin = render_module._unit_phasor(units)
+    assert abs(cos - math.cos(angle)) <= 4e-16 and abs(sin - math.sin(angle)) <= 4e-16
 
 
 # --- ramps, watchdog ------------------------------------------------------------
@@ -415,6 +428,14 @@ def test_grating_swipe_envelope_maps_back_to_the_friction_levels(low: float) -> 
 
 def _argument_arrays(pipeline: Pipeline, block: int) -> tuple[Any, ...]:
     return (np.zeros(block, dtype=np.float32), pipeline.sample_index, *pipeline.arrays)
+
+
+@pytest.mark.skipif(not JIT, reason="nothing is compiled under NUMBA_DISABLE_JIT")
+def test_render_block_cache_is_stamped_with_every_source_compiled_into_it() -> None:
+    """numba would watch render.py alone: editing texture_eval.py must also invalidate the cache."""
+    stamp = render_block._cache._impl.locator.get_source_stamp()
+    sources = (render_module, layout, texture_eval, friction)
+    assert stamp == tuple(hashlib.sha256(Path(module.__file__).read_bytes()).hexdigest() for module in sources)
 
 
 def _native_functions_ir(llvm_ir: str) -> str:

@@ -112,7 +112,7 @@ LAYER_FLOOR = 0.01            # every COMBINE result is clamped to [LAYER_FLOOR,
 STATE_NEXT_INDEX = 0          # sample index after the last rendered block
 STATE_STEP_OPEN = 1           # 1.0 once a control step has run
 STATE_STEP_SAMPLES = 2        # samples rendered in the open step so far
-STATE_STEP_NUMBER = 3         # its first sample // control_interval (power_ring slot: % M)
+STATE_RING_SLOT = 3           # its power_ring slot (the next step takes the next slot)
 STATE_STEP_FLAGS = 4          # FLAG_* bits of the open step
 STATE_GATE = 5                # 1.0: gain ramps up during the open step, 0.0: down
 STATE_COMMAND_V = 6           # commanded envelope volts (peak), after the limits
@@ -140,6 +140,10 @@ STATE_VY_MM_S = 25
 STATE_TABLE_FS_HZ = 26
 STATE_TABLE_CARRIER_HZ = 27
 STATE_TABLE_SMOOTHING_S = 28
+# Bookkeeping that saves work, not state the output depends on:
+STATE_NEXT_PHASE = 29         # STATE_NEXT_INDEX % control_interval
+STATE_FIRST_SEGMENT_SAMPLES = 30  # samples of the open step's first rendered piece (0: none yet)
+STATE_FIRST_SEGMENT_V2 = 31   # their sum of e^2 (V^2)
 # Per-sample tables, indexed by j, the sample's offset in its control step:
 MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
 STATE_COS_TABLE = 32          # cos(j w), w the carrier's phase step (rad)

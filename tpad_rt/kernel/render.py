@@ -33,11 +33,15 @@ then summed from them in a fixed order, whatever blocks the step was rendered in
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numba
 import numpy as np
+from numba.core import caching
 
+from tpad_rt.kernel import layout, texture_eval
 from tpad_rt.kernel.layout import (
     CFG_CARRIER_HZ,
     CFG_CONTROL_INTERVAL,
@@ -84,18 +88,21 @@ from tpad_rt.kernel.layout import (
     STATE_DECAY_TABLE,
     STATE_ENVELOPE,
     STATE_FINGER_SAMPLE,
+    STATE_FIRST_SEGMENT_SAMPLES,
+    STATE_FIRST_SEGMENT_V2,
     STATE_FORCE_N,
     STATE_GATE,
     STATE_NEXT_INDEX,
+    STATE_NEXT_PHASE,
     STATE_POWER_PER_V2,
     STATE_PREEMPHASIS_GAIN,
+    STATE_RING_SLOT,
     STATE_RAMP_SAMPLES,
     STATE_RAMP_START,
     STATE_SIN_TABLE,
     STATE_SMOOTH_START_V,
     STATE_SPEED_MM_S,
     STATE_STEP_FLAGS,
-    STATE_STEP_NUMBER,
     STATE_STEP_OPEN,
     STATE_STEP_SAMPLES,
     STATE_TABLE_CARRIER_HZ,
@@ -120,6 +127,7 @@ from tpad_rt.kernel.layout import (
     TEL_Y_MM,
 )
 from tpad_rt.kernel.texture_eval import eval_texture
+from tpad_rt.physics import friction
 from tpad_rt.physics.friction import amplitude_for_core
 
 #: Relative margin every limit keeps against rounding: the cap is ``max_voltage_v``
@@ -131,14 +139,54 @@ PHASE_BITS = 60
 _HALF_BITS = PHASE_BITS // 2
 _HALF_MASK = (1 << _HALF_BITS) - 1
 _PHASE_MASK = (1 << PHASE_BITS) - 1
-_CYCLES_PER_UNIT = 2.0**-PHASE_BITS
 _TWO_PI = 2.0 * math.pi
+# The carrier phasor of a phase: a table at the top 8 bits, a polynomial for the rest.
+_COARSE_BITS = 8
+_FINE_BITS = PHASE_BITS - _COARSE_BITS
+_FINE_MASK = (1 << _FINE_BITS) - 1
+_RADIANS_PER_UNIT = _TWO_PI * 2.0**-PHASE_BITS
+_COARSE_COS = np.cos(_TWO_PI * np.arange(1 << _COARSE_BITS) / (1 << _COARSE_BITS))
+_COARSE_SIN = np.sin(_TWO_PI * np.arange(1 << _COARSE_BITS) / (1 << _COARSE_BITS))
+
+# numba keys a function's disk cache on its own source file only, but render_block has
+# the texture evaluation, the layout constants and the friction model compiled into it:
+# editing one of those would leave a stale render_block in the cache. This module's
+# functions are cached under a stamp of every one of those files instead.
+_COMPILED_SOURCES = tuple(Path(module.__file__).resolve() for module in (layout, texture_eval, friction))
+_THIS_FILE = Path(__file__).resolve()
+
+
+def _sources_stamp() -> tuple[str, ...]:
+    """SHA-256 of this file and of every other source compiled into the kernel."""
+    return tuple(hashlib.sha256(path.read_bytes()).hexdigest() for path in (_THIS_FILE, *_COMPILED_SOURCES))
+
+
+def _watching_sources(base: type) -> type:
+    """numba cache locator ``base``, for this file only, stamped with :func:`_sources_stamp`."""
+
+    class Locator(base):  # type: ignore[valid-type, misc]
+        @classmethod
+        def from_function(cls, py_func, py_file):  # type: ignore[no-untyped-def]
+            return super().from_function(py_func, py_file) if Path(py_file).resolve() == _THIS_FILE else None
+
+        def get_source_stamp(self) -> tuple[str, ...]:
+            return _sources_stamp()
+
+    return Locator
+
+
+caching.CacheImpl._locator_classes[:0] = [
+    _watching_sources(base)
+    for base in (caching.UserProvidedCacheLocator, caching.InTreeCacheLocator, caching.UserWideCacheLocator)
+]
 
 # error_model="numpy": a division by zero gives inf/nan instead of raising, so no
 # exception checks are compiled in (nothing here may raise inside an audio callback).
 _kernel = numba.njit(cache=True, nogil=True, error_model="numpy")
-# Helpers are inlined into render_block at numba IR level: one function, in which numba
-# drops the reference counting of the array arguments the calls would otherwise do.
+# Inlined at numba IR level into every numba caller: the helpers into render_block, and
+# render_block into the audio @cfunc. A call passing arrays costs a reference-count
+# call per array on each side (~40 ns per block for render_block's 14 arguments); in
+# one function numba drops them.
 _inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
@@ -169,21 +217,45 @@ def carrier_phase_units(n: int, step_units: int) -> int:
 
 
 @_inline
-def _device_value(dev: np.ndarray, row: int, cfg: np.ndarray, force_n: float) -> float:
-    """``dev[row]`` linearly interpolated at ``force_n`` (N) on the uniform grid, clamped at the ends."""
+def _unit_phasor(phase_units: int) -> tuple[float, float]:
+    """``(cos, sin)`` of the phase ``phase_units`` (2**-60 cycles), within ~3e-16, without libm.
+
+    ``cos`` and ``sin`` of the top 8 bits come from a table, those of the rest
+    (``d < 2 pi / 256``) from their Taylor series to ``d**8`` (next term < 1e-20),
+    then the angle-sum formulas combine them: a quarter of the cost of libm's pair.
+    """
+    coarse = phase_units >> _FINE_BITS
+    d = (phase_units & _FINE_MASK) * _RADIANS_PER_UNIT
+    d2 = d * d
+    sin_d = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0)))
+    cos_d = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0 * (1.0 - d2 / 56.0)))
+    cos_c = _COARSE_COS[coarse]
+    sin_c = _COARSE_SIN[coarse]
+    return cos_c * cos_d - sin_c * sin_d, sin_c * cos_d + cos_c * sin_d
+
+
+@_inline
+def _force_cell(cfg: np.ndarray, dev: np.ndarray, force_n: float) -> tuple[int, int, float]:
+    """Columns ``(i, i + 1)`` of the force grid around ``force_n`` (N) and the weight of the second, clamped."""
     last = dev.shape[1] - 1
     position = (force_n - cfg[CFG_FORCE_GRID_START_N]) / cfg[CFG_FORCE_GRID_STEP_N]
     position = min(max(position, 0.0), float(last))
     i = min(int(position), max(last - 1, 0))
-    i_next = min(i + 1, last)
-    return dev[row, i] + (position - i) * (dev[row, i_next] - dev[row, i])
+    return i, min(i + 1, last), position - i
+
+
+@_inline
+def _device_value(dev: np.ndarray, row: int, cell: tuple[int, int, float]) -> float:
+    """``dev[row]`` linearly interpolated in a :func:`_force_cell`."""
+    i, i_next, weight = cell
+    return dev[row, i] + weight * (dev[row, i_next] - dev[row, i])
 
 
 @_inline
 def _refresh_tables(cfg: np.ndarray, state: np.ndarray) -> None:
     """Rebuild the per-sample tables (carrier rotation, smoothing decay) if their cfg values changed.
 
-    ``cos(j w)``, ``sin(j w)`` with ``j w`` from the exact integer phase of ``j``, and
+    ``cos(j w)``, ``sin(j w)`` of the exact integer phase of sample ``j``, and
     ``d^(j+1) = exp(-(j+1) / (smoothing_s fs))``, for every ``j < MAX_CONTROL_INTERVAL``.
     """
     fs_hz = cfg[CFG_FS_HZ]
@@ -198,9 +270,7 @@ def _refresh_tables(cfg: np.ndarray, state: np.ndarray) -> None:
     step_units = carrier_step_units(carrier_hz, fs_hz)
     smoothing_samples = smoothing_s * fs_hz
     for j in range(MAX_CONTROL_INTERVAL):
-        angle = _TWO_PI * (carrier_phase_units(j, step_units) * _CYCLES_PER_UNIT)
-        state[STATE_COS_TABLE + j] = math.cos(angle)
-        state[STATE_SIN_TABLE + j] = math.sin(angle)
+        state[STATE_COS_TABLE + j], state[STATE_SIN_TABLE + j] = _unit_phasor(carrier_phase_units(j, step_units))
         state[STATE_DECAY_TABLE + j] = math.exp(-(j + 1.0) / smoothing_samples)
     state[STATE_TABLE_FS_HZ] = fs_hz
     state[STATE_TABLE_CARRIER_HZ] = carrier_hz
@@ -253,19 +323,23 @@ def _envelope_sums(state: np.ndarray, first: int, stop: int) -> tuple[float, flo
 def _close_step(state: np.ndarray, power_ring: np.ndarray) -> None:
     """Account for the open control step: its power into the ring, its smoothing and ramp advanced.
 
-    The step's power is ``p1(force) * mean(e^2)`` over its rendered samples. The ring's
+    The step's power is ``p1(force) * mean(e^2)`` over its rendered samples, the sum of
+    ``e^2`` taken in one fixed order (the first segment's sum when it covered the whole
+    step, else the same sum recomputed), whatever the blocks were. The ring's
     running sum is recomputed from scratch each time the last slot is written, so its
     rounding error never accumulates beyond one window.
     """
     samples = int(state[STATE_STEP_SAMPLES])
     if state[STATE_STEP_OPEN] == 0.0 or samples == 0:
         return
-    power_w = state[STATE_POWER_PER_V2] * _envelope_sums(state, 0, samples)[1] / samples
-    slots = power_ring.shape[0]
-    slot = int(state[STATE_STEP_NUMBER]) % slots
+    energy_v2 = state[STATE_FIRST_SEGMENT_V2]
+    if state[STATE_FIRST_SEGMENT_SAMPLES] != samples:  # rendered in pieces: sum them in the same order
+        energy_v2 = _envelope_sums(state, 0, samples)[1]
+    power_w = state[STATE_POWER_PER_V2] * energy_v2 / samples
+    slot = int(state[STATE_RING_SLOT])
     state[STATE_WINDOW_SUM_W] += power_w - power_ring[slot]
     power_ring[slot] = power_w
-    if slot == slots - 1:
+    if slot == power_ring.shape[0] - 1:
         state[STATE_WINDOW_SUM_W] = _ring_sum(power_ring)
     command_v = state[STATE_COMMAND_V]
     decay = state[STATE_DECAY_TABLE + samples - 1]
@@ -276,53 +350,68 @@ def _close_step(state: np.ndarray, power_ring: np.ndarray) -> None:
 
 
 @_inline
-def _newest_sample(finger: np.ndarray, count: int, t_s: float, hint: int) -> int:
-    """Index (samples written before it) of the newest finger sample with ``t <= t_s``, or -1.
-
-    Only rows the producer cannot be overwriting are read: the newest ``R - 1`` (slot
-    ``count % R`` may be half-written). Finger times are non-decreasing, so the search
-    runs forward from ``hint`` (the previous step's answer) when that is still
-    readable and not later than ``t_s``: O(1) per step however far ahead the producer
-    writes; otherwise backwards from the newest.
-    """
-    rows = finger.shape[0]
-    oldest = max(0, count - rows + 1)
-    if oldest <= hint < count and finger[hint % rows, FINGER_T_S] <= t_s:
-        i = hint
-        while i + 1 < count and finger[(i + 1) % rows, FINGER_T_S] <= t_s:
-            i += 1
-        return i
-    i = count - 1
-    while i >= oldest and finger[i % rows, FINGER_T_S] > t_s:
-        i -= 1
-    return i if i >= oldest else -1
+def _next_slot(slot: int, slots: int) -> int:
+    """The ring slot after ``slot`` (no division)."""
+    return slot + 1 if slot + 1 < slots else 0
 
 
 @_inline
-def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, window_s: float) -> tuple[float, float]:
-    """Finger velocity (mm/s) from sample ``newest`` and the oldest one of the same touch within ``window_s``.
+def _previous_slot(slot: int, slots: int) -> int:
+    """The ring slot before ``slot`` (no division)."""
+    return slot - 1 if slot > 0 else slots - 1
+
+
+@_inline
+def _newest_sample(finger: np.ndarray, count: int, t_s: float, hint: int) -> tuple[int, int]:
+    """``(index, row)`` of the newest finger sample with ``t <= t_s``, or ``(-1, -1)``.
+
+    ``index`` counts the samples written before it; ``row = index % R``. Only rows the
+    producer cannot be overwriting are read: the newest ``R - 1`` (row ``count % R``
+    may be half-written). Finger times are non-decreasing, so the search runs forward
+    from ``hint`` (the previous step's answer) when that is still readable and not
+    later than ``t_s``: O(1) per step however far ahead the producer writes;
+    otherwise backwards from the newest.
+    """
+    rows = finger.shape[0]
+    oldest = max(0, count - rows + 1)
+    if oldest <= hint < count:
+        row = hint % rows
+        if finger[row, FINGER_T_S] <= t_s:
+            i = hint
+            while i + 1 < count and finger[_next_slot(row, rows), FINGER_T_S] <= t_s:
+                i += 1
+                row = _next_slot(row, rows)
+            return i, row
+    i = count - 1
+    row = i % rows
+    while i >= oldest and finger[row, FINGER_T_S] > t_s:
+        i -= 1
+        row = _previous_slot(row, rows)
+    return (i, row) if i >= oldest else (-1, -1)
+
+
+@_inline
+def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, row: int, window_s: float) -> tuple[float, float]:
+    """Finger velocity (mm/s) from sample ``newest`` (at ``row``) and the oldest of its touch within ``window_s``.
 
     The touch runs back while samples are down; ``(0, 0)`` without an older sample
     or when the two samples share a time.
     """
     rows = finger.shape[0]
     oldest = max(0, count - rows + 1)
-    t_newest = finger[newest % rows, FINGER_T_S]
-    first = newest
+    t_newest = finger[row, FINGER_T_S]
+    first = row
     k = newest - 1
-    while k >= oldest:
-        row = k % rows
-        if finger[row, FINGER_DOWN] == 0.0 or t_newest - finger[row, FINGER_T_S] > window_s:
-            break
-        first = k
+    earlier = _previous_slot(row, rows)
+    while k >= oldest and finger[earlier, FINGER_DOWN] != 0.0 and t_newest - finger[earlier, FINGER_T_S] <= window_s:
+        first = earlier
         k -= 1
-    dt_s = t_newest - finger[first % rows, FINGER_T_S]
+        earlier = _previous_slot(earlier, rows)
+    dt_s = t_newest - finger[first, FINGER_T_S]
     if not dt_s > 0.0:
         return 0.0, 0.0
-    a = newest % rows
-    b = first % rows
-    return (finger[a, FINGER_X_MM] - finger[b, FINGER_X_MM]) / dt_s, (
-        finger[a, FINGER_Y_MM] - finger[b, FINGER_Y_MM]
+    return (finger[row, FINGER_X_MM] - finger[first, FINGER_X_MM]) / dt_s, (
+        finger[row, FINGER_Y_MM] - finger[first, FINGER_Y_MM]
     ) / dt_s
 
 
@@ -333,17 +422,16 @@ def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndar
     Active: a sample at or before ``t_s``, down, at most ``watchdog_s`` old. When not
     active the previous step's finger is kept.
     """
-    newest = _newest_sample(finger, count, t_s, int(state[STATE_FINGER_SAMPLE]) - 1)
+    newest, row = _newest_sample(finger, count, t_s, int(state[STATE_FINGER_SAMPLE]) - 1)
     state[STATE_FINGER_SAMPLE] = newest + 1.0
     if newest < 0:
         return False
-    row = newest % finger.shape[0]
     age_s = t_s - finger[row, FINGER_T_S]
     watchdog_s = cfg[CFG_WATCHDOG_S]
     if finger[row, FINGER_DOWN] == 0.0 or age_s > watchdog_s:
         return False
     if state[STATE_VELOCITY_SAMPLE] != newest + 1.0:
-        vx, vy = _velocity_mm_s(finger, count, newest, cfg[CFG_VELOCITY_WINDOW_S])
+        vx, vy = _velocity_mm_s(finger, count, newest, row, cfg[CFG_VELOCITY_WINDOW_S])
         state[STATE_VX_MM_S] = vx
         state[STATE_VY_MM_S] = vy
         state[STATE_VELOCITY_SAMPLE] = newest + 1.0
@@ -360,7 +448,7 @@ def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndar
 
 @_inline
 def _command_volts(
-    t_s: float, cfg: np.ndarray, dev: np.ndarray, state: np.ndarray,
+    t_s: float, cfg: np.ndarray, state: np.ndarray, amplitude_m_per_v: float,
     prog: np.ndarray, params: np.ndarray, img: np.ndarray, stack: np.ndarray,
 ) -> tuple[float, int]:
     """Envelope volts (peak) the texture asks for at the step's finger, and FLAG_SPEED_FLOOR if floored.
@@ -386,21 +474,20 @@ def _command_volts(
     amplitude_m = amplitude_for_core(
         mu, cfg[CFG_CARRIER_HZ], speed_m_s, cfg[CFG_MU0], cfg[CFG_POISSON], cfg[CFG_PSI_STAR]
     )
-    return amplitude_m / _device_value(dev, DEV_AMP_M_PER_V, cfg, state[STATE_FORCE_N]), flags
+    return amplitude_m / amplitude_m_per_v, flags
 
 
 @_inline
-def _cap_volts(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray, p1_w: float, step: int) -> tuple[float, int]:
+def _cap_volts(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray, p1_w: float, slot: int) -> tuple[float, int]:
     """The step's envelope cap (volts peak) and the FLAG_* of the bound that sets it.
 
     ``min(max_voltage_v, sqrt(power_cap_w / p1), sqrt(allowance / p1))``, each limit
     times ``1 - SAFETY_MARGIN``; ``allowance = M * power_avg_w`` less the previous
-    ``M - 1`` steps' powers (the ring without the slot this step will overwrite).
+    ``M - 1`` steps' powers (the ring without ``slot``, which this step will overwrite).
     """
     keep = 1.0 - SAFETY_MARGIN
-    slots = power_ring.shape[0]
-    previous_w = state[STATE_WINDOW_SUM_W] - power_ring[step % slots]
-    allowance_w = max(slots * cfg[CFG_POWER_AVG_W] * keep - previous_w, 0.0)
+    previous_w = state[STATE_WINDOW_SUM_W] - power_ring[slot]
+    allowance_w = max(power_ring.shape[0] * cfg[CFG_POWER_AVG_W] * keep - previous_w, 0.0)
     power_v = math.sqrt(min(cfg[CFG_POWER_CAP_W] * keep, allowance_w) / p1_w)
     voltage_v = cfg[CFG_MAX_VOLTAGE_V] * keep
     if voltage_v <= power_v:
@@ -410,41 +497,42 @@ def _cap_volts(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray, p1_w:
 
 @_inline
 def _control_step(
-    n: int, interval: int, cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, power_ring: np.ndarray,
+    n: int, cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, power_ring: np.ndarray,
     finger: np.ndarray, finger_count: np.ndarray,
     prog: np.ndarray, params: np.ndarray, img: np.ndarray, stack: np.ndarray,
 ) -> None:
     """Close the open step and open one at sample ``n``: finger, texture, inverse model, limits, carrier."""
+    slot = _next_slot(int(state[STATE_RING_SLOT]), power_ring.shape[0]) if state[STATE_STEP_OPEN] != 0.0 else 0
     _close_step(state, power_ring)
     _refresh_tables(cfg, state)
     fs_hz = cfg[CFG_FS_HZ]
     t_s = n / fs_hz
-    step = n // interval
     active = _read_finger(t_s, cfg, state, finger, finger_count[0])
+    cell = _force_cell(cfg, dev, state[STATE_FORCE_N])
+    amplitude_m_per_v = _device_value(dev, DEV_AMP_M_PER_V, cell)
     if active:
-        command_v, flags = _command_volts(t_s, cfg, dev, state, prog, params, img, stack)
+        command_v, flags = _command_volts(t_s, cfg, state, amplitude_m_per_v, prog, params, img, stack)
     else:
         command_v = state[STATE_COMMAND_V]
         flags = FLAG_WATCHDOG
-    force_n = state[STATE_FORCE_N]
-    p1_w = _device_value(dev, DEV_POWER_W_PER_V2, cfg, force_n)
-    cap_v, limit_flag = _cap_volts(cfg, state, power_ring, p1_w, step)
+    p1_w = _device_value(dev, DEV_POWER_W_PER_V2, cell)
+    cap_v, limit_flag = _cap_volts(cfg, state, power_ring, p1_w, slot)
     if command_v > cap_v:
         command_v = cap_v
         flags |= limit_flag
     state[STATE_COMMAND_V] = command_v
     state[STATE_CAP_V] = cap_v
-    state[STATE_AMPLITUDE_M] = command_v * _device_value(dev, DEV_AMP_M_PER_V, cfg, force_n)
+    state[STATE_AMPLITUDE_M] = command_v * amplitude_m_per_v
     state[STATE_POWER_PER_V2] = p1_w
-    tau_s = _device_value(dev, DEV_TAU_S, cfg, force_n)
+    tau_s = _device_value(dev, DEV_TAU_S, cell)
     state[STATE_PREEMPHASIS_GAIN] = tau_s / cfg[CFG_SMOOTHING_S] if cfg[CFG_PREEMPHASIS] != 0.0 else 0.0
     state[STATE_GATE] = 1.0 if active and cfg[CFG_RUN] != 0.0 else 0.0
     state[STATE_RAMP_SAMPLES] = max(1.0, float(round(cfg[CFG_RAMP_S] * fs_hz)))
-    angle = _TWO_PI * (carrier_phase_units(n, carrier_step_units(cfg[CFG_CARRIER_HZ], fs_hz)) * _CYCLES_PER_UNIT)
-    state[STATE_CARRIER_COS] = math.cos(angle)
-    state[STATE_CARRIER_SIN] = math.sin(angle)
-    state[STATE_STEP_NUMBER] = step
+    phase_units = carrier_phase_units(n, carrier_step_units(cfg[CFG_CARRIER_HZ], fs_hz))
+    state[STATE_CARRIER_COS], state[STATE_CARRIER_SIN] = _unit_phasor(phase_units)
+    state[STATE_RING_SLOT] = slot
     state[STATE_STEP_SAMPLES] = 0.0
+    state[STATE_FIRST_SEGMENT_SAMPLES] = 0.0
     state[STATE_STEP_FLAGS] = flags
     state[STATE_STEP_OPEN] = 1.0
 
@@ -500,7 +588,7 @@ def _write_telemetry(
     telem_count[0] += 1
 
 
-@_kernel
+@_inline
 def render_block(
     out: np.ndarray,
     start_index: int,
@@ -533,19 +621,25 @@ def render_block(
     peak_v = 0.0
     energy_w = 0.0
     flags = 0
+    phase = int(state[STATE_NEXT_PHASE]) if start_index == state[STATE_NEXT_INDEX] else start_index % interval
     i = 0
     while i < total:
-        n = start_index + i
-        phase = n % interval
         if phase == 0 or state[STATE_STEP_OPEN] == 0.0 or state[STATE_STEP_SAMPLES] >= interval:
-            _control_step(n, interval, cfg, dev, state, power_ring, finger, finger_count, prog, params, img, stack)
+            _control_step(start_index + i, cfg, dev, state, power_ring, finger, finger_count, prog, params, img, stack)
         j0 = int(state[STATE_STEP_SAMPLES])
         stop = min(total, i + interval - phase, i + interval - j0)
         _render_samples(out, i, stop, state, out_per_v)
         segment_peak_v, segment_v2 = _envelope_sums(state, j0, j0 + stop - i)
+        if j0 == 0:
+            state[STATE_FIRST_SEGMENT_V2] = segment_v2
+            state[STATE_FIRST_SEGMENT_SAMPLES] = stop - i
         peak_v = max(peak_v, segment_peak_v)
         energy_w += state[STATE_POWER_PER_V2] * segment_v2
         flags |= int(state[STATE_STEP_FLAGS])
+        phase += stop - i
+        if phase == interval:
+            phase = 0
         i = stop
     state[STATE_NEXT_INDEX] = start_index + total
+    state[STATE_NEXT_PHASE] = phase
     _write_telemetry(telem, telem_count, start_index / cfg[CFG_FS_HZ], state, peak_v, energy_w / max(total, 1), flags)
