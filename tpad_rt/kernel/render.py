@@ -456,11 +456,9 @@ def _command_volts(
     Writes the clamped target friction to ``state``.
     """
     speed_mm_s = state[STATE_SPEED_MM_S]
-    ux = 0.0
-    uy = 0.0
-    if speed_mm_s > 0.0:
-        ux = state[STATE_VX_MM_S] / speed_mm_s
-        uy = state[STATE_VY_MM_S] / speed_mm_s
+    per_speed = 1.0 / speed_mm_s if speed_mm_s > 0.0 else 0.0
+    ux = state[STATE_VX_MM_S] * per_speed
+    uy = state[STATE_VY_MM_S] * per_speed
     mu = eval_texture(
         prog, params, img, stack, state[STATE_X_MM], state[STATE_Y_MM], ux, uy, t_s - cfg[CFG_TEXTURE_T0_S]
     )
