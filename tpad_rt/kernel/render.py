@@ -13,7 +13,8 @@ carrier_step_units(carrier_hz, fs_hz) -> int
 
 docs/kernel.md is the design; ``tpad_rt.kernel.layout`` names every array slot.
 Arguments are arrays and scalars only, so that a numba ``@cfunc`` (the real-time audio
-callback) can call :func:`render_block` with arrays rebuilt from raw pointers.
+callback) can call :func:`render_block` with arrays rebuilt from raw pointers; it is
+inlined into such a caller at numba IR level (no per-call argument passing).
 
 How the doc's per-sample recurrences are evaluated: within a control step the command
 ``v``, the cap, the pre-emphasis gain ``g`` and the gate are constant, so the
@@ -222,7 +223,7 @@ def _unit_phasor(phase_units: int) -> tuple[float, float]:
 
     ``cos`` and ``sin`` of the top 8 bits come from a table, those of the rest
     (``d < 2 pi / 256``) from their Taylor series to ``d**8`` (next term < 1e-20),
-    then the angle-sum formulas combine them: a quarter of the cost of libm's pair.
+    then the angle-sum formulas combine them (cheaper than libm's ``sin`` and ``cos``).
     """
     coarse = phase_units >> _FINE_BITS
     d = (phase_units & _FINE_MASK) * _RADIANS_PER_UNIT
