@@ -33,7 +33,7 @@ def test_render_options_defaults() -> None:
     assert (options.power_budget_w, options.power_avg_w, options.preemphasis) == (None, None, None)
     assert options.power_window_s == 1.0 and options.control_interval == 32
     assert (options.ramp_ms, options.watchdog_ms, options.velocity_window_ms) == (5.0, 50.0, 10.0)
-    assert (options.default_force_n, options.mu_floor, options.horizon_ms) == (0.5, 0.01, 0.0)
+    assert (options.default_force_n, options.mu_floor, options.horizon_ms) == (0.5, 0.01, 1.0)
 
 
 def test_bad_options_are_one_config_error_naming_every_field() -> None:

@@ -34,7 +34,7 @@ def test_without_a_terminal_it_reports_and_records(tmp_path: Path) -> None:
     lines = done.stdout.splitlines()
     assert lines[0] == "no audio engine yet: rendering to sim:// from scripted://swipe?to_mm=20 (real-time pacing)"
     assert lines[1].startswith("rendered 0.106 s of audio in ")
-    assert any(line.startswith("friction |target - achieved|") for line in lines)
+    assert any(line.startswith("friction |texture under the finger - achieved|") for line in lines)
     assert lines[-1] == f"wrote {tmp_path / 'r.npz'}"
     recording = read_recording(tmp_path / "r.npz")
     assert recording.has_sim and np.all(recording.drive[-64:] == 0)

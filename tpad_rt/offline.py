@@ -15,7 +15,9 @@ OfflineRender(pipeline, source, outputs, block_frames=, input_s=, tail_s=, force
     measurements); ``.result()`` -> RenderResult
 RenderResult
     ``fs_hz``, ``block_frames``, ``drive`` (float32 or None), ``blocks`` (name -> array),
-    ``seconds`` of audio rendered
+    ``finger`` (every finger sample pushed), ``seconds`` of audio rendered
+texture_under_finger(result, texture) -> (mu, valid)
+    the texture's friction where the finger really was at each block's middle
 input_span_s(source, duration_s) -> float
     how long to follow the input; ConfigError for an endless input without a duration
 """
@@ -31,9 +33,11 @@ import numpy.typing as npt
 
 from tpad_rt.errors import ConfigError
 from tpad_rt.inputs import Input
+from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel.layout import TEL_NAMES
 from tpad_rt.outputs import Output
 from tpad_rt.pipeline import Pipeline
+from tpad_rt.texture import CompiledTexture
 
 
 @dataclass(frozen=True)
@@ -44,6 +48,7 @@ class RenderResult:
     block_frames: int
     drive: npt.NDArray[np.float32] | None
     blocks: dict[str, np.ndarray]
+    finger: np.ndarray
 
     @property
     def seconds(self) -> float:
@@ -99,6 +104,7 @@ class OfflineRender:
         self._drive: list[np.ndarray] | None = [] if keep_drive else None
         self._rows: dict[str, list[np.ndarray]] = {name: [] for name in TEL_NAMES}
         self._pushed_until_s = -math.inf
+        self._finger: list[np.ndarray] = []
         self.latest: dict[str, float] = {}
 
     @property
@@ -139,7 +145,9 @@ class OfflineRender:
         self.blocks_done += 1
 
     def _push_until(self, end_s: float) -> None:
-        for sample in self.source.samples_between(self._pushed_until_s, end_s):
+        samples = self.source.samples_between(self._pushed_until_s, end_s)
+        self._finger.append(samples)
+        for sample in samples:
             force_n = sample["force_n"] if self.force_n is None else self.force_n
             self.pipeline.push_finger(float(sample["t_s"]), float(sample["x_mm"]), float(sample["y_mm"]),
                                       force_n=float(force_n), down=bool(sample["down"]))
@@ -153,4 +161,37 @@ class OfflineRender:
         drive = None
         if self._drive is not None:
             drive = np.concatenate(self._drive) if self._drive else np.zeros(0, dtype=np.float32)
-        return RenderResult(self.pipeline.fs_hz, self.block_frames, drive, blocks)
+        finger = np.concatenate(self._finger) if self._finger else np.zeros(0, dtype=FINGER_DTYPE)
+        return RenderResult(self.pipeline.fs_hz, self.block_frames, drive, blocks, finger)
+
+
+def texture_under_finger(result: RenderResult, texture: CompiledTexture) -> tuple[np.ndarray, np.ndarray]:
+    """The texture's relative friction where the finger was at each block's middle, and where that is known.
+
+    The finger's position is interpolated linearly between the input's samples around
+    the block's middle time; its direction of motion is that segment's. ``valid`` is
+    False where the finger was lifted or the render ran past the input's last sample.
+    This is what the finger should have felt, free of the kernel's own extrapolation.
+    """
+    middle_s = result.blocks["t"] + 0.5 * result.block_frames / result.fs_hz
+    finger = result.finger
+    after = np.searchsorted(finger["t_s"], middle_s, side="right")
+    valid = (after > 0) & (after < len(finger))
+    before = np.clip(after - 1, 0, max(len(finger) - 1, 0))
+    after = np.clip(after, 0, max(len(finger) - 1, 0))
+    if len(finger):
+        valid &= finger["down"][before] & finger["down"][after]
+    mu = np.ones(len(middle_s))
+    if not valid.any():
+        return mu, valid
+    b, a = before[valid], after[valid]
+    span_s = finger["t_s"][a] - finger["t_s"][b]
+    share = (middle_s[valid] - finger["t_s"][b]) / span_s
+    dx, dy = finger["x_mm"][a] - finger["x_mm"][b], finger["y_mm"][a] - finger["y_mm"][b]
+    length = np.hypot(dx, dy)
+    moving = length > 0
+    ux = np.divide(dx, length, out=np.zeros_like(dx), where=moving)
+    uy = np.divide(dy, length, out=np.zeros_like(dy), where=moving)
+    mu[valid] = texture.evaluate(finger["x_mm"][b] + share * dx, finger["y_mm"][b] + share * dy, ux, uy,
+                                 middle_s[valid])
+    return mu, valid

@@ -3,7 +3,7 @@
 API map
 -------
 RenderOptions(power_budget_w=None, power_avg_w=None, power_window_s=1.0, control_interval=32,
-              smoothing_ms=1.0, preemphasis=None, horizon_ms=0.0, velocity_window_ms=10.0,
+              smoothing_ms=1.0, preemphasis=None, horizon_ms=1.0, velocity_window_ms=10.0,
               watchdog_ms=50.0, ramp_ms=5.0, default_force_n=0.5, mu_floor=0.01,
               finger_ring=1024, telemetry_ring=8192)
     the renderer's settings (frozen; ConfigError naming each bad field)
@@ -71,7 +71,10 @@ class RenderOptions:
     - ``smoothing_ms``: one-pole time constant of the commanded envelope (ms).
     - ``preemphasis``: shape the drive so the plate envelope follows the smoothing
       instead of its own ``tau``; None: ``device.preemphasis``.
-    - ``horizon_ms``: extra extrapolation lead of the finger position (ms; latency compensation).
+    - ``horizon_ms``: extra extrapolation lead of the finger position (ms; latency
+      compensation). The default equals the default ``smoothing_ms``: a one-pole filter
+      delays a slowly varying envelope by its time constant, so looking that far ahead
+      puts texture features back where they are on the plate.
     - ``velocity_window_ms``: span the finger velocity is estimated over (ms).
     - ``watchdog_ms``: no finger sample for longer than this and the drive ramps to 0 (ms).
     - ``ramp_ms``: linear gain ramp on start, stop, lift and watchdog (ms).
@@ -89,7 +92,7 @@ class RenderOptions:
     control_interval: int = 32
     smoothing_ms: float = 1.0
     preemphasis: bool | None = None
-    horizon_ms: float = 0.0
+    horizon_ms: float = 1.0
     velocity_window_ms: float = 10.0
     watchdog_ms: float = 50.0
     ramp_ms: float = 5.0

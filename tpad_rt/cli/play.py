@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
         stopped = _paced(session.render, console, session.metadata)
         wall_s = time.perf_counter() - started
     result = session.render.result()
-    for line in summary_lines(result, session.metadata, wall_s):
+    for line in summary_lines(result, session.metadata, wall_s, session.render.pipeline.texture):
         console.print(line)
     if stopped:
         console.print("stopped by Ctrl-C")

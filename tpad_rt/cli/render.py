@@ -30,12 +30,12 @@ from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
-from tpad_rt.offline import OfflineRender, RenderResult, input_span_s
+from tpad_rt.offline import OfflineRender, RenderResult, input_span_s, texture_under_finger
 from tpad_rt.outputs import open_output
 from tpad_rt.outputs.wav import WavOutput
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.recording import Recording, write_recording
-from tpad_rt.texture import load_compiled
+from tpad_rt.texture import CompiledTexture, load_compiled
 
 #: The default input of ``play`` (``render`` requires one).
 DEFAULT_INPUT = "scripted://swipe?speed_mm_s=100"
@@ -167,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
     result = session.render.result()
     if result.drive is not None:
         write_recording(out, Recording(result.fs_hz, result.drive, result.blocks, session.metadata))
-    for line in summary_lines(result, session.metadata, wall_s):
+    for line in summary_lines(result, session.metadata, wall_s, session.render.pipeline.texture):
         console.print(line)
     console.print(f"wrote {out}")
     return 0
@@ -191,8 +191,21 @@ def _percent(mask: np.ndarray) -> str:
     return f"{100 * np.count_nonzero(mask) / max(len(mask), 1):.1f} %"
 
 
-def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float) -> list[str]:
-    """The end-of-render summary: speed, peak volts, power vs budgets, saturation, friction error."""
+def _settled(t_s: np.ndarray, touching: np.ndarray, settle_s: float) -> np.ndarray:
+    """True for blocks at least ``settle_s`` (s) after the touch they belong to began (ramp, velocity)."""
+    touch_start_s = np.where(touching & ~np.r_[False, touching[:-1]], t_s, -np.inf)
+    return t_s - np.maximum.accumulate(touch_start_s) >= settle_s
+
+
+def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
+                  texture: CompiledTexture) -> list[str]:
+    """The end-of-render summary: speed, peak volts, power vs budgets, saturation, friction error.
+
+    The friction error compares the simulated plate's friction with the texture where
+    the finger really was (not the kernel's extrapolated target), over blocks where
+    the finger touched, had settled (start ramp, velocity window) and the drive was
+    not saturated.
+    """
     blocks = result.blocks
     flags = blocks["saturated"].astype(np.int64)
     touching = (flags & FLAG_WATCHDOG) == 0
@@ -210,9 +223,13 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float)
         f"power {_percent((flags & FLAG_POWER) != 0)}); finger touching in {_percent(touching)}",
     ]
     if "achieved_mu" in blocks:
-        compared = touching & ~saturated
-        error = np.abs(blocks["target_mu"] - blocks["achieved_mu"])[compared]
+        felt_target, known = texture_under_finger(result, texture)
+        options = metadata["render_options"]
+        settle_s = (options["ramp_ms"] + options["velocity_window_ms"] + 3 * options["smoothing_ms"]) * 1e-3
+        compared = touching & ~saturated & known & _settled(blocks["t"], touching, settle_s)
+        mu_floor = options["mu_floor"]
+        error = np.abs(np.clip(felt_target, mu_floor, 1.0) - blocks["achieved_mu"])[compared]
         if len(error):
-            lines.append(f"friction |target - achieved| (simulated plate; blocks touching, not saturated): "
-                         f"mean {error.mean():.4f}, 95th percentile {np.percentile(error, 95):.4f}")
+            lines.append(f"friction |texture under the finger - achieved| (simulated plate; touching, "
+                         f"not saturated): mean {error.mean():.4f}, 95th percentile {np.percentile(error, 95):.4f}")
     return lines
