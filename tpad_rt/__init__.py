@@ -9,6 +9,15 @@ Files (``tpad_rt.config``)
     check_file(path) -> list of breadcrumb errors
 Device model (``tpad_rt.device``)
     Device.from_file(path) / Device.default(): calibration, circuit and limits
+Textures (``tpad_rt.texture``)
+    load_compiled(path) / compile_texture(model) -> CompiledTexture (.evaluate(x, y, ...))
+Rendering (``tpad_rt.pipeline``)
+    RenderOptions, Pipeline(device, texture, fs_hz, options): push_finger, lift,
+    set_texture, start, stop, render(block), drain_telemetry
+Inputs and outputs, by URL (``tpad_rt.inputs``, ``tpad_rt.outputs``)
+    open_input("scripted://swipe?speed_mm_s=100"), open_output("sim://", ...)
+Offline rendering and recordings (``tpad_rt.offline``, ``tpad_rt.recording``)
+    OfflineRender, read_recording, write_recording
 Physics (``tpad_rt.physics``, SI units, NumPy-vectorised, numba-callable)
     friction.relative_friction, friction.amplitude_for,
     electromech.impedance, electromech.real_power_eq6, electromech.real_power_exact,
