@@ -1,0 +1,180 @@
+"""The arrays a real-time callback reaches through ``userData``, and the clocks read from them.
+
+API map
+-------
+CallbackTable(arrays, texture, *, channels=1, channel=0, scratch_frames=4096, drive_frames=2**20,
+              block_rows=4096)
+    owns the pointer table (``.table``, int64, layout in :mod:`tpad_rt.kernel.callback`) and
+    every array it points to: the render kernel's arrays (:class:`tpad_rt.pipeline.KernelArrays`,
+    shared, not copied), two texture slots, the output scratch, the drive ring, the
+    statistics (``.stats``) and the per-block records (``.blocks``)
+    ``.user_data``: the address to pass as ``userData``; ``.set_texture(texture, t0_s)``;
+    ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.copy()``; ``.call(frames, out)``
+monotonic_ns() -> int
+    the clock the callback stamps blocks with (CLOCK_MONOTONIC, ns)
+
+docs/realtime.md is the design. One Python thread (the owner of the texture slots) may
+call :meth:`CallbackTable.set_texture`; any thread may read.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import time
+
+import numpy as np
+
+from tpad_rt.kernel import callback as cb
+from tpad_rt.kernel.layout import CFG_FS_HZ, CFG_TEXTURE_T0_S, STATE_NEXT_INDEX
+from tpad_rt.pipeline import KernelArrays
+from tpad_rt.texture import CompiledTexture
+
+#: The callback's clock (Python's ``time.monotonic_ns`` is CLOCK_MONOTONIC on Linux).
+monotonic_ns = time.monotonic_ns
+#: Longest wait (s) for the callback to let go of a texture slot before it is rewritten.
+SLOT_RELEASE_TIMEOUT_S = 1.0
+
+_TIME_INFO = ctypes.c_double * 3
+
+
+class CallbackTable:
+    """The pointer table over ``arrays`` (used in place) and ``texture`` in slot 0.
+
+    ``channels`` interleaved output channels with the drive in ``channel`` (0-based);
+    ``scratch_frames`` the most frames rendered per ``render_block`` call;
+    ``drive_frames`` samples the drive ring keeps; ``block_rows`` blocks the record
+    ring keeps. Raises ValueError for a channel outside ``[0, channels)``.
+    """
+
+    def __init__(self, arrays: KernelArrays, texture: CompiledTexture, *, channels: int = 1, channel: int = 0,
+                 scratch_frames: int = 4096, drive_frames: int = 2**20, block_rows: int = 4096):
+        if not 0 <= channel < channels:
+            raise ValueError(f"channel: must be in [0, {channels}), got {channel}")
+        self.arrays = arrays
+        self.scratch = np.zeros(scratch_frames, dtype=np.float32)
+        self.drive = np.zeros(drive_frames, dtype=np.float32)
+        self.stats = np.zeros(cb.STAT_SIZE, dtype=np.int64)
+        self.blocks = np.zeros((block_rows, cb.BLOCK_COLS), dtype=np.int64)
+        self.slot_t0_s = np.zeros(2)
+        self._slots: list[tuple[np.ndarray, ...]] = [(), ()]
+        self._flip_callbacks = -2  # the callback count when a slot was last flipped
+        table = np.zeros(cb.TAB_SIZE, dtype=np.int64)
+        for address_at, array, sizes in (
+            (cb.TAB_CFG, arrays.cfg, (cb.TAB_CFG_SIZE,)),
+            (cb.TAB_DEV, arrays.dev, (cb.TAB_DEV_ROWS, cb.TAB_DEV_COLS)),
+            (cb.TAB_STATE, arrays.state, (cb.TAB_STATE_SIZE,)),
+            (cb.TAB_POWER_RING, arrays.power_ring, (cb.TAB_POWER_RING_SIZE,)),
+            (cb.TAB_FINGER, arrays.finger, (cb.TAB_FINGER_ROWS,)),
+            (cb.TAB_FINGER_COUNT, arrays.finger_count, ()),
+            (cb.TAB_TELEM, arrays.telem, (cb.TAB_TELEM_ROWS,)),
+            (cb.TAB_TELEM_COUNT, arrays.telem_count, ()),
+            (cb.TAB_SLOT_T0, self.slot_t0_s, ()),
+            (cb.TAB_SCRATCH, self.scratch, (cb.TAB_SCRATCH_FRAMES,)),
+            (cb.TAB_DRIVE, self.drive, (cb.TAB_DRIVE_FRAMES,)),
+            (cb.TAB_STATS, self.stats, ()),
+            (cb.TAB_BLOCKS, self.blocks, (cb.TAB_BLOCK_ROWS,)),
+        ):
+            table[address_at] = _address(array)
+            table[list(sizes)] = array.shape[:len(sizes)]
+        table[cb.TAB_CHANNELS] = channels
+        table[cb.TAB_CHANNEL] = channel
+        self.table = table
+        self._write_slot(0, texture, float(arrays.cfg[CFG_TEXTURE_T0_S]))
+
+    @property
+    def user_data(self) -> int:
+        """The address of the table (the callback's ``userData``)."""
+        return _address(self.table)
+
+    @property
+    def active_slot(self) -> int:
+        """The texture slot the callback renders (0 or 1)."""
+        return int(self.table[cb.TAB_ACTIVE_SLOT])
+
+    def _write_slot(self, slot: int, texture: CompiledTexture, t0_s: float) -> None:
+        """Copy ``texture`` into ``slot`` (writable arrays the table points to) with start time ``t0_s`` (s)."""
+        arrays = (np.array(texture.prog, dtype=np.int64, order="C"), np.array(texture.params, dtype=np.float64),
+                  np.array(texture.img, dtype=np.float64), np.zeros(max(texture.stack_depth, 1)))
+        base = cb.TAB_SLOTS + slot * cb.SLOT_SIZE
+        for offset, array in zip((cb.SLOT_PROG, cb.SLOT_PARAMS, cb.SLOT_IMG, cb.SLOT_STACK), arrays):
+            self.table[base + offset] = _address(array)
+            self.table[base + offset + 1] = array.shape[0]
+        self.slot_t0_s[slot] = t0_s
+        self._slots[slot] = arrays  # keeps them alive while the table points to them
+
+    def set_texture(self, texture: CompiledTexture, t0_s: float, running: bool) -> None:
+        """Write ``texture`` (starting at stream time ``t0_s``, s) into the idle slot, then make it active.
+
+        The callback reads the active slot once per call, so it renders either texture
+        whole. While ``running``, the idle slot may still be in use by a callback that
+        began before the previous flip: wait (at most SLOT_RELEASE_TIMEOUT_S) until a
+        callback has begun since.
+        """
+        if running:
+            deadline = time.monotonic() + SLOT_RELEASE_TIMEOUT_S
+            while self.stats[cb.STAT_CALLBACKS] < self._flip_callbacks + 2 and time.monotonic() < deadline:
+                time.sleep(0.0005)
+        idle = 1 - self.active_slot
+        self._write_slot(idle, texture, t0_s)
+        self.table[cb.TAB_ACTIVE_SLOT] = idle
+        self._flip_callbacks = int(self.stats[cb.STAT_CALLBACKS])
+
+    def recent_blocks(self) -> np.ndarray:
+        """The block records still in the ring, oldest first (int64 ``[rows, BLOCK_COLS]``, a copy)."""
+        callbacks = int(self.stats[cb.STAT_CALLBACKS])
+        rows = self.blocks.shape[0]
+        first = max(0, callbacks - rows + 1)  # the oldest row may be rewritten by the running callback
+        return self.blocks[np.arange(first, callbacks) % rows]
+
+    def dac_sample(self, now_ns: int) -> float:
+        """The stream sample (fractional) at the DAC at CLOCK_MONOTONIC ``now_ns``, from the newest block.
+
+        A block's first sample reaches the DAC ``BLOCK_DAC_DELAY_NS`` after the callback
+        began; the rate is the stream's (cfg). 0.0 before the first callback.
+        """
+        callbacks = int(self.stats[cb.STAT_CALLBACKS])
+        if callbacks == 0:
+            return 0.0
+        row = self.blocks[(callbacks - 1) % self.blocks.shape[0]]
+        since_s = (now_ns - row[cb.BLOCK_ENTRY_NS] - row[cb.BLOCK_DAC_DELAY_NS]) * 1e-9
+        return float(row[cb.BLOCK_SAMPLE_INDEX]) + since_s * float(self.arrays.cfg[CFG_FS_HZ])
+
+    @property
+    def next_sample(self) -> int:
+        """The sample index the next callback renders first."""
+        return int(self.arrays.state[STATE_NEXT_INDEX])
+
+    def copy(self) -> CallbackTable:
+        """A table over copies of every array (the same textures): for warming the callback up."""
+        twin = CallbackTable(KernelArrays(*(array.copy() for array in self.arrays)),
+                             _texture_of(self._slots[self.active_slot]),
+                             channels=int(self.table[cb.TAB_CHANNELS]), channel=int(self.table[cb.TAB_CHANNEL]),
+                             scratch_frames=len(self.scratch), drive_frames=len(self.drive),
+                             block_rows=len(self.blocks))
+        twin.slot_t0_s[:] = self.slot_t0_s
+        return twin
+
+    def call(self, out: np.ndarray, callback: object = cb.render_callback) -> None:
+        """Run ``callback`` once from Python on ``out`` (float32, frames x channels), as PortAudio would.
+
+        Its time info says the samples play at once (DAC time = current time). The
+        ctypes call releases the GIL while the callback runs.
+        """
+        channels = int(self.table[cb.TAB_CHANNELS])
+        if out.dtype != np.float32 or not out.flags.c_contiguous or out.size % channels:
+            raise ValueError(f"out: must be C-contiguous float32 holding whole frames of {channels} channels")
+        callback.ctypes(None, _address(out), out.size // channels, _TIME_INFO(0.0, 0.0, 0.0), 0,  # type: ignore[attr-defined]
+                        self.user_data)
+
+
+def _texture_of(slot: tuple[np.ndarray, ...]) -> CompiledTexture:
+    """The texture a slot's arrays hold (for :meth:`CallbackTable.copy`)."""
+    prog, params, img, stack = slot
+    return CompiledTexture(prog, params, img, len(stack), "copy", "copy of a slot")
+
+
+def _address(array: np.ndarray) -> int:
+    """The data address of a C-contiguous ``array``."""
+    if not array.flags.c_contiguous:
+        raise ValueError("the callback's arrays must be C-contiguous")
+    return int(array.ctypes.data)
