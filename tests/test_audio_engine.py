@@ -1,0 +1,313 @@
+"""The Renderer on audio:// against a real JACK dummy server (192 kHz, 64-frame periods).
+
+Every timing assertion is relative to something measured in the same test: callbacks
+against the stream's own clock, underflows against an empty-callback baseline
+(ARCHITECTURE.md sections 5 and 6). The output is captured by a second JACK client
+(tests/jack_capture.py) in its own process.
+"""
+
+from __future__ import annotations
+
+import gc
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from jack_server import jack_server
+
+from tpad_rt.device import Device
+from tpad_rt.engine import Renderer
+from tpad_rt.kernel import callback as cb
+from tpad_rt.outputs import audio
+from tpad_rt.pipeline import Pipeline, RenderOptions
+from tpad_rt.realtime import CallbackTable
+from tpad_rt.recording import read_recording
+from tpad_rt.texture import load_compiled
+
+pytestmark = pytest.mark.system
+
+RATE_HZ = 192000
+BLOCK = 64
+GRATING = Path(__file__).resolve().parents[1] / "textures" / "grating.yaml"
+SQUARE = Path(__file__).resolve().parents[1] / "textures" / "square_grating.yaml"
+CAPTURE = Path(__file__).resolve().parent / "jack_capture.py"
+#: The JACK ports of the PortAudio stream (the drive is on its first).
+DRIVE_PORT = "PortAudio:out_"
+#: Seconds each timed stream runs.
+RUN_S = 1.5
+#: Underflows a native callback may show beyond the empty-callback baseline of the same test
+#: (the dummy driver logs a few xruns per 5 s by itself).
+UNDERFLOW_MARGIN = 5
+
+
+@pytest.fixture(scope="module")
+def jack() -> Iterator[str]:
+    with jack_server(RATE_HZ, BLOCK) as name:
+        yield name
+
+
+#: Seconds between the finger samples of a scripted swipe.
+SWIPE_STEP_S = 0.002
+
+
+def swipe(renderer: Renderer, x0_mm: float, speed_mm_s: float, duration_s: float, hold_s: float,
+          lead_s: float = 0.02) -> tuple[float, float]:
+    """Push a whole swipe ahead on the stream clock, then a hold; returns its (start, end) stream times (s).
+
+    All of it must fit in the finger ring (the kernel reads the newest ``finger_ring - 1`` samples).
+    """
+    start_s = renderer.now_s() + lead_s
+    steps = int((duration_s + hold_s) / SWIPE_STEP_S)
+    assert steps < renderer.options.finger_ring - 1
+    for k in range(steps):
+        t_s = min(k * SWIPE_STEP_S, duration_s)
+        renderer.push_finger(x0_mm + speed_mm_s * t_s, 20.0, 0.5, t=start_s + k * SWIPE_STEP_S)
+    return start_s, start_s + duration_s
+
+
+def live_swipe(renderer: Renderer, x0_mm: float, speed_mm_s: float, duration_s: float) -> None:
+    """Push finger samples "now" every SWIPE_STEP_S for ``duration_s`` (s), as an input thread would."""
+    started = time.monotonic()
+    while (elapsed_s := time.monotonic() - started) < duration_s:
+        renderer.push_finger(x0_mm + speed_mm_s * elapsed_s, 20.0, 0.5)
+        time.sleep(SWIPE_STEP_S)
+
+
+class Capture:
+    """The second JACK client: records the first output port matching ``source`` for ``seconds``."""
+
+    def __init__(self, source: str, path: Path, seconds: float):
+        self.path = path
+        self.process = subprocess.Popen([sys.executable, str(CAPTURE), source, str(path), str(seconds)],
+                                        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True)
+        assert self.process.stdout is not None
+        assert self.process.stdout.readline().strip() == "ready"
+
+    def result(self) -> np.ndarray:
+        out, _ = self.process.communicate(timeout=30)
+        assert self.process.returncode == 0, out
+        return np.load(self.path)
+
+
+def carrier_baseband(samples: np.ndarray, carrier_hz: float, window: int = 192) -> np.ndarray:
+    """Complex envelope of ``samples`` at ``carrier_hz``, averaged over ``window``-sample windows."""
+    n = np.arange(len(samples))
+    mixed = samples * np.exp(-2j * np.pi * carrier_hz / RATE_HZ * n)
+    usable = len(mixed) // window * window
+    return 2 * mixed[:usable].reshape(-1, window).mean(axis=1)
+
+
+def run_native(callback: object, seconds: float) -> tuple[np.ndarray, float]:
+    """Run ``callback`` (a cfunc) on the default device for ``seconds``; (statistics, callbacks the stream clock expects)."""
+    device = Device.default()
+    pipeline = Pipeline(device, load_compiled(GRATING), RATE_HZ)
+    target = audio.find_output_device(None)
+    table = CallbackTable(pipeline.arrays, pipeline.texture, channels=target.channels)
+    stream = audio.AudioStream(target, RATE_HZ, BLOCK, target.channels, callback.address, table.user_data)
+    try:
+        stream.start()
+        begin_s = stream.time_s()
+        time.sleep(seconds)
+        end_s = stream.time_s()
+        counted = table.stats.copy()
+        stream.stop()
+    finally:
+        stream.close()
+    return counted, (end_s - begin_s) * RATE_HZ / BLOCK
+
+
+def renderer_run(renderer: Renderer, seconds: float, activity: Callable[[], None] | None = None) -> tuple[dict, float]:
+    """Let a started renderer run ``seconds`` (doing ``activity`` meanwhile, which must last that long, or
+    sleeping); (its stats, callbacks its stream clock expects)."""
+    stream = renderer._stream
+    assert stream is not None
+    begin_s, begin = stream.time_s(), renderer.stats()["callbacks"]
+    (activity or (lambda: time.sleep(seconds)))()
+    end_s, stats = stream.time_s(), renderer.stats()
+    stats["callbacks_in_run"] = stats["callbacks"] - begin
+    return stats, (end_s - begin_s) * RATE_HZ / BLOCK
+
+
+def test_renderer_keeps_the_stream_clock(jack: str) -> None:
+    baseline, _ = run_native(cb.silence_callback, RUN_S)
+    with Renderer(output="audio://", texture=GRATING) as renderer:
+        stats, expected = renderer_run(renderer, RUN_S, lambda: live_swipe(renderer, 10.0, 50.0, RUN_S))
+    print(stats)
+    assert stats["callbacks_in_run"] == pytest.approx(expected, rel=0.03)
+    assert stats["frames"] == stats["callbacks"] * BLOCK
+    assert stats["underflows"] <= baseline[cb.STAT_UNDERFLOWS] + UNDERFLOW_MARGIN
+    assert stats["compute_us_p50"] > 0 and stats["compute_us_max"] >= stats["compute_us_p99"]
+    assert stats["blocks"] > 0 and stats["power_peak_w"] <= stats["power_budget_w"]
+    assert 0 < stats["latency_ms_p50"] <= stats["latency_ms_p99"]
+
+
+class GilHog:
+    """A Python thread running a pure-Python loop (it holds the GIL but for the switch interval)."""
+
+    def __enter__(self) -> GilHog:
+        self.stop = False
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+        return self
+
+    def _spin(self) -> None:
+        count = 0
+        while not self.stop:
+            count += 1
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop = True
+        self.thread.join()
+
+
+def run_python_callback(seconds: float) -> tuple[int, int, float]:
+    """The control: an ordinary sounddevice Python callback rendering via Pipeline.render.
+
+    Returns (callbacks, underflows, callbacks the stream clock expects).
+    """
+    import sounddevice
+
+    pipeline = Pipeline(Device.default(), load_compiled(GRATING), RATE_HZ)
+    pipeline.start()
+    block = np.zeros(BLOCK, dtype=np.float32)
+    counts = [0, 0]
+
+    def render(outdata: np.ndarray, frames: int, time_info: object, status: sounddevice.CallbackFlags) -> None:
+        counts[0] += 1
+        counts[1] += bool(status.output_underflow)
+        outdata.fill(0.0)
+        if frames == BLOCK:
+            pipeline.render(block)
+            outdata[:, 0] = block
+
+    with sounddevice.OutputStream(samplerate=RATE_HZ, blocksize=BLOCK, channels=1, dtype="float32",
+                                  latency="low", callback=render) as stream:
+        begin_s = stream.time
+        time.sleep(seconds)
+        end_s = stream.time
+        seen = tuple(counts)
+    return seen[0], seen[1], (end_s - begin_s) * RATE_HZ / BLOCK
+
+
+def test_gil_load_does_not_starve_the_native_callback(jack: str) -> None:
+    baseline, _ = run_native(cb.silence_callback, RUN_S)
+    with GilHog(), Renderer(output="audio://", texture=GRATING) as renderer:
+        swipe(renderer, 10.0, 50.0, RUN_S, 0.3)
+        stats, expected = renderer_run(renderer, RUN_S)
+    with GilHog():
+        python_callbacks, python_underflows, python_expected = run_python_callback(RUN_S)
+    print(f"baseline underflows {baseline[cb.STAT_UNDERFLOWS]}; native under GIL load: "
+          f"{stats['callbacks_in_run']} of {expected:.0f} callbacks, {stats['underflows']} underflows; "
+          f"Python callback under GIL load: {python_callbacks} of {python_expected:.0f}, "
+          f"{python_underflows} underflows")
+    assert stats["callbacks_in_run"] == pytest.approx(expected, rel=0.03)
+    assert stats["underflows"] <= baseline[cb.STAT_UNDERFLOWS] + UNDERFLOW_MARGIN
+    collapsed = (python_callbacks < 0.5 * python_expected
+                 or python_underflows > baseline[cb.STAT_UNDERFLOWS] + 10 * UNDERFLOW_MARGIN)
+    assert collapsed, (python_callbacks, python_expected, python_underflows)
+
+
+def envelope_after_stop(envelope: np.ndarray) -> tuple[int, int, float]:
+    """(first window of the final decline, first window after it at ~0, plateau before it) of an envelope."""
+    end = int(np.flatnonzero(envelope > 1e-3 * envelope.max())[-1]) + 1
+    plateau = float(np.median(envelope[end - 60:end - 30]))
+    start = int(np.flatnonzero(envelope[:end] >= 0.98 * plateau)[-1])
+    return start, end, plateau
+
+
+def test_capture_carrier_envelope_and_stop_ramp(jack: str, tmp_path: Path) -> None:
+    device = Device.default()
+    speed_mm_s, period_mm, window = 50.0, 2.5, 64
+    with Renderer(output="audio://", texture=GRATING) as renderer:
+        capture = Capture(DRIVE_PORT, tmp_path / "capture.npy", 1.5)
+        swipe(renderer, 10.0, speed_mm_s, 0.8, hold_s=0.35)
+        time.sleep(1.0)  # the swipe, then part of the hold (finger still, drive steady)
+        renderer.stop()
+    samples = capture.result()
+    envelope = np.abs(carrier_baseband(samples, device.resonance_hz, window))
+    active = np.flatnonzero(envelope > 0.5 * envelope.max())
+    swept = samples[active[0] * window + 9600:active[0] * window + 9600 + 96000]  # 0.5 s of the swipe
+    spectrum = np.abs(np.fft.rfft(swept * np.hanning(len(swept))))
+    assert np.fft.rfftfreq(len(swept), 1 / RATE_HZ)[np.argmax(spectrum)] == pytest.approx(device.resonance_hz, abs=4)
+    ripple = envelope[active[0] + 150:active[0] + 150 + 1800]  # 0.6 s at 3000 windows/s
+    ripple_spectrum = np.abs(np.fft.rfft(ripple - ripple.mean()))
+    ripple_hz = np.fft.rfftfreq(len(ripple), window / RATE_HZ)[np.argmax(ripple_spectrum)]
+    assert ripple_hz == pytest.approx(speed_mm_s / period_mm, abs=2)
+    start, end, plateau = envelope_after_stop(envelope)
+    options = renderer.options
+    ramp_samples = options.ramp_ms * 1e-3 * RATE_HZ
+    assert (end - start) * window <= ramp_samples + options.control_interval + 3 * window
+    assert np.all(np.diff(envelope[start:end + 2]) <= 0.02 * plateau), "the stop ramp is not monotone"
+    assert np.max(np.abs(samples[start * window:])) <= 1.02 * plateau  # no click
+    assert np.all(samples[(end + 2) * window:] == 0.0)
+
+
+def test_set_texture_keeps_the_carrier_phase(jack: str, tmp_path: Path) -> None:
+    device = Device.default()
+    window = 300  # 49 whole carrier cycles at 31360 Hz and 192 kHz
+    with Renderer(output="audio://", texture=GRATING) as renderer:
+        start_s = renderer.now_s() + 0.02
+        for k in range(400):  # finger still at x = 12 mm for 0.8 s
+            renderer.push_finger(12.0, 20.0, 0.5, t=start_s + k * SWIPE_STEP_S)
+        capture = Capture(DRIVE_PORT, tmp_path / "capture.npy", 0.7)
+        time.sleep(0.35)
+        renderer.set_texture(SQUARE)
+        capture_samples = capture.result()
+        telemetry = renderer.telemetry()
+    baseband = carrier_baseband(capture_samples, device.resonance_hz, window)
+    magnitudes = np.abs(baseband)
+    steady = magnitudes > 0.2 * magnitudes.max()
+    phase = np.angle(baseband[steady] * np.conj(baseband[steady][0]))
+    assert np.max(np.abs(phase)) < 0.05
+    targets = np.unique(np.round(telemetry["target_mu"][telemetry["voltage_v"] > 0], 3))
+    assert {0.5, 0.756} <= set(targets.tolist())
+    before, after = np.median(magnitudes[:len(magnitudes) // 3]), np.median(magnitudes[-len(magnitudes) // 4:])
+    assert after > 1.5 * before  # the swap took effect: square grating's 0.5 at x = 12 mm needs more drive
+
+
+def test_watchdog_ramps_to_zero_without_finger_samples(jack: str, tmp_path: Path) -> None:
+    path = tmp_path / "watchdog.npz"
+    renderer = Renderer(output="audio://", texture=GRATING)
+    renderer.record(path)
+    with renderer:
+        _, end_s = swipe(renderer, 10.0, 50.0, 0.3, hold_s=0.0)
+        time.sleep(0.5)
+    recording = read_recording(path)
+    options = renderer.options
+    silent_from_s = end_s + (options.watchdog_ms + options.ramp_ms) * 1e-3 + (options.control_interval + BLOCK) / RATE_HZ
+    t_s = recording.blocks["t"]
+    assert np.any(recording.blocks["voltage_v"][t_s < end_s] > 1.0)
+    assert np.all(recording.blocks["voltage_v"][t_s > silent_from_s] == 0.0)
+    first_sample = round(t_s[0] * RATE_HZ)
+    drive_t_s = (first_sample + np.arange(len(recording.drive))) / RATE_HZ
+    assert np.any(recording.drive[drive_t_s < end_s] != 0.0)
+    assert np.all(recording.drive[drive_t_s > silent_from_s] == 0.0)
+
+
+def rss_bytes() -> int:
+    """Resident set size of this process (bytes)."""
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * 4096
+
+
+def test_start_stop_many_times_leaks_nothing(jack: str) -> None:
+    renderer = Renderer(output="audio://", texture=GRATING)
+    threads = threading.active_count()
+    for run in range(100):
+        renderer.start()
+        renderer.push_finger(10.0 + run * 0.1, 20.0)
+        renderer.stop()
+        if run == 9:
+            gc.collect()
+            rss_after_10 = rss_bytes()
+    gc.collect()
+    assert threading.active_count() == threads
+    ports = subprocess.run(["jack_lsp", "-s", jack], capture_output=True, text=True, check=True).stdout
+    assert "PortAudio:" not in ports
+    assert rss_bytes() - rss_after_10 < 16 * 2**20
+    assert renderer.stats()["callbacks"] > 0

@@ -1,0 +1,450 @@
+"""The real-time engine: :class:`Renderer`, the API for applications.
+
+API map
+-------
+Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_frames=64,
+         options=RenderOptions())
+    context manager; ``start()``, ``stop()``, ``set_texture(texture_or_path)``,
+    ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
+    ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``record(path)``,
+    ``check()``, ``.rate_hz``, ``.block_frames``, ``.running``
+
+Example::
+
+    from tpad_rt.engine import Renderer
+
+    with Renderer(output="audio://?rate=192000&block=64", texture="textures/grating.yaml") as renderer:
+        for x_mm in range(10, 60):              # an app's own finger samples
+            renderer.push_finger(x_mm, 20.0)     # stamped "now" on the stream's clock
+            time.sleep(0.01)
+        renderer.lift()
+        print(renderer.stats())
+    # leaving the block ramps the drive to 0, closes the stream, and re-raises any
+    # error the audio device or the engine's thread met
+
+docs/realtime.md is the design: the audio callback is the native
+``tpad_rt.kernel.callback.render_callback``; every state array is shared with it
+through a :class:`tpad_rt.realtime.CallbackTable`; a watcher thread drains
+telemetry and the drive for recordings and polls the stream. With a non-audio output
+(``sim://``, ``null://``, ``wav://...``) a paced Python thread calls the same callback
+and hands each block to the output (GIL-bound: a simulator, not a real-time path).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from dataclasses import asdict
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from tpad_rt import __version__
+from tpad_rt.device import Device
+from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.kernel import callback as cb
+from tpad_rt.kernel.layout import (
+    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_X_MM, FINGER_Y_MM, FLAG_POWER, FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE,
+    STATE_NEXT_INDEX, STATE_RAMP_START, TEL_NAMES, TEX_PROG_COLS,
+)
+from tpad_rt.outputs import open_output, output_forms
+from tpad_rt.outputs import audio
+from tpad_rt.pipeline import Pipeline, RenderOptions
+from tpad_rt.realtime import CallbackTable, monotonic_ns
+from tpad_rt.recording import Recording, write_recording
+from tpad_rt.texture import CompiledTexture, load_compiled
+from tpad_rt.urls import parse_url
+
+#: Seconds between two passes of the watcher thread (telemetry drain, stream poll).
+WATCH_PERIOD_S = 0.02
+#: Telemetry rows kept for :meth:`Renderer.telemetry` between calls (the oldest go first).
+MAX_PENDING_ROWS = 2**18
+#: The stop waits at most this many times the ramp's duration (plus a second) for the drive to reach 0.
+STOP_TIMEOUT_FACTOR = 20
+
+#: Friction 1 everywhere: the drive stays silent (the texture before any is set).
+NO_TEXTURE = CompiledTexture(np.array([[OP_PUSH_ONE] + [0] * (TEX_PROG_COLS - 1)]), np.zeros(0), np.zeros(0), 1,
+                             "none", "no texture (friction 1 everywhere)")
+
+
+def _compiled(texture: CompiledTexture | str | Path | None) -> tuple[CompiledTexture, str | None]:
+    """``(compiled texture, its path or None)``; ConfigError for a bad texture file."""
+    if texture is None:
+        return NO_TEXTURE, None
+    if isinstance(texture, CompiledTexture):
+        return texture, None
+    return load_compiled(texture), str(texture)
+
+
+class Renderer:
+    """Renders textures for one device in real time on ``output``.
+
+    ``device`` (None: ``Device.default()``); ``output`` an output URL: ``audio://[device
+    name or index]?rate=&block=&channel=`` (rate and block, when written, override
+    ``rate_hz`` and ``block_frames``), or ``sim://``, ``null://``, ``wav://...`` run by a
+    paced thread; ``texture`` a compiled texture, a texture file, or None (silent until
+    :meth:`set_texture`); ``rate_hz`` the sample rate (Hz), ``block_frames`` the frames
+    per callback; ``options`` the render settings (power budget, ramps, watchdog...).
+
+    Raises ConfigError for a bad URL, texture or option, or a carrier above 0.45 x the
+    rate (naming the rate needed); BackendError (at :meth:`start`) when the audio
+    device cannot run the stream. Errors met later by the stream or the engine's
+    thread are re-raised by :meth:`stop`, :meth:`check` and on leaving a ``with`` block.
+
+    Finger samples come from one thread at a time (:meth:`push_finger` is a
+    lock-free single-producer write); :meth:`set_texture` from one thread at a time.
+    """
+
+    def __init__(self, device: Device | None = None, output: str = "audio://", *,
+                 texture: CompiledTexture | str | Path | None = None, rate_hz: int = 192000,
+                 block_frames: int = 64, options: RenderOptions = RenderOptions()):
+        self.device = device if device is not None else Device.default()
+        self.output_url = output
+        url = parse_url(output, "output", {**output_forms(), "audio": audio.FORMS})
+        self._audio = audio.parse_audio_url(url) if url.scheme == "audio" else None
+        if self._audio is not None:
+            rate_hz = self._audio.rate_hz if "rate" in self._audio.given else rate_hz
+            block_frames = self._audio.block_frames if "block" in self._audio.given else block_frames
+        if not (isinstance(block_frames, int) and 1 <= block_frames <= 65536):
+            raise ConfigError(f"block_frames: must be a whole number in [1, 65536], got {block_frames!r}")
+        self.rate_hz = rate_hz
+        self.block_frames = block_frames
+        self.options = options
+        compiled, self._texture_path = _compiled(texture)
+        self._pipeline = Pipeline(self.device, compiled, fs_hz=rate_hz, options=options)
+        self._table: CallbackTable | None = None  # while running
+        self._last_table: CallbackTable | None = None  # the last run's, for stats() after stop()
+        self._stream: audio.AudioStream | None = None
+        self._output = None if self._audio is not None else url  # opened at start
+        self._paced: threading.Thread | None = None
+        self._watcher: threading.Thread | None = None
+        self._halt = threading.Event()
+        self._error: BaseException | None = None
+        self._telemetry_lock = threading.Lock()
+        self._pending: deque[dict[str, np.ndarray]] = deque()
+        self._pending_rows = 0
+        self._totals = {"blocks": 0, "voltage_saturated": 0, "power_saturated": 0, "energy_w": 0.0, "peak_w": 0.0}
+        self._push_ns = np.zeros(options.finger_ring, dtype=np.int64)
+        self._last_t_s = -math.inf
+        self._output_latency_s = math.nan
+        self._record_path: Path | None = None
+        self._recorded: list[dict[str, np.ndarray]] = []
+        self._drive_chunks: list[np.ndarray] = []
+        self._drive_from = 0  # next drive sample to copy out of the ring while recording
+        self._texture = compiled
+
+    # --- lifecycle -----------------------------------------------------------------
+
+    @property
+    def running(self) -> bool:
+        """True between :meth:`start` and :meth:`stop`."""
+        return self._table is not None
+
+    def start(self) -> None:
+        """Warm the callback up, open and start the output; the drive ramps up while a finger slides.
+
+        Raises BackendError when the audio device cannot run the stream (missing
+        PortAudio, unknown device, a rate it does not accept), RuntimeError if running.
+        """
+        if self.running:
+            raise RuntimeError("Renderer.start: already running")
+        self._error = None
+        self._halt.clear()
+        channels, channel = 1, 0
+        device = None
+        if self._audio is not None:
+            device = audio.find_output_device(self._audio.device)
+            if self._audio.channel > device.channels:
+                raise BackendError(f"audio: channel {self._audio.channel}: device {device} has "
+                                   f"{device.channels} output channel(s)")
+            channels, channel = device.channels, self._audio.channel - 1
+        table = CallbackTable(self._pipeline.arrays, self._texture, channels=channels, channel=channel)
+        table.slot_t0_s[0] = self.now_s()
+        self._last_table = table
+        warm = table.copy()
+        warm.call(np.zeros(self.block_frames * channels, dtype=np.float32))
+        self._pipeline.start()
+        try:
+            if device is not None:
+                self._stream = audio.AudioStream(device, self.rate_hz, self.block_frames, channels,
+                                                 cb.render_callback.address, table.user_data)
+                self._output_latency_s = self._stream.output_latency_s
+                self._table = table
+                self._stream.start()
+            else:
+                output = open_output(self.output_url, device=self.device, fs_hz=self.rate_hz)
+                self._table = table
+                self._paced = threading.Thread(target=self._guard, args=(self._pace, output),
+                                               name="tpad-rt paced output", daemon=True)
+                self._paced.start()
+        except BaseException:
+            self._pipeline.stop()
+            self._close_stream()
+            self._table = None
+            raise
+        self._watcher = threading.Thread(target=self._guard, args=(self._watch,), name="tpad-rt watcher", daemon=True)
+        self._watcher.start()
+
+    def stop(self) -> None:
+        """Ramp the drive down to 0, then stop and close the output; again: nothing.
+
+        Waits (bounded) until the callback has rendered the samples of the ramp, one
+        control interval and one block past the stop: the kernel's gain is 0 from
+        there on. Re-raises an error the stream or the engine's threads met, and
+        writes the recording :meth:`record` asked for.
+        """
+        table = self._table
+        if table is None:
+            self.check()
+            return
+        self._pipeline.stop()
+        ramp_samples = max(1, round(self.options.ramp_ms * 1e-3 * self.rate_hz))
+        target = table.next_sample + self.options.control_interval + ramp_samples + self.block_frames
+        deadline = time.monotonic() + STOP_TIMEOUT_FACTOR * (target - table.next_sample) / self.rate_hz + 1.0
+        while table.next_sample < target and self._error is None and time.monotonic() < deadline:
+            time.sleep(0.001)
+        self._halt.set()
+        for thread in (self._paced, self._watcher):
+            if thread is not None:
+                thread.join()
+        self._paced = self._watcher = None
+        try:
+            self._close_stream()
+        except BackendError as error:
+            self._error = self._error or error
+        self._drain(table)
+        self._table = None
+        if self._record_path is not None:
+            self._write_recording()
+        if table.next_sample >= target and (table.arrays.state[STATE_GATE] or table.arrays.state[STATE_RAMP_START]):
+            self._error = self._error or RuntimeError("Renderer.stop: the drive was not ramped to 0")
+        self.check()
+
+    def _close_stream(self) -> None:
+        stream, self._stream = self._stream, None
+        if stream is not None:
+            try:
+                stream.stop()
+            finally:
+                stream.close()
+
+    def check(self) -> None:
+        """Re-raise (once) the error the stream or the engine's threads met, if any."""
+        error, self._error = self._error, None
+        if error is not None:
+            raise error
+
+    def __enter__(self) -> Renderer:
+        self.start()
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        if error is None:
+            self.stop()
+            return
+        try:
+            self.stop()
+        except Exception:  # the caller's exception is the one to see  # noqa: BLE001
+            pass
+
+    # --- threads -----------------------------------------------------------------------
+
+    def _guard(self, work: Any, *args: Any) -> None:
+        """Run ``work(*args)`` in a thread; keep its exception for :meth:`check` and ramp the drive down."""
+        try:
+            work(*args)
+        except BaseException as error:  # noqa: BLE001 - re-raised in the caller's thread
+            self._error = self._error or error
+            self._pipeline.stop()
+
+    def _pace(self, output: Any) -> None:
+        """Call the render callback one block at a time, no faster than real time; hand blocks to ``output``."""
+        table = self._table
+        assert table is not None
+        block = np.zeros(self.block_frames, dtype=np.float32)
+        with output:
+            started = time.monotonic()
+            rendered = 0
+            while not self._halt.is_set():
+                due = int((time.monotonic() - started) * self.rate_hz / self.block_frames) + 1
+                for _ in range(due - rendered):
+                    table.call(block)
+                    row = table.arrays.telem[(table.arrays.telem_count[0] - 1) % len(table.arrays.telem)]
+                    output.write(block, dict(zip(TEL_NAMES, row.tolist())))
+                rendered = max(rendered, due)
+                time.sleep(min(0.005, self.block_frames / self.rate_hz))
+
+    def _watch(self) -> None:
+        """Until halted: drain telemetry (and the drive when recording), and fail if the stream stopped."""
+        table = self._table
+        assert table is not None
+        while not self._halt.wait(WATCH_PERIOD_S):
+            self._drain(table)
+            if self._stream is not None and not self._halt.is_set() and not self._stream.active():
+                raise BackendError(f"audio: the stream on device {self._stream.device} stopped "
+                                   "(device lost or server gone)")
+
+    def _drain(self, table: CallbackTable) -> None:
+        """Move new telemetry rows (and drive samples, when recording) out of the shared rings."""
+        with self._telemetry_lock:
+            frames = table.next_sample
+            rows = self._pipeline.drain_telemetry()
+            count = len(rows["t"])
+            if count == 0:
+                return
+            flags = rows["saturated"]
+            totals = self._totals
+            totals["blocks"] += count
+            totals["voltage_saturated"] += int(np.count_nonzero(flags & FLAG_VOLTAGE))
+            totals["power_saturated"] += int(np.count_nonzero(flags & FLAG_POWER))
+            totals["energy_w"] += float(rows["power_w"].sum())
+            totals["peak_w"] = max(totals["peak_w"], float(rows["power_w"].max()))
+            self._pending.append(rows)
+            self._pending_rows += count
+            while self._pending_rows > MAX_PENDING_ROWS:
+                self._pending_rows -= len(self._pending.popleft()["t"])
+            if self._record_path is not None:
+                if not self._recorded:
+                    self._drive_from = round(float(rows["t"][0]) * self.rate_hz)
+                self._recorded.append(rows)
+                self._drive_chunks.append(table.drive[np.arange(self._drive_from, frames) % len(table.drive)])
+                self._drive_from = max(self._drive_from, frames)
+
+    # --- textures and fingers ------------------------------------------------------
+
+    def set_texture(self, texture: CompiledTexture | str | Path) -> None:
+        """Render ``texture`` (compiled, or a file) from the next callback on; temporal textures start now.
+
+        Atomic (the callback renders one texture or the other, never a mix) and
+        phase-continuous (the carrier follows the sample index). Raises ConfigError
+        for a bad texture file.
+        """
+        compiled, path = _compiled(texture)
+        self._texture, self._texture_path = compiled, path
+        if self._table is not None:
+            self._table.set_texture(compiled, self.now_s(), running=True)
+        else:
+            self._pipeline.set_texture(compiled)
+
+    def now_s(self) -> float:
+        """The stream time (s) of the sample at the DAC now (0.0 before the stream runs)."""
+        if self._table is None:
+            return float(self._pipeline.arrays.state[STATE_NEXT_INDEX]) / self.rate_hz
+        return self._table.dac_sample(monotonic_ns()) / self.rate_hz
+
+    def push_finger(self, x_mm: float, y_mm: float, force_n: float | None = None, t: float | None = None) -> None:
+        """A finger sample at plate position ``(x_mm, y_mm)`` (mm), contact force ``force_n`` (N; None: the
+        default), stream time ``t`` (s; None: now). Times are kept non-decreasing (an earlier one is
+        raised to the previous). One producer thread at a time; no lock, no allocation in the ring.
+        """
+        self._push(x_mm, y_mm, math.nan if force_n is None else force_n, t, down=True)
+
+    def lift(self, t: float | None = None) -> None:
+        """The finger leaves the plate at stream time ``t`` (s; None: now): the drive ramps to 0."""
+        arrays = self._pipeline.arrays
+        last = arrays.finger[(arrays.finger_count[0] - 1) % len(arrays.finger)]
+        self._push(float(last[FINGER_X_MM]), float(last[FINGER_Y_MM]), math.nan, t, down=False)
+
+    def _push(self, x_mm: float, y_mm: float, force_n: float, t: float | None, down: bool) -> None:
+        t_s = max(self.now_s() if t is None else t, self._last_t_s)
+        self._last_t_s = t_s
+        self._push_ns[self._pipeline.arrays.finger_count[0] % len(self._push_ns)] = monotonic_ns()
+        self._pipeline.push_finger(t_s, x_mm, y_mm, force_n, down)
+
+    # --- measurements --------------------------------------------------------------
+
+    def stats(self) -> dict[str, Any]:
+        """Counters and distributions so far (units in the keys; NaN where nothing was measured yet).
+
+        ``callbacks``, ``frames``, ``underflows`` (of the current or last run), ``rate_hz``,
+        ``block_frames``, ``output_latency_s`` (the stream's, audio only); ``compute_us_p50/p99/max``
+        (time in the callback, over the recent blocks); ``blocks``,
+        ``voltage_saturated``, ``power_saturated`` (blocks), ``power_mean_w``,
+        ``power_peak_w``, ``power_budget_w``, ``power_avg_w`` (from telemetry);
+        ``latency_ms_p50/p99``: from a push to the DAC time of the first block that
+        read it, over the recent blocks.
+        """
+        if self._table is not None:
+            self._drain(self._table)
+        table = self._last_table
+        result: dict[str, Any] = {"rate_hz": self.rate_hz, "block_frames": self.block_frames}
+        if table is not None:
+            counters = table.stats.copy()
+            blocks = table.recent_blocks()
+        else:
+            counters, blocks = np.zeros(cb.STAT_SIZE, dtype=np.int64), np.zeros((0, cb.BLOCK_COLS), dtype=np.int64)
+        result.update(callbacks=int(counters[cb.STAT_CALLBACKS]), frames=int(counters[cb.STAT_FRAMES]),
+                      underflows=int(counters[cb.STAT_UNDERFLOWS]), output_latency_s=self._output_latency_s)
+        compute_us = blocks[:, cb.BLOCK_COMPUTE_NS] * 1e-3
+        for name, q in (("p50", 50), ("p99", 99), ("max", 100)):
+            result[f"compute_us_{name}"] = float(np.percentile(compute_us, q)) if len(compute_us) else math.nan
+        latency_ms = self._latencies_ms(blocks)
+        for name, q in (("p50", 50), ("p99", 99)):
+            result[f"latency_ms_{name}"] = float(np.percentile(latency_ms, q)) if len(latency_ms) else math.nan
+        with self._telemetry_lock:
+            totals = dict(self._totals)
+        cfg = self._pipeline.arrays.cfg
+        result.update(blocks=totals["blocks"], voltage_saturated=totals["voltage_saturated"],
+                      power_saturated=totals["power_saturated"],
+                      power_mean_w=totals["energy_w"] / totals["blocks"] if totals["blocks"] else math.nan,
+                      power_peak_w=totals["peak_w"], power_budget_w=float(cfg[CFG_POWER_CAP_W]),
+                      power_avg_w=float(cfg[CFG_POWER_AVG_W]))
+        return result
+
+    def _latencies_ms(self, blocks: np.ndarray) -> np.ndarray:
+        """Push-to-DAC latency (ms) of each finger sample first read by one of ``blocks`` (oldest first)."""
+        counts = blocks[:, cb.BLOCK_FINGER_COUNT]
+        if len(counts) < 2:
+            return np.zeros(0)
+        first_seen = np.flatnonzero(np.diff(counts) > 0) + 1
+        new = counts[first_seen] - counts[first_seen - 1]
+        samples = np.repeat(counts[first_seen], new) - (np.arange(new.sum()) - np.repeat(np.cumsum(new) - new, new)) - 1
+        out_ns = np.repeat(blocks[first_seen, cb.BLOCK_ENTRY_NS] + blocks[first_seen, cb.BLOCK_DAC_DELAY_NS], new)
+        kept = samples >= counts[-1] - len(self._push_ns) + 1  # their push times are still in the ring
+        return (out_ns[kept] - self._push_ns[samples[kept] % len(self._push_ns)]) * 1e-6
+
+    def telemetry(self) -> dict[str, np.ndarray]:
+        """The telemetry rows since the last call (at most MAX_PENDING_ROWS, the newest), by TEL_NAMES column."""
+        if self._table is not None:
+            self._drain(self._table)
+        with self._telemetry_lock:
+            chunks, self._pending, self._pending_rows = list(self._pending), deque(), 0
+        return _joined(chunks)
+
+    def record(self, path: str | Path) -> None:
+        """Record the drive and telemetry from now on; :meth:`stop` writes them to ``path`` (.npz, the
+        format of ``tpad-rt render``). Raises ConfigError unless ``path`` ends in ``.npz``."""
+        path = Path(path)
+        if path.suffix.lower() != ".npz":
+            raise ConfigError(f"record: the path must end in .npz, got '{path}'")
+        with self._telemetry_lock:
+            self._record_path = path
+            self._recorded, self._drive_chunks = [], []
+
+    def _write_recording(self) -> None:
+        path, self._record_path = self._record_path, None
+        assert path is not None
+        cfg = self._pipeline.arrays.cfg
+        metadata = {
+            "texture_path": self._texture_path, "texture_description": self._texture.description,
+            "device_label": self.device.label, "carrier_hz": self.device.resonance_hz,
+            "volts_per_full_scale": self.device.volts_per_full_scale, "max_voltage_v": self.device.max_voltage_v,
+            "power_budget_w": float(cfg[CFG_POWER_CAP_W]), "power_avg_w": float(cfg[CFG_POWER_AVG_W]),
+            "power_window_s": self.options.power_window_s, "block_frames": self.block_frames,
+            "input_url": "api", "output_url": self.output_url, "render_options": asdict(self.options),
+            "tpad_rt_version": __version__,
+        }
+        drive = np.concatenate(self._drive_chunks) if self._drive_chunks else np.zeros(0, dtype=np.float32)
+        write_recording(path, Recording(self.rate_hz, drive, _joined(self._recorded), metadata))
+
+
+def _joined(chunks: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Telemetry chunks concatenated column by column (empty columns when there are none)."""
+    if not chunks:
+        return {name: np.zeros(0, dtype=np.int64 if name == "saturated" else np.float64) for name in TEL_NAMES}
+    return {name: np.concatenate([chunk[name] for chunk in chunks]) for name in TEL_NAMES}
