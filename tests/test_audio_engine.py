@@ -22,6 +22,7 @@ from jack_server import jack_server
 
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
+from tpad_rt.errors import BackendError
 from tpad_rt.kernel import callback as cb
 from tpad_rt.outputs import audio
 from tpad_rt.pipeline import Pipeline, RenderOptions
@@ -36,6 +37,7 @@ BLOCK = 64
 GRATING = Path(__file__).resolve().parents[1] / "textures" / "grating.yaml"
 SQUARE = Path(__file__).resolve().parents[1] / "textures" / "square_grating.yaml"
 CAPTURE = Path(__file__).resolve().parent / "jack_capture.py"
+PYTHON_CALLBACK = Path(__file__).resolve().parent / "python_callback.py"
 #: The JACK ports of the PortAudio stream (the drive is on its first).
 DRIVE_PORT = "PortAudio:out_"
 #: Seconds each timed stream runs.
@@ -166,32 +168,11 @@ class GilHog:
 
 
 def run_python_callback(seconds: float) -> tuple[int, int, float]:
-    """The control: an ordinary sounddevice Python callback rendering via Pipeline.render.
-
-    Returns (callbacks, underflows, callbacks the stream clock expects).
-    """
-    import sounddevice
-
-    pipeline = Pipeline(Device.default(), load_compiled(GRATING), RATE_HZ)
-    pipeline.start()
-    block = np.zeros(BLOCK, dtype=np.float32)
-    counts = [0, 0]
-
-    def render(outdata: np.ndarray, frames: int, time_info: object, status: sounddevice.CallbackFlags) -> None:
-        counts[0] += 1
-        counts[1] += bool(status.output_underflow)
-        outdata.fill(0.0)
-        if frames == BLOCK:
-            pipeline.render(block)
-            outdata[:, 0] = block
-
-    with sounddevice.OutputStream(samplerate=RATE_HZ, blocksize=BLOCK, channels=1, dtype="float32",
-                                  latency="low", callback=render) as stream:
-        begin_s = stream.time
-        time.sleep(seconds)
-        end_s = stream.time
-        seen = tuple(counts)
-    return seen[0], seen[1], (end_s - begin_s) * RATE_HZ / BLOCK
+    """The control (tests/python_callback.py, in its own process): (callbacks, underflows, callbacks expected)."""
+    done = subprocess.run([sys.executable, str(PYTHON_CALLBACK), str(seconds)], capture_output=True, text=True,
+                          timeout=seconds + 60)
+    callbacks, underflows, expected = done.stdout.split()
+    return int(callbacks), int(underflows), float(expected)
 
 
 def test_gil_load_does_not_starve_the_native_callback(jack: str) -> None:
@@ -199,8 +180,7 @@ def test_gil_load_does_not_starve_the_native_callback(jack: str) -> None:
     with GilHog(), Renderer(output="audio://", texture=GRATING) as renderer:
         swipe(renderer, 10.0, 50.0, RUN_S, 0.3)
         stats, expected = renderer_run(renderer, RUN_S)
-    with GilHog():
-        python_callbacks, python_underflows, python_expected = run_python_callback(RUN_S)
+    python_callbacks, python_underflows, python_expected = run_python_callback(RUN_S)
     print(f"baseline underflows {baseline[cb.STAT_UNDERFLOWS]}; native under GIL load: "
           f"{stats['callbacks_in_run']} of {expected:.0f} callbacks, {stats['underflows']} underflows; "
           f"Python callback under GIL load: {python_callbacks} of {python_expected:.0f}, "
@@ -311,3 +291,13 @@ def test_start_stop_many_times_leaks_nothing(jack: str) -> None:
     assert "PortAudio:" not in ports
     assert rss_bytes() - rss_after_10 < 16 * 2**20
     assert renderer.stats()["callbacks"] > 0
+
+
+def test_rate_the_device_refuses_lists_the_rates_it_accepts(jack: str) -> None:
+    with pytest.raises(BackendError, match=r"does not accept 96000 Hz.*it accepts: 192000 Hz"):
+        Renderer(output="audio://?rate=96000").start()
+
+
+def test_unknown_device_lists_the_devices(jack: str) -> None:
+    with pytest.raises(BackendError, match=r"named 'no such card': there is none \(output devices: 0 'system'"):
+        Renderer(output="audio://no such card").start()

@@ -1,0 +1,98 @@
+"""The Renderer without a sound card: URL and option errors, the paced simulator path, the API contract."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tpad_rt.engine import Renderer
+from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.recording import read_recording
+
+GRATING = Path(__file__).resolve().parents[1] / "textures" / "grating.yaml"
+AUDIO_FORM = "audio://[device name or index]?rate=192000&block=64&channel=1"
+
+
+@pytest.mark.parametrize(("url", "problem"), [
+    ("audio://?rate=fast", "option rate: must be a whole number >= 1, got 'fast'"),
+    ("audio://?blok=64", "unknown option 'blok'; did you mean 'block'?"),
+    ("audio://?channel=0", "option channel: must be a whole number >= 1"),
+])
+def test_bad_audio_url_shows_the_expected_form(url: str, problem: str) -> None:
+    with pytest.raises(ConfigError) as caught:
+        Renderer(output=url)
+    assert problem in str(caught.value) and AUDIO_FORM in str(caught.value)
+
+
+def test_unknown_scheme_lists_audio() -> None:
+    with pytest.raises(ConfigError, match="did you mean 'audio'.*audio://"):
+        Renderer(output="audoi://")
+
+
+def test_carrier_above_the_rate_limit_names_the_rate_needed() -> None:
+    with pytest.raises(ConfigError, match="needs a sample rate of at least 69689 Hz"):
+        Renderer(output="audio://?rate=48000")
+
+
+def test_url_rate_and_block_override_the_arguments() -> None:
+    renderer = Renderer(output="audio://?rate=96000", rate_hz=192000, block_frames=32)
+    assert (renderer.rate_hz, renderer.block_frames) == (96000, 32)
+
+
+def test_missing_portaudio_names_the_package() -> None:
+    script = (
+        "import ctypes.util\n"
+        "find = ctypes.util.find_library\n"
+        "ctypes.util.find_library = lambda name: None if 'portaudio' in name else find(name)\n"
+        "from tpad_rt.outputs import audio\n"
+        "try:\n    audio.portaudio()\nexcept Exception as error:\n    print(type(error).__name__, error)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert done.stdout.startswith("BackendError audio: PortAudio is not available"), done.stdout + done.stderr
+    assert "install the system package libportaudio2" in done.stdout
+
+
+def test_sim_output_renders_in_a_paced_thread(tmp_path: Path) -> None:
+    path = tmp_path / "sim.npz"
+    renderer = Renderer(output="sim://", texture=GRATING)
+    renderer.record(path)
+    with renderer:
+        start_s = renderer.now_s()
+        for k in range(150):
+            renderer.push_finger(10.0 + 0.1 * k, 20.0, t=start_s + k * 0.002)
+        time.sleep(0.4)
+        telemetry = renderer.telemetry()
+    stats = renderer.stats()
+    assert stats["callbacks"] == stats["blocks"] > 0
+    assert telemetry["voltage_v"].max() > 1.0
+    recording = read_recording(path)
+    assert len(recording.drive) >= (len(recording.blocks["t"]) - 1) * renderer.block_frames
+    assert np.all(recording.drive[-renderer.block_frames:] == 0.0)  # stopped with a ramp to 0
+
+
+def test_stop_is_idempotent_and_start_twice_is_an_error() -> None:
+    renderer = Renderer(output="null://")
+    renderer.stop()
+    with renderer:
+        renderer.push_finger(10.0, 20.0)
+    renderer.stop()
+    with pytest.raises(RuntimeError, match="already running"):
+        with renderer:
+            renderer.start()
+
+
+def test_output_that_cannot_open_fails_start(tmp_path: Path) -> None:
+    renderer = Renderer(output=f"wav://{tmp_path}/missing/out.wav")
+    with pytest.raises(BackendError, match="cannot write"):
+        renderer.start()
+    assert not renderer.running
+
+
+def test_record_needs_npz() -> None:
+    with pytest.raises(ConfigError, match="must end in .npz"):
+        Renderer(output="null://").record("out.wav")
