@@ -301,3 +301,16 @@ def test_rate_the_device_refuses_lists_the_rates_it_accepts(jack: str) -> None:
 def test_unknown_device_lists_the_devices(jack: str) -> None:
     with pytest.raises(BackendError, match=r"named 'no such card': there is none \(output devices: 0 'system'"):
         Renderer(output="audio://no such card").start()
+
+
+def test_a_stream_that_stops_under_the_renderer_is_reported(jack: str) -> None:
+    renderer = Renderer(output="audio://", texture=GRATING)
+    renderer.start()
+    stream = renderer._stream
+    assert stream is not None
+    _, lib = audio.portaudio()
+    lib.Pa_AbortStream(stream._stream)  # what a lost device or a dead server looks like from here
+    with pytest.raises(BackendError, match="stream on device 0 'system' .* stopped"):
+        renderer.stop()
+    assert not renderer.running
+    renderer.stop()  # reported once; the stream is closed
