@@ -65,7 +65,9 @@ def test_sim_output_renders_in_a_paced_thread(tmp_path: Path) -> None:
         start_s = renderer.now_s()
         for k in range(150):
             renderer.push_finger(10.0 + 0.1 * k, 20.0, t=start_s + k * 0.002)
-        time.sleep(0.4)
+        deadline = time.monotonic() + 30  # the first block may wait for the simulator's kernels to compile
+        while renderer.now_s() < start_s + 0.35 and time.monotonic() < deadline:
+            time.sleep(0.01)
         telemetry = renderer.telemetry()
     stats = renderer.stats()
     assert stats["callbacks"] == stats["blocks"] > 0

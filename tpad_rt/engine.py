@@ -11,6 +11,8 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
 
 Example::
 
+    import time
+
     from tpad_rt.engine import Renderer
 
     with Renderer(output="audio://?rate=192000&block=64", texture="textures/grating.yaml") as renderer:
@@ -405,7 +407,8 @@ class Renderer:
         new = counts[first_seen] - counts[first_seen - 1]
         samples = np.repeat(counts[first_seen], new) - (np.arange(new.sum()) - np.repeat(np.cumsum(new) - new, new)) - 1
         out_ns = np.repeat(blocks[first_seen, cb.BLOCK_ENTRY_NS] + blocks[first_seen, cb.BLOCK_DAC_DELAY_NS], new)
-        kept = samples >= counts[-1] - len(self._push_ns) + 1  # their push times are still in the ring
+        pushed = int(self._pipeline.arrays.finger_count[0])
+        kept = samples >= pushed - len(self._push_ns)  # their push times are still in the ring
         return (out_ns[kept] - self._push_ns[samples[kept] % len(self._push_ns)]) * 1e-6
 
     def telemetry(self) -> dict[str, np.ndarray]:
