@@ -2,8 +2,11 @@
 
 The bench-side twin of tests/jack_server.py (which lives with the tests and depends
 on their skip rules): ``jack_server(rate_hz, period_frames)`` starts
-``jackd -n NAME -p 16 -d dummy -r RATE -p PERIOD`` with a unique NAME, waits for it
-with ``jack_wait -s NAME -w``, and yields an environment for child processes
+``jackd -n NAME -p 16 -d dummy -r RATE -p PERIOD`` with the first NAME of
+``tpadrt-bench-0..3`` no running server has (reused, not random: JACK keeps a small
+table of servers in shared memory and reclaims the entry of a server that died without
+cleaning up only when a new one takes its name), logs to a file (an unread pipe
+would block jackd), waits for it with ``jack_wait -s NAME -w``, and yields an environment for child processes
 (``JACK_DEFAULT_SERVER=NAME``); on exit it sends SIGTERM to the PID and waits.
 This process never loads PortAudio: every measured configuration runs in a fresh
 child process, which initialises PortAudio while the server runs (ARCHITECTURE.md
@@ -19,13 +22,15 @@ import shutil
 import signal
 import subprocess
 import sys
-import uuid
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 #: Seconds to wait for the server to come up, and to exit after SIGTERM.
 START_TIMEOUT_S = 10
 EXIT_TIMEOUT_S = 10
+#: Server names tried (JACK's own table holds few servers; the tests use tpadrt-N).
+MAX_SERVERS = 4
 
 
 def _program(name: str) -> str:
@@ -33,6 +38,16 @@ def _program(name: str) -> str:
     if path is None:
         raise SystemExit(f"bench/latency: program '{name}' not found (Debian: apt-get install jackd2)")
     return path
+
+
+def _free_name(jack_wait: str) -> str:
+    """The first of ``tpadrt-bench-0`` .. ``tpadrt-bench-{MAX_SERVERS - 1}`` no running server has."""
+    for index in range(MAX_SERVERS):
+        name = f"tpadrt-bench-{index}"
+        probe = subprocess.run([jack_wait, "-s", name, "-c"], capture_output=True, text=True, timeout=10)
+        if "not running" in probe.stdout:
+            return name
+    raise RuntimeError(f"{MAX_SERVERS} JACK servers named tpadrt-bench-N already run")
 
 
 def _stop(process: subprocess.Popen) -> None:
@@ -50,8 +65,8 @@ def _stop(process: subprocess.Popen) -> None:
 def jack_server(rate_hz: int, period_frames: int, log: Path | None = None) -> Iterator[dict[str, str]]:
     """Run a dummy JACK server; yields the environment its clients need. ``log``: jackd's output."""
     jackd, jack_wait = _program("jackd"), _program("jack_wait")
-    name = f"tpadrt-bench-{uuid.uuid4().hex[:8]}"
-    sink = open(log, "w") if log is not None else subprocess.DEVNULL  # noqa: SIM115
+    name = _free_name(jack_wait)
+    sink = open(log, "w") if log is not None else tempfile.TemporaryFile()  # noqa: SIM115
     process = subprocess.Popen(
         [jackd, "-n", name, "-p", "16", "-d", "dummy", "-r", str(rate_hz), "-p", str(period_frames)],
         stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
@@ -63,8 +78,7 @@ def jack_server(rate_hz: int, period_frames: int, log: Path | None = None) -> It
         yield {**os.environ, "JACK_DEFAULT_SERVER": name}
     finally:
         _stop(process)
-        if log is not None:
-            sink.close()
+        sink.close()
 
 
 @contextlib.contextmanager
