@@ -231,10 +231,10 @@ def test_set_texture_keeps_the_carrier_phase(jack: str, tmp_path: Path) -> None:
     device = Device.default()
     window = 300  # 49 whole carrier cycles at 31360 Hz and 192 kHz
     with Renderer(output="audio://", texture=GRATING) as renderer:
+        capture = Capture(DRIVE_PORT, tmp_path / "capture.npy", 0.7)
         start_s = renderer.now_s() + 0.02
         for k in range(400):  # finger still at x = 12 mm for 0.8 s
             renderer.push_finger(12.0, 20.0, 0.5, t=start_s + k * SWIPE_STEP_S)
-        capture = Capture(DRIVE_PORT, tmp_path / "capture.npy", 0.7)
         time.sleep(0.35)
         renderer.set_texture(SQUARE)
         capture_samples = capture.result()

@@ -53,8 +53,7 @@ from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_X_MM, FINGER_Y_MM, FLAG_POWER, FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE,
     STATE_NEXT_INDEX, STATE_RAMP_START, TEL_NAMES, TEX_PROG_COLS,
 )
-from tpad_rt.outputs import open_output, output_forms
-from tpad_rt.outputs import audio
+from tpad_rt.outputs import Output, audio, open_output, output_forms
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.realtime import CallbackTable, monotonic_ns
 from tpad_rt.recording import Recording, write_recording
@@ -121,7 +120,6 @@ class Renderer:
         self._table: CallbackTable | None = None  # while running
         self._last_table: CallbackTable | None = None  # the last run's, for stats() after stop()
         self._stream: audio.AudioStream | None = None
-        self._output = None if self._audio is not None else url  # opened at start
         self._paced: threading.Thread | None = None
         self._watcher: threading.Thread | None = None
         self._halt = threading.Event()
@@ -241,7 +239,9 @@ class Renderer:
             raise error
 
     def __enter__(self) -> Renderer:
-        self.start()
+        """Start (unless already running); leaving the block stops."""
+        if not self.running:
+            self.start()
         return self
 
     def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
@@ -264,7 +264,7 @@ class Renderer:
             self._error = self._error or error
             self._pipeline.stop()
 
-    def _pace(self, output: Any) -> None:
+    def _pace(self, output: Output) -> None:
         """Call the render callback one block at a time, no faster than real time; hand blocks to ``output``."""
         table = self._table
         assert table is not None
