@@ -8,8 +8,8 @@ CallbackTable(arrays, texture, *, channels=1, channel=0, scratch_frames=4096, dr
     every array it points to: the render kernel's arrays (:class:`tpad_rt.pipeline.KernelArrays`,
     shared, not copied), two texture slots, the output scratch, the drive ring, the
     statistics (``.stats``) and the per-block records (``.blocks``)
-    ``.user_data``: the address to pass as ``userData``; ``.set_texture(texture, t0_s)``;
-    ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.copy()``; ``.call(frames, out)``
+    ``.user_data``: the address to pass as ``userData``; ``.set_texture(texture, t0_s, running)``;
+    ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.copy()``; ``.call(out, callback)``
 monotonic_ns() -> int
     the clock the callback stamps blocks with (CLOCK_MONOTONIC, ns)
 
