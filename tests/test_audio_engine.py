@@ -315,6 +315,6 @@ def test_a_stream_that_stops_under_the_renderer_is_reported(jack: str) -> None:
     _, lib = audio.portaudio()
     lib.Pa_AbortStream(stream._stream)  # what a lost device or a dead server looks like from here
     with pytest.raises(BackendError, match="stream on device 0 'system' .* stopped"):
-        renderer.stop()
+        renderer.join(timeout_s=10)
+    renderer.stop()  # reported once; closes the stream
     assert not renderer.running
-    renderer.stop()  # reported once; the stream is closed

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -88,6 +89,16 @@ def test_stop_is_idempotent_and_start_twice_is_an_error() -> None:
     renderer.start()
     with renderer:  # already running: entering does not start again
         assert renderer.running
+    assert not renderer.running
+
+
+def test_join_returns_when_another_thread_stops() -> None:
+    renderer = Renderer(output="null://")
+    renderer.start()
+    stopper = threading.Timer(0.1, renderer.stop)
+    stopper.start()
+    renderer.join(timeout_s=10)
+    stopper.join()
     assert not renderer.running
 
 

@@ -7,7 +7,7 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
     context manager; ``start()``, ``stop()``, ``set_texture(texture_or_path)``,
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
     ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``record(path)``,
-    ``check()``, ``.rate_hz``, ``.block_frames``, ``.running``
+    ``join(timeout_s=None)``, ``check()``, ``.rate_hz``, ``.block_frames``, ``.running``
 
 Example::
 
@@ -123,6 +123,7 @@ class Renderer:
         self._paced: threading.Thread | None = None
         self._watcher: threading.Thread | None = None
         self._halt = threading.Event()
+        self._ended = threading.Event()  # set by stop() and by an error in the engine's threads
         self._error: BaseException | None = None
         self._telemetry_lock = threading.Lock()
         self._pending: deque[dict[str, np.ndarray]] = deque()
@@ -154,6 +155,7 @@ class Renderer:
             raise RuntimeError("Renderer.start: already running")
         self._error = None
         self._halt.clear()
+        self._ended.clear()
         channels, channel = 1, 0
         device = None
         if self._audio is not None:
@@ -222,6 +224,7 @@ class Renderer:
             self._write_recording()
         if table.next_sample >= target and (table.arrays.state[STATE_GATE] or table.arrays.state[STATE_RAMP_START]):
             self._error = self._error or RuntimeError("Renderer.stop: the drive was not ramped to 0")
+        self._ended.set()
         self.check()
 
     def _close_stream(self) -> None:
@@ -231,6 +234,12 @@ class Renderer:
                 stream.stop()
             finally:
                 stream.close()
+
+    def join(self, timeout_s: float | None = None) -> None:
+        """Wait (at most ``timeout_s`` s; None: no limit) until another thread stops the renderer or an
+        error ends the run; re-raise that error (pynput style). Call :meth:`stop` after it to close."""
+        self._ended.wait(timeout_s)
+        self.check()
 
     def check(self) -> None:
         """Re-raise (once) the error the stream or the engine's threads met, if any."""
@@ -263,6 +272,7 @@ class Renderer:
         except BaseException as error:  # noqa: BLE001 - re-raised in the caller's thread
             self._error = self._error or error
             self._pipeline.stop()
+            self._ended.set()
 
     def _pace(self, output: Output) -> None:
         """Call the render callback one block at a time, no faster than real time; hand blocks to ``output``."""
