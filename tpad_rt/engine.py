@@ -375,7 +375,8 @@ class Renderer:
 
         ``callbacks``, ``frames``, ``underflows`` (of the current or last run), ``rate_hz``,
         ``block_frames``, ``output_latency_s`` (the stream's, audio only); ``compute_us_p50/p99/max``
-        (time in the callback, over the recent blocks); ``blocks``,
+        (time in the callback, over the recent blocks); ``callback_load_p99`` (that p99 as a
+        fraction of a block's duration); ``blocks``,
         ``voltage_saturated``, ``power_saturated`` (blocks), ``power_mean_w``,
         ``power_peak_w``, ``power_budget_w``, ``power_avg_w`` (from telemetry);
         ``latency_ms_p50/p99``: from a push to the DAC time of the first block that
@@ -395,6 +396,7 @@ class Renderer:
         compute_us = blocks[:, cb.BLOCK_COMPUTE_NS] * 1e-3
         for name, q in (("p50", 50), ("p99", 99), ("max", 100)):
             result[f"compute_us_{name}"] = float(np.percentile(compute_us, q)) if len(compute_us) else math.nan
+        result["callback_load_p99"] = result["compute_us_p99"] * 1e-6 * self.rate_hz / self.block_frames
         latency_ms = self._latencies_ms(blocks)
         for name, q in (("p50", 50), ("p99", 99)):
             result[f"latency_ms_{name}"] = float(np.percentile(latency_ms, q)) if len(latency_ms) else math.nan

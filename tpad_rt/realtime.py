@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import ctypes
 import time
+from typing import Any
 
 import numpy as np
 
@@ -154,7 +155,7 @@ class CallbackTable:
         twin.slot_t0_s[:] = self.slot_t0_s
         return twin
 
-    def call(self, out: np.ndarray, callback: object = cb.render_callback) -> None:
+    def call(self, out: np.ndarray, callback: Any = cb.render_callback) -> None:
         """Run ``callback`` once from Python on ``out`` (float32, frames x channels), as PortAudio would.
 
         Its time info says the samples play at once (DAC time = current time). The
@@ -163,8 +164,7 @@ class CallbackTable:
         channels = int(self.table[cb.TAB_CHANNELS])
         if out.dtype != np.float32 or not out.flags.c_contiguous or out.size % channels:
             raise ValueError(f"out: must be C-contiguous float32 holding whole frames of {channels} channels")
-        callback.ctypes(None, _address(out), out.size // channels, _TIME_INFO(0.0, 0.0, 0.0), 0,  # type: ignore[attr-defined]
-                        self.user_data)
+        callback.ctypes(None, _address(out), out.size // channels, _TIME_INFO(0.0, 0.0, 0.0), 0, self.user_data)
 
 
 def _texture_of(slot: tuple[np.ndarray, ...]) -> CompiledTexture:
