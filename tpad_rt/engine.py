@@ -47,7 +47,7 @@ import numpy as np
 
 from tpad_rt import __version__
 from tpad_rt.device import Device
-from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.errors import BackendError, ConfigError, TpadError
 from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_X_MM, FINGER_Y_MM, FLAG_POWER, FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE,
@@ -324,6 +324,10 @@ class Renderer:
                 if not self._recorded:
                     self._drive_from = round(float(rows["t"][0]) * self.rate_hz)
                 self._recorded.append(rows)
+                if frames - self._drive_from > len(table.drive):
+                    raise TpadError(f"record: {frames - self._drive_from} drive samples were due but the ring "
+                                    f"holds {len(table.drive)}: the recording lost samples (the watcher thread "
+                                    "was held up for too long)")
                 self._drive_chunks.append(table.drive[np.arange(self._drive_from, frames) % len(table.drive)])
                 self._drive_from = max(self._drive_from, frames)
 
