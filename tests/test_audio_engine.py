@@ -129,11 +129,9 @@ def run_native(callback: object, seconds: float) -> tuple[np.ndarray, float]:
 def renderer_run(renderer: Renderer, seconds: float, activity: Callable[[], None] | None = None) -> tuple[dict, float]:
     """Let a started renderer run ``seconds`` (doing ``activity`` meanwhile, which must last that long, or
     sleeping); (its stats, callbacks its stream clock expects)."""
-    stream = renderer._stream
-    assert stream is not None
-    begin_s, begin = stream.time_s(), renderer.stats()["callbacks"]
+    begin_s, begin = renderer.stream_time_s(), renderer.stats()["callbacks"]
     (activity or (lambda: time.sleep(seconds)))()
-    end_s, stats = stream.time_s(), renderer.stats()
+    end_s, stats = renderer.stream_time_s(), renderer.stats()
     stats["callbacks_in_run"] = stats["callbacks"] - begin
     return stats, (end_s - begin_s) * RATE_HZ / BLOCK
 

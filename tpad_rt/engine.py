@@ -7,7 +7,8 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
     context manager; ``start()``, ``stop()``, ``set_texture(texture_or_path)``,
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
     ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``record(path)``,
-    ``join(timeout_s=None)``, ``check()``, ``.rate_hz``, ``.block_frames``, ``.running``
+    ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``.callback_table``, ``.rate_hz``,
+    ``.block_frames``, ``.running``
 
 Example::
 
@@ -144,6 +145,16 @@ class Renderer:
     def running(self) -> bool:
         """True between :meth:`start` and :meth:`stop`."""
         return self._table is not None
+
+    @property
+    def callback_table(self) -> CallbackTable | None:
+        """The arrays the callback shares in the current run (statistics, block records), None when stopped."""
+        return self._table
+
+    def stream_time_s(self) -> float:
+        """The audio stream's own clock (s; PortAudio's stream time), NaN without a running audio stream."""
+        stream = self._stream
+        return stream.time_s() if stream is not None else math.nan
 
     def start(self) -> None:
         """Warm the callback up, open and start the output; the drive ramps up while a finger slides.
