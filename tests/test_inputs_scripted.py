@@ -127,7 +127,7 @@ def test_spans_partition_the_samples(pattern) -> None:  # type: ignore[no-untype
         ("scripted://still?duration_s=-1", "option duration_s: must be a number > 0 or inf"),
         ("scripted://tap?rate_hz=1e9", "option rate_hz: must be a number in (0, 100000]"),
         ("scripted://swipe?force_n=nan", "option force_n: must be a number >= 0, got 'nan'"),
-        ("scriptd://swipe", "unknown scheme 'scriptd'; did you mean 'scripted'? (known: scripted://, file://)"),
+        ("scriptd://swipe", "unknown scheme 'scriptd'; did you mean 'scripted'? (known: scripted://, file://, mouse://)"),
         ("swipe", "not a URL (no 'scheme://')"),
     ],
 )

@@ -7,14 +7,23 @@ renderer asks for the samples of each block's span; the real-time engine will as
 an input thread, so :meth:`Input.samples_between` must be safe to call from a thread
 other than the one that opened the input (scripted inputs are pure functions of time,
 file inputs read arrays loaded up front).
+
+A live input (:class:`LiveInput`, ``live = True``: the mouse) has no samples over a
+span of time: it exists only as it happens and delivers each event through
+:meth:`LiveInput.listen`; its :meth:`~LiveInput.samples_between` raises BackendError.
+:class:`tpad_rt.inputs.live.LiveFeed` feeds either kind into a renderer in real time.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from types import TracebackType
 
 import numpy as np
+
+from tpad_rt.errors import BackendError
 
 #: One finger sample per row.
 FINGER_DTYPE = np.dtype(
@@ -29,6 +38,9 @@ class Input(ABC):
     holds a resource (a thread, a device) also overrides :meth:`close`. Inputs are
     context managers that close on exit.
     """
+
+    #: False: samples exist for any span (replayable offline); True: a :class:`LiveInput`.
+    live: bool = False
 
     @property
     @abstractmethod
@@ -53,3 +65,41 @@ class Input(ABC):
         self, kind: type[BaseException] | None, error: BaseException | None, trace: TracebackType | None
     ) -> None:
         self.close()
+
+
+#: Receives one live finger sample: FINGER_DTYPE's fields in order, ``(t_s, x_mm, y_mm, force_n, down)``.
+SampleSink = Callable[[float, float, float, float, bool], None]
+
+
+class LiveInput(Input):
+    """An input that exists only as it happens (a mouse): events, not spans of time.
+
+    A backend sets :attr:`scheme` and implements :meth:`listen`. It is endless
+    (``duration_s`` is None) and cannot be rendered offline.
+    """
+
+    live = True
+    #: The URL scheme, for messages (``"mouse"``).
+    scheme: str
+
+    @property
+    def duration_s(self) -> None:
+        """None: a live input never ends by itself."""
+        return None
+
+    def samples_between(self, t0_s: float, t1_s: float) -> np.ndarray:
+        """Unsupported: always raises BackendError (a live input has no samples over a span of time)."""
+        raise BackendError(
+            f"input {self.scheme}://: a live input (events as they happen) cannot be rendered offline; "
+            "use it in real time (tpad-rt play, or a Renderer fed by tpad_rt.inputs.live.LiveFeed)"
+        )
+
+    @abstractmethod
+    def listen(self, on_sample: SampleSink) -> AbstractContextManager[None]:
+        """A context manager delivering events to ``on_sample`` while it is open.
+
+        Entering starts the input's own thread and returns once it is ready to
+        receive events; each event then calls ``on_sample`` from that thread, with
+        ``t_s`` the event's ``time.monotonic()`` (s). Exiting stops and joins the
+        thread and re-raises an error raised in it (``on_sample``'s included).
+        """
