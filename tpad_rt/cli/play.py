@@ -1,11 +1,18 @@
-"""``tpad-rt play TEXTURE``: INTERIM, until the real-time audio engine lands.
+"""``tpad-rt play TEXTURE``: render a texture in real time on the :class:`~tpad_rt.engine.Renderer`.
 
-Renders like ``tpad-rt render`` (same options, minus ``--out``), paced to real time,
-into ``--output`` (default ``sim://``) with a live status line on a terminal, then the
-render summary; ``--record FILE.npz`` also writes a recording. The first line says
-that no audio engine is used. Ctrl-C stops cleanly: the drive ramps down, the summary
-and the recording are still written, exit status 0. Everything specific to this stand-in
-is in this module; the real-time engine replaces it whole.
+``--output auto`` (default) picks an audio device that accepts ``--rate`` (a JACK
+device first, then the default output), else the simulated plate ``sim://``;
+``--input auto`` picks ``mouse://`` when an X display answers, else endless
+back-and-forth swipes (:data:`AUTO_SWIPE`). The first line says both choices and why.
+A :class:`~tpad_rt.inputs.live.LiveFeed` feeds the input into the renderer; a status
+panel (finger, target friction and, on ``sim://``, the friction of a simulated plate
+driven by the last drive samples, volts, power, underflows, callback load, time)
+refreshes :data:`STATUS_HZ` times a second on a terminal (nothing on a pipe). Play
+ends at ``--duration``, when a finite input ends, or on Ctrl-C (exit status 0): the
+drive ramps to 0 (``Renderer.stop``), a summary follows, and ``--record`` writes the
+recording (the ``tpad-rt render`` format). An error (bad file or URL, missing or lost
+audio device, an input failing) ends with the output ramped and closed, one line on
+stderr and exit status 1 (``tpad_rt.cli.main``).
 """
 
 from __future__ import annotations
@@ -13,108 +20,255 @@ from __future__ import annotations
 import argparse
 import contextlib
 import signal
+import threading
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
+from collections.abc import Iterator
 from types import FrameType
-from typing import Any
 
+import numpy as np
 from rich.console import Console
 from rich.live import Live
-from rich.text import Text
+from rich.table import Table
 
-from tpad_rt.cli.render import DEFAULT_INPUT, add_session_arguments, open_session, summary_lines
-from tpad_rt.errors import ConfigError
+from tpad_rt.cli.render import add_session_arguments
+from tpad_rt.device import Device
+from tpad_rt.engine import Renderer
+from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.inputs import open_input
+from tpad_rt.inputs.live import LiveFeed, PushFinger
+from tpad_rt.inputs.mouse import screen_size_px
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
-from tpad_rt.offline import OfflineRender
-from tpad_rt.recording import Recording, write_recording
+from tpad_rt.outputs import audio
+from tpad_rt.outputs.sim import SimOutput
+from tpad_rt.pipeline import RenderOptions
 
-#: Seconds between status line updates.
-STATUS_PERIOD_S = 0.1
+#: The input ``--input auto`` uses without a display: endless back-and-forth swipes at 100 mm/s.
+AUTO_SWIPE = "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1"
+#: Status refreshes per second.
+STATUS_HZ = 5
+#: Drive (s) the status's simulated plate is run over before the block it reports (its ring-up).
+PROBE_WARMUP_S = 0.02
+
+
+@dataclass(frozen=True)
+class Choice:
+    """An output or input URL and why it was chosen (empty when the user named it)."""
+
+    url: str
+    reason: str = ""
+
+    def __str__(self) -> str:
+        return f"{self.url} ({self.reason})" if self.reason else self.url
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """Register ``play``."""
     parser = subparsers.add_parser(
         "play",
-        help="render a texture in real time (interim: to sim:// until the audio engine lands)",
-        description="Render TEXTURE for the finger path of --input, paced in real time, with a live status "
-        "line. Interim: renders offline to --output (default sim://); Ctrl-C stops.",
+        help="render a texture in real time (audio device or simulated plate) with a live status",
+        description="Render TEXTURE in real time for the finger of --input on --output, with a live status "
+        "panel; Ctrl-C stops with a ramp and prints a summary.",
     )
-    add_session_arguments(parser, input_default=DEFAULT_INPUT)
-    parser.add_argument("--record", metavar="FILE.npz", help="also write a recording")
+    add_session_arguments(parser, input_default="auto")
+    _redefault(parser, "--input", "auto", f"finger input URL, or auto: mouse:// with an X display, else {AUTO_SWIPE}")
+    _redefault(parser, "--output", "auto", "output URL (audio://[device]?..., sim://, null://), or auto: an audio "
+               "device that accepts --rate (JACK first), else sim://")
+    parser.add_argument("--record", metavar="FILE.npz", help="also write a recording (the format of render)")
     parser.set_defaults(func=run)
 
 
+def _redefault(parser: argparse.ArgumentParser, option: str, default: str, help_text: str) -> None:
+    """Give the shared ``option`` play's own default and help."""
+    action = parser._option_string_actions[option]
+    action.default, action.help = default, f"{help_text} (default {default})"
+
+
+def choose_output(requested: str, rate_hz: int) -> Choice:
+    """``requested``, or for ``auto`` the first audio device accepting ``rate_hz`` (JACK, then the default
+    output, then the others), else ``sim://``."""
+    if requested != "auto":
+        return Choice(requested)
+    try:
+        devices = audio.output_devices()
+    except BackendError as error:
+        return Choice("sim://", f"no audio: {error}")
+    default = audio.portaudio()[1].Pa_GetDefaultOutputDevice()
+    ranked = sorted(devices, key=lambda device: ("JACK" not in device.host_api, device.index != default))
+    for device in ranked:
+        if audio.accepted_rates(device, device.channels, (rate_hz,)):
+            return Choice(f"audio://{device.index}", f"'{device.name}', {device.host_api}, runs {rate_hz} Hz")
+    return Choice("sim://", f"no audio device runs {rate_hz} Hz")
+
+
+def choose_input(requested: str) -> Choice:
+    """``requested``, or for ``auto`` ``mouse://`` when an X display answers, else :data:`AUTO_SWIPE`."""
+    if requested != "auto":
+        return Choice(requested)
+    try:
+        width, height = screen_size_px()
+    except BackendError:
+        return Choice(AUTO_SWIPE, "no display")
+    return Choice("mouse://", f"{width}x{height} screen onto the plate, left button held touches")
+
+
 def run(args: argparse.Namespace) -> int:
-    """Play (module docstring); 0 on success, also when stopped by Ctrl-C."""
-    record = Path(args.record) if args.record else None
-    if record is not None and record.suffix.lower() != ".npz":
+    """Play (module docstring); 0 when it ends normally or by Ctrl-C."""
+    if args.record is not None and Path(args.record).suffix.lower() != ".npz":
         raise ConfigError(f"--record: must end in .npz, got '{args.record}'")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
-    console.print(f"no audio engine yet: rendering to {args.output} from {args.input} (real-time pacing)")
-    with contextlib.ExitStack() as stack:
-        session = open_session(args, stack, keep_drive=record is not None, endless_ok=True)
-        started = time.perf_counter()
-        stopped = _paced(session.render, console, session.metadata)
-        wall_s = time.perf_counter() - started
-    result = session.render.result()
-    for line in summary_lines(result, session.metadata, wall_s, session.render.pipeline.texture):
+    output, finger = choose_output(args.output, args.rate), choose_input(args.input)
+    device = Device.from_file(args.device) if args.device else Device.default()
+    options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
+                            **({} if args.force is None else {"default_force_n": args.force}))
+    renderer = Renderer(device, output.url, texture=args.texture, rate_hz=args.rate, block_frames=args.block,
+                        options=options)
+    with open_input(finger.url, device=device) as source, _sigint_event() as interrupted:
+        console.print(f"output {output}, input {finger}; "
+                      + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
+        if args.record is not None:
+            renderer.record(args.record)
+        with renderer, LiveFeed(source, _pusher(renderer, args.force), renderer.lift,
+                                clock=renderer.now_s) as feed:
+            session = Session(renderer, console)
+            _loop(session, feed, interrupted, args.duration)
+    session.take_telemetry()
+    for line in session.summary(interrupted.is_set()):
         console.print(line)
-    if stopped:
-        console.print("stopped by Ctrl-C")
-    if record is not None and result.drive is not None:
-        write_recording(record, Recording(result.fs_hz, result.drive, result.blocks, session.metadata))
-        console.print(f"wrote {record}")
+    if args.record is not None:
+        console.print(f"wrote {args.record}")
     return 0
 
 
-def _paced(render: OfflineRender, console: Console, metadata: dict[str, Any]) -> bool:
-    """Render every block no faster than real time; True if Ctrl-C stopped it (then the ramp tail is rendered)."""
-    stop_requested = False
+def _pusher(renderer: Renderer, fixed_n: float | None) -> PushFinger:
+    """``renderer.push_finger``, with every sample's force replaced by ``fixed_n`` (N) when given."""
+    if fixed_n is None:
+        return renderer.push_finger
 
-    def request_stop(signum: int, frame: FrameType | None) -> None:
-        nonlocal stop_requested
-        stop_requested = True
+    def push(x_mm: float, y_mm: float, force_n: float | None = None, t: float | None = None) -> None:
+        renderer.push_finger(x_mm, y_mm, fixed_n, t)
 
-    seconds_per_block = render.block_frames / render.pipeline.fs_hz
-    previous = signal.signal(signal.SIGINT, request_stop)
-    live = Live(console=console, auto_refresh=False) if console.is_terminal else contextlib.nullcontext()
-    if isinstance(live, Live):
-        console.print(Text(STATUS_HEADER, style="dim"))
+    return push
+
+
+@contextlib.contextmanager
+def _sigint_event() -> Iterator[threading.Event]:
+    """An Event that SIGINT (Ctrl-C) sets instead of raising KeyboardInterrupt, while open."""
+    event = threading.Event()
+
+    def on_sigint(signum: int, frame: FrameType | None) -> None:
+        event.set()
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
     try:
-        with live:
-            started = time.perf_counter()
-            next_status = started
-            while not render.done and not stop_requested:
-                render.step()
-                now = time.perf_counter()
-                ahead_s = render.blocks_done * seconds_per_block - (now - started)
-                if ahead_s > 0.005:
-                    time.sleep(ahead_s)
-                if isinstance(live, Live) and now >= next_status:
-                    live.update(status_text(render.latest, metadata), refresh=True)
-                    next_status = now + STATUS_PERIOD_S
-            render.stop_early()
-            while not render.done:
-                render.step()
+        yield event
     finally:
         signal.signal(signal.SIGINT, previous)
-    return stop_requested
 
 
-#: Column header of the status line (same widths as :func:`status_text`).
-STATUS_HEADER = "    time  finger (x, y), speed        μ' target→got drive     power"
+def _loop(session: Session, feed: LiveFeed, interrupted: threading.Event, duration_s: float | None) -> None:
+    """Refresh the status until Ctrl-C, ``duration_s`` (s), the input's end or an error (re-raised)."""
+    live = Live(console=session.console, auto_refresh=False) if session.console.is_terminal else None
+    with live if live is not None else contextlib.nullcontext():
+        while not interrupted.wait(1 / STATUS_HZ):
+            session.renderer.check()
+            session.tick()
+            if live is not None:
+                live.update(session.panel(), refresh=True)
+            if not feed.is_alive() or (duration_s is not None and session.elapsed_s() >= duration_s):
+                return
 
 
-def status_text(row: dict[str, float], metadata: dict[str, Any]) -> Text:
-    """One status line (under 80 columns): time, finger, target→achieved friction, volts and power vs limits."""
-    flags = int(row["saturated"])
-    finger = "lifted" if flags & FLAG_WATCHDOG else (
-        f"({row['x_mm']:5.1f},{row['y_mm']:5.1f}) mm {row['speed_mm_s']:3.0f} mm/s")
-    friction = f"{row['target_mu']:.2f}" + (f"→{row['achieved_mu']:.2f}" if "achieved_mu" in row else "")
-    text = Text(f"{row['t']:6.2f} s  {finger:<27} {friction:<13} "
-                f"{row['voltage_v']:4.1f}/{metadata['max_voltage_v']:g} V "
-                f"{row['power_w']:4.2f}/{metadata['power_budget_w']:g} W")
-    if flags & (FLAG_VOLTAGE | FLAG_POWER):
-        text.append(" SAT", style="bold red")
-    return text
+@dataclass
+class Session:
+    """A running play (from when the renderer and the feed run): the renderer, the last telemetry row, the
+    peak volts, and the simulated-plate friction samples."""
+
+    renderer: Renderer
+    console: Console
+    started: float = field(default_factory=time.monotonic)
+    latest: dict[str, float] = field(default_factory=dict)
+    peak_v: float = 0.0
+    achieved: float | None = None
+    friction_errors: list[float] = field(default_factory=list)
+
+    def elapsed_s(self) -> float:
+        """Seconds since play started."""
+        return time.monotonic() - self.started
+
+    def take_telemetry(self) -> None:
+        """Drain the renderer's telemetry: keep the last row and the peak volts."""
+        rows = self.renderer.telemetry()
+        if len(rows["t"]):
+            self.latest = {name: float(column[-1]) for name, column in rows.items()}
+            self.peak_v = max(self.peak_v, float(rows["voltage_v"].max()))
+
+    def tick(self) -> None:
+        """One status period: drain the telemetry, then sample the simulated plate's friction."""
+        self.take_telemetry()
+        self.achieved = self._achieved_mu()
+
+    def _achieved_mu(self) -> float | None:
+        """Friction a simulated plate feels after the last drive samples (sim:// only, else None); kept
+        for the summary against the target when touching and not saturated."""
+        table = self.renderer.callback_table
+        if not self.renderer.output_url.startswith("sim") or table is None or not self.latest:
+            return None
+        block = self.renderer.block_frames
+        end = table.next_sample
+        start = end - round(PROBE_WARMUP_S * self.renderer.rate_hz) - block
+        if start < 0:
+            return None
+        drive = table.drive[np.arange(start, end) % len(table.drive)]
+        plate = SimOutput(self.renderer.device, self.renderer.rate_hz)
+        plate.write(drive[:-block], self.latest)
+        plate.write(drive[-block:], self.latest)
+        achieved = plate.latest()["achieved_mu"]
+        if int(self.latest["saturated"]) & (FLAG_WATCHDOG | FLAG_VOLTAGE | FLAG_POWER) == 0:
+            self.friction_errors.append(abs(self.latest["target_mu"] - achieved))
+        return achieved
+
+    def panel(self) -> Table:
+        """The live status panel."""
+        row, stats = self.latest, self.renderer.stats()
+        grid = Table.grid(padding=(0, 2))
+        grid.add_column(style="dim")
+        grid.add_column()
+        if row:
+            lifted = int(row["saturated"]) & FLAG_WATCHDOG
+            grid.add_row("finger", f"({row['x_mm']:5.1f}, {row['y_mm']:5.1f}) mm  {row['speed_mm_s']:4.0f} mm/s  "
+                         + ("lifted" if lifted else "down"))
+            grid.add_row("friction", f"target {row['target_mu']:.2f}"
+                         + ("" if self.achieved is None else f", simulated plate {self.achieved:.2f}"))
+            grid.add_row("drive", f"{row['voltage_v']:5.1f} V of {self.renderer.device.max_voltage_v:g} V"
+                         + ("  SATURATED" if int(row["saturated"]) & (FLAG_VOLTAGE | FLAG_POWER) else ""))
+        grid.add_row("power", f"now {row.get('power_w', 0.0):.3f} W, mean {stats['power_mean_w']:.3f} W, "
+                     f"peak {stats['power_peak_w']:.3f} W of {stats['power_budget_w']:g} W")
+        grid.add_row("callbacks", f"{stats['callbacks']}, {stats['underflows']} underflows, "
+                     f"load p99 {100 * stats['callback_load_p99']:.1f} % of a block")
+        grid.add_row("time", f"{self.elapsed_s():.1f} s")
+        return grid
+
+    def summary(self, interrupted: bool) -> list[str]:
+        """The end-of-play summary from the renderer's stats (and the friction samples, on sim://)."""
+        stats = self.renderer.stats()
+        blocks = max(stats["blocks"], 1)
+        lines = [
+            f"played {self.elapsed_s():.2f} s" + (" (stopped by Ctrl-C)" if interrupted else "")
+            + f": {stats['callbacks']} callbacks of {stats['block_frames']} frames at {stats['rate_hz']} Hz, "
+            f"{stats['underflows']} underflows",
+            f"callback compute: p50 {stats['compute_us_p50']:.1f} us, p99 {stats['compute_us_p99']:.1f} us "
+            f"({100 * stats['callback_load_p99']:.1f} % of a block)",
+            f"push-to-output latency: p50 {stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms",
+            f"drive: peak {self.peak_v:.2f} V of {self.renderer.device.max_voltage_v:g} V max; saturated "
+            f"{100 * stats['voltage_saturated'] / blocks:.1f} % of blocks (voltage), "
+            f"{100 * stats['power_saturated'] / blocks:.1f} % (power)",
+            f"power: mean {stats['power_mean_w']:.3f} W, peak {stats['power_peak_w']:.3f} W "
+            f"(cap {stats['power_budget_w']:g} W, average budget {stats['power_avg_w']:g} W)",
+        ]
+        if self.friction_errors:
+            errors = np.array(self.friction_errors)
+            lines.append(f"friction |target - simulated plate| at {len(errors)} status samples (touching, not "
+                         f"saturated): mean {errors.mean():.4f}, max {errors.max():.4f}")
+        return [line.replace("nan", "n/a") for line in lines]
