@@ -137,23 +137,32 @@ def _run_s(command: list[str], env: dict[str, str]) -> float:
 
 
 def measure_startup(plan: Plan, log: Callable[[str], None], logs: Path) -> dict[str, Any]:
-    """Part 4: spawn -> first sample at the DAC of a Renderer on audio://, next to ``import tpad_rt``."""
-    runs, baseline, engine_import = [], [], []
+    """Part 4: spawn -> first sample at the DAC, through ``tpad-rt play`` (when it renders to audio://) and
+    through the Renderer API, next to ``import tpad_rt`` and ``import tpad_rt.engine``, alternated."""
+    play = _play_has_audio()
+    modes = ["startup", "play"] if play else ["startup"]
+    runs: dict[str, list[dict[str, float]]] = {mode: [] for mode in modes}
+    baseline, engine_import = [], []
     with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-startup.log") as env:
-        warm = _worker(["startup"], env, 300)  # fills the numba cache if it is cold; not counted
-        if "error" in warm:
-            return {"error": warm["error"]}
+        env = {key: value for key, value in env.items() if key != "DISPLAY"}  # play: scripted input, no mouse
+        for mode in modes:
+            warm = _worker([mode], env, 300)  # fills the numba cache if it is cold; not counted
+            if "error" in warm:
+                return {"error": f"{mode}: {warm['error']}"}
         for _ in range(plan.startups):
             baseline.append(_run_s([sys.executable, "-c", "import tpad_rt"], env))
             engine_import.append(_run_s([sys.executable, "-c", "import tpad_rt.engine"], env))
-            spawned_ns = time.monotonic_ns()
-            result = _worker(["startup"], env, 120)
-            if "error" in result:
-                return {"error": result["error"]}
-            runs.append({key: (value - spawned_ns) * 1e-9 for key, value in result.items()})
-            log(f"start-up: first sample at {runs[-1]['first_dac_ns']:.3f} s, import tpad_rt {baseline[-1]:.3f} s")
-    return {"runs": runs, "import_tpad_rt_s": baseline, "import_tpad_rt_engine_s": engine_import,
-            "play_wired_to_audio": _play_has_audio()}
+            for mode in modes:
+                spawned_ns = time.monotonic_ns()
+                result = _worker([mode], env, 120)
+                if "error" in result:
+                    return {"error": f"{mode}: {result['error']}"}
+                runs[mode].append({key: (value - spawned_ns) * 1e-9 for key, value in result.items()})
+            log("start-up: first sample at " + ", ".join(f"{mode} {runs[mode][-1]['first_dac_ns']:.3f} s"
+                                                         for mode in modes)
+                + f"; import tpad_rt {baseline[-1]:.3f} s")
+    return {"runs": runs["startup"], "play_runs": runs.get("play", []), "import_tpad_rt_s": baseline,
+            "import_tpad_rt_engine_s": engine_import, "play_wired_to_audio": play}
 
 
 def _play_has_audio() -> bool:
@@ -303,38 +312,50 @@ def markdown(report: dict[str, Any]) -> str:
             f"| {row['read_dac_delay_ms']['p50']:.3f} | {row['output_latency_s'] * 1e3:.3f} | {target_ms:.3f} "
             f"| {'yes' if latency['p50'] <= target_ms else 'no'} |")
     startup = report["startup"]
-    lines += ["", f"## 4. Start-up to the first sample ({len(startup.get('runs', []))} runs, warm numba cache)", ""]
+    lines += ["", f"## 4. Start-up to the first sample ({len(startup.get('runs', []))} runs each, warm numba cache)",
+              ""]
     if "error" in startup:
         lines.append(f"error: {startup['error']}")
     else:
-        runs = startup["runs"]
-        what = ("`tpad-rt play` is not wired to audio:// yet (its interim version renders offline to sim://), "
-                "so this measures the API path: " if not startup["play_wired_to_audio"] else "")
+        runs, play_runs = startup["runs"], startup.get("play_runs", [])
+
+        def cell(rows: list[dict[str, float]], key: str) -> str:
+            return _band([r[key] for r in rows]) if rows and key in rows[0] else "-"
+
         lines += [
-            what + "spawn a Python process that imports `tpad_rt.engine`, builds a `Renderer` on "
-            "`audio://?rate=192000&block=64` with textures/grating.yaml, calls `start()` (warm-up call of the "
-            "callback, stream open, start) and waits for the first callback. Times from spawning the process "
-            "(CLOCK_MONOTONIC, shared by both processes): median (p10-p90) in seconds.",
+            "Times from spawning the process (CLOCK_MONOTONIC, shared by both processes): median (p10-p90) in "
+            "seconds. *tpad-rt play*: `tpad-rt play textures/grating.yaml --output audio://?rate=192000&block=64 "
+            "--duration 0.3` run through `tpad_rt.cli.main` (the console script's function) in the spawned "
+            "process, its first sample read from the Renderer's block records. *Renderer API*: the process "
+            "imports `tpad_rt.engine`, builds a `Renderer` on the same URL with the same texture, calls `start()` "
+            "(warm-up call of the callback, stream open, start). Both wait for the first callback; the first "
+            "sample at the DAC is that block's entry time plus its DAC delay."
+            + ("" if startup["play_wired_to_audio"] else " `tpad-rt play` did not render to audio:// in this "
+               "tree (the interim offline version): only the API path was measured."),
             "",
-            "| step | s from spawn |",
-            "| --- | ---: |",
-            f"| interpreter up (worker's first line) | {_band([r['process_begin_ns'] for r in runs])} |",
-            f"| `import tpad_rt.engine` done | {_band([r['imported_ns'] for r in runs])} |",
-            f"| `Renderer(...)` built (texture compiled) | {_band([r['built_ns'] for r in runs])} |",
-            f"| first callback entered | {_band([r['first_entry_ns'] for r in runs])} |",
-            f"| `start()` returned | {_band([r['started_ns'] for r in runs])} |",
-            f"| **first sample at the DAC** | **{_band([r['first_dac_ns'] for r in runs])}** |",
-            f"| baseline: `python -c \"import tpad_rt\"` (spawn to exit) | {_band(startup['import_tpad_rt_s'])} |",
+            "| step | tpad-rt play | Renderer API |",
+            "| --- | ---: | ---: |",
+            f"| interpreter up (worker's first line) | {cell(play_runs, 'process_begin_ns')} "
+            f"| {cell(runs, 'process_begin_ns')} |",
+            f"| imports done (`tpad_rt.cli` / `tpad_rt.engine`) | {cell(play_runs, 'imported_ns')} "
+            f"| {cell(runs, 'imported_ns')} |",
+            f"| `Renderer(...)` built (texture compiled) | - | {cell(runs, 'built_ns')} |",
+            f"| first callback entered | {cell(play_runs, 'first_entry_ns')} | {cell(runs, 'first_entry_ns')} |",
+            f"| `start()` returned | {cell(play_runs, 'started_ns')} | {cell(runs, 'started_ns')} |",
+            f"| **first sample at the DAC** | **{cell(play_runs, 'first_dac_ns')}** "
+            f"| **{cell(runs, 'first_dac_ns')}** |",
+            f"| baseline: `python -c \"import tpad_rt\"` (spawn to exit) | {_band(startup['import_tpad_rt_s'])} | |",
             f"| second baseline: `python -c \"import tpad_rt.engine\"` (spawn to exit: numba, the kernels "
-            f"from the cache) | {_band(startup['import_tpad_rt_engine_s'])} |",
+            f"from the cache, the interpreter's exit) | {_band(startup['import_tpad_rt_engine_s'])} | |",
             "",
-            f"Start-up minus baseline (medians): "
-            f"{np.median([r['first_dac_ns'] for r in runs]) - np.median(startup['import_tpad_rt_s']):.3f} s; "
-            "from `import tpad_rt.engine` done to the first sample at the DAC (building the Renderer, warming "
-            "the callback, opening and starting the stream): "
-            f"{_band([r['first_dac_ns'] - r['imported_ns'] for r in runs])} s. `import tpad_rt` is lazy; the rest "
-            "is importing numba and loading the cached kernels (the second baseline also includes the "
-            "interpreter's exit).",
+            "First sample minus the `import tpad_rt` baseline (medians): "
+            + (f"play {np.median([r['first_dac_ns'] for r in play_runs]) - np.median(startup['import_tpad_rt_s']):.3f}"
+               " s, " if play_runs else "")
+            + f"API {np.median([r['first_dac_ns'] for r in runs]) - np.median(startup['import_tpad_rt_s']):.3f} s. "
+            "From imports done to the first sample at the DAC: "
+            + (f"play {_band([r['first_dac_ns'] - r['imported_ns'] for r in play_runs])} s, " if play_runs else "")
+            + f"API {_band([r['first_dac_ns'] - r['imported_ns'] for r in runs])} s. `import tpad_rt` is lazy; "
+            "most of the start-up is importing numba and loading the cached kernels.",
         ]
     v = verdict
     lines += [

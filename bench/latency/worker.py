@@ -2,6 +2,7 @@
 
     python bench/latency/worker.py stream CALLBACK --block FRAMES --seconds S [--gil-threads N]
     python bench/latency/worker.py startup --block FRAMES
+    python bench/latency/worker.py play --block FRAMES
 
 Run by bench/latency/run.py with ``JACK_DEFAULT_SERVER`` naming a running dummy server
 (PortAudio sees it because it initialises in this process while the server runs).
@@ -30,7 +31,9 @@ the GIL can hang in deactivation; the server cleans up after a client that exits
 Renderer on ``audio://`` with the grating, ``start()``s it and waits for the first
 callback; reports CLOCK_MONOTONIC stamps (ns, the clock of the parent process too)
 of each step and of the first sample at the DAC (the first block's entry time plus
-its DAC delay).
+its DAC delay). ``play``: the same stamps for ``tpad-rt play textures/grating.yaml
+--output audio://?rate=192000&block=FRAMES --duration 0.3`` run through
+``tpad_rt.cli.main`` in this process.
 """
 
 from __future__ import annotations
@@ -137,8 +140,8 @@ def stream_native(callback: str, block: int, seconds: float, gil_threads: int) -
     if callback == "tpad":
         renderer = Renderer(output=f"audio://?rate={RATE_HZ}&block={block}", texture=GRATING)
         renderer.start()
-        table = renderer._table  # noqa: SLF001 - the engine exposes no public handle on its block records
-        clock = renderer._stream.time_s  # noqa: SLF001
+        table = renderer.callback_table
+        clock = renderer.stream_time_s
         counts = table.arrays.finger_count
 
         def push(x_mm: float) -> None:
@@ -266,7 +269,7 @@ def startup(block: int) -> dict:
     built_ns = monotonic_ns()
     renderer.start()
     started_ns = monotonic_ns()
-    table = renderer._table  # noqa: SLF001
+    table = renderer.callback_table
     deadline = time.monotonic() + 10
     while table.stats[cb.STAT_CALLBACKS] == 0 and time.monotonic() < deadline:
         time.sleep(0.0001)
@@ -277,9 +280,41 @@ def startup(block: int) -> dict:
             "first_dac_ns": int(first[cb.BLOCK_ENTRY_NS] + first[cb.BLOCK_DAC_DELAY_NS])}
 
 
+def startup_play(block: int) -> dict:
+    """``tpad-rt play textures/grating.yaml --output audio://...`` run through ``tpad_rt.cli.main`` (the
+    console script's function), its first sample read from the Renderer's block records: ``Renderer.start``
+    is wrapped to note the first block once it arrives (after the stream started: it moves nothing)."""
+    from time import monotonic_ns
+    begin_ns = monotonic_ns()
+    from tpad_rt import cli
+    from tpad_rt.engine import Renderer
+    from tpad_rt.kernel import callback as cb
+    imported_ns = monotonic_ns()
+    original = Renderer.start
+    noted: dict = {}
+
+    def start(self: Renderer) -> None:
+        original(self)
+        noted["started_ns"] = monotonic_ns()
+        table = self.callback_table
+        deadline = time.monotonic() + 10
+        while table.stats[cb.STAT_CALLBACKS] == 0 and time.monotonic() < deadline:
+            time.sleep(0.0001)
+        first = table.blocks[0].copy()
+        noted["first_entry_ns"] = int(first[cb.BLOCK_ENTRY_NS])
+        noted["first_dac_ns"] = int(first[cb.BLOCK_ENTRY_NS] + first[cb.BLOCK_DAC_DELAY_NS])
+
+    Renderer.start = start  # type: ignore[method-assign]
+    status = cli.main(["play", str(GRATING), "--output", f"audio://?rate={RATE_HZ}&block={block}",
+                       "--duration", "0.3"])
+    if status != 0 or "first_dac_ns" not in noted:
+        raise SystemExit(f"tpad-rt play exited with {status} before a first sample")
+    return {"process_begin_ns": begin_ns, "imported_ns": imported_ns, **noted}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("mode", choices=("stream", "startup"))
+    parser.add_argument("mode", choices=("stream", "startup", "play"))
     parser.add_argument("callback", nargs="?", choices=("silence", "tpad", "python"))
     parser.add_argument("--block", type=int, default=64)
     parser.add_argument("--seconds", type=float, default=5.0)
@@ -287,6 +322,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.mode == "startup":
         _result(startup(args.block))
+    elif args.mode == "play":
+        _result(startup_play(args.block))
     elif args.callback == "python":
         stream_python(args.block, args.seconds, args.gil_threads)
     else:
