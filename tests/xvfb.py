@@ -1,7 +1,7 @@
 """An Xvfb X server for tests (ARCHITECTURE.md section 5), started and stopped by PID.
 
 Import the fixtures into a test module: ``from xvfb import display, xvfb_server``.
-``xvfb_server`` (one per module) starts ``Xvfb :N -screen 0 1280x800x24 -nolisten tcp``
+``xvfb_server`` (one per module) starts ``Xvfb :N -screen 0 1280x800x24 -nolisten tcp -noreset``
 on a free display number and waits until it accepts connections; ``display`` sets
 ``DISPLAY`` to it for one test. Without Xvfb the tests skip locally and fail under
 ``TPAD_RT_REQUIRE_SYSTEM=1`` (see conftest.py).
@@ -10,6 +10,7 @@ on a free display number and waits until it accepts connections; ``display`` set
 from __future__ import annotations
 
 import gc
+import os
 import subprocess
 import time
 from collections.abc import Iterator
@@ -19,8 +20,10 @@ import pytest
 from conftest import require_program
 
 SCREEN_PX = (1280, 800)
-#: Display numbers tried, lowest first (high enough to miss a desktop's own).
-_CANDIDATES = range(90, 190)
+#: Display numbers tried (high enough to miss a desktop's own), from one that depends on the
+#: process: concurrent test runs rarely race for the same number (Xvfb's lock is not safe
+#: against two servers starting on one number at the same instant).
+_CANDIDATES = range(90, 490)
 #: Connection attempts per server, ``_RETRY_S`` (s) apart: Xvfb is up within a second.
 _ATTEMPTS, _RETRY_S = 400, 0.025
 
@@ -56,7 +59,10 @@ def _start(program: str, number: int) -> subprocess.Popen[bytes] | None:
     Raises RuntimeError when Xvfb exits for another reason or never accepts a connection.
     """
     width, height = SCREEN_PX
-    server = subprocess.Popen([program, f":{number}", "-screen", "0", f"{width}x{height}x24", "-nolisten", "tcp"],
+    # -noreset: by default an X server resets when its last client disconnects (between two
+    # tests), and a client connecting meanwhile is reset too.
+    server = subprocess.Popen([program, f":{number}", "-screen", "0", f"{width}x{height}x24", "-nolisten", "tcp",
+                               "-noreset"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     for _ in range(_ATTEMPTS):
         if server.poll() is not None:
@@ -86,7 +92,8 @@ def _stop(server: subprocess.Popen[bytes]) -> None:
 def xvfb_server() -> Iterator[str]:
     """The display name (``:N``) of an Xvfb server running for the test module."""
     program = require_program("Xvfb")
-    for number in _CANDIDATES:
+    first = os.getpid() % len(_CANDIDATES)
+    for number in (*_CANDIDATES[first:], *_CANDIDATES[:first]):
         if _in_use(number):
             continue
         server = _start(program, number)
