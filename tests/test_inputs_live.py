@@ -187,3 +187,16 @@ def test_the_feed_forwards_mouse_events_with_their_stamps(display: str) -> None:
             pass
     assert threading.active_count() == before
 
+
+
+def test_feeds_a_renderer_on_its_stream_clock() -> None:
+    from tpad_rt.engine import Renderer
+
+    renderer = Renderer(output="null://")
+    with renderer:
+        source = open_input("scripted://swipe?speed_mm_s=1000&from_mm=10&to_mm=120&rate_hz=200")
+        with LiveFeed(source, renderer.push_finger, renderer.lift, clock=renderer.now_s) as feed:
+            feed.join(120.0)  # a failure bound: the first block may wait for the kernels to compile
+        assert feed.done and not feed.is_alive()
+        finger_x_mm = renderer.telemetry()["x_mm"]
+    assert finger_x_mm.min() <= 15.0 and finger_x_mm.max() >= 110.0  # the renderer saw the whole swipe
