@@ -65,6 +65,9 @@ from tpad_rt.urls import parse_url
 WATCH_PERIOD_S = 0.02
 #: Telemetry rows kept for :meth:`Renderer.telemetry` between calls (the oldest go first).
 MAX_PENDING_ROWS = 2**18
+#: A paced (non-audio) output further behind real time than this (s) skips ahead instead of catching
+#: up in a burst, and counts an underflow.
+PACED_MAX_BEHIND_S = 0.1
 #: The stop waits at most this many times the ramp's duration (plus a second) for the drive to reach 0.
 STOP_TIMEOUT_FACTOR = 20
 
@@ -290,11 +293,15 @@ class Renderer:
         table = self._table
         assert table is not None
         block = np.zeros(self.block_frames, dtype=np.float32)
+        most_behind = max(1, round(PACED_MAX_BEHIND_S * self.rate_hz / self.block_frames))
         with output:
             started = time.monotonic()
             rendered = 0
             while not self._halt.is_set():
                 due = int((time.monotonic() - started) * self.rate_hz / self.block_frames) + 1
+                if due - rendered > most_behind:  # stalled (e.g. compiling): skip ahead, count an underflow
+                    table.stats[cb.STAT_UNDERFLOWS] += 1
+                    rendered = due - 1
                 for _ in range(due - rendered):
                     table.call(block)
                     row = table.arrays.telem[(table.arrays.telem_count[0] - 1) % len(table.arrays.telem)]
