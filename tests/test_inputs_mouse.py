@@ -10,6 +10,7 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 from conftest import require_program
@@ -226,3 +227,14 @@ def test_url_errors_show_the_expected_form(url: str, problem: str) -> None:
         open_input(url)
     assert problem in str(error.value)
     assert str(error.value).endswith("expected mouse://?rect=screen&plate_mm=device&force_n=0.5&button=left&hover=0")
+
+
+def test_render_refuses_a_live_input_in_one_line(display: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tpad_rt.cli import main
+
+    status = main(["render", "textures/grating.yaml", "--input", "mouse://", "--duration", "1",
+                   "--out", str(tmp_path / "x.npz")])
+    err = capsys.readouterr().err
+    assert status == 1 and not (tmp_path / "x.npz").exists()
+    assert err == ("tpad-rt render: input mouse://: follows a live finger, which cannot be rendered offline; "
+                   "use tpad-rt play, or a scripted:// or file:// input\n")

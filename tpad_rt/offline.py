@@ -4,8 +4,8 @@ Per block: push the input's finger samples up to the block's end time into the
 pipeline, render the block, hand the drive and the block's telemetry row to every
 output, keep the row (and the drive, if asked). After ``input_s`` seconds of input the
 pipeline is stopped and rendered for a tail long enough for its ramp to reach silence.
-Nothing here waits for a clock: ``tpad-rt render`` runs it as fast as it goes, the
-interim ``tpad-rt play`` paces it.
+Nothing here waits for a clock: ``tpad-rt render`` runs it as fast as it goes
+(``tpad-rt play`` uses the real-time :class:`tpad_rt.engine.Renderer` instead).
 
 API map
 -------

@@ -38,6 +38,16 @@ SLOT_RELEASE_TIMEOUT_S = 1.0
 _TIME_INFO = ctypes.c_double * 3
 
 
+def _prefault(array: np.ndarray) -> None:
+    """Write every page of ``array`` once, values unchanged.
+
+    NumPy's zeros are mapped lazily: without this the audio callback takes a
+    first-touch page fault every few kB of a ring (bench/latency/README.md: p99
+    compute time 7-10 us instead of 2-3 us until the 4 MiB drive ring has wrapped).
+    """
+    np.add(array, 0, out=array)
+
+
 class CallbackTable:
     """The pointer table over ``arrays`` (used in place) and ``texture`` in slot 0.
 
@@ -56,6 +66,9 @@ class CallbackTable:
         self.drive = np.zeros(drive_frames, dtype=np.float32)
         self.stats = np.zeros(cb.STAT_SIZE, dtype=np.int64)
         self.blocks = np.zeros((block_rows, cb.BLOCK_COLS), dtype=np.int64)
+        for written_by_callback in (self.scratch, self.drive, self.blocks, arrays.state, arrays.power_ring,
+                                    arrays.telem):
+            _prefault(written_by_callback)
         self.slot_t0_s = np.zeros(2)
         self._slots: list[tuple[np.ndarray, ...]] = [(), ()]
         self._flip_callbacks = -2  # the callback count when a slot was last flipped

@@ -8,7 +8,7 @@ friction, metadata); ``--out FILE.wav`` writes the drive as a 32-bit float WAV. 
 progress bar shows on a terminal; a summary follows.
 
 The session helpers here (:func:`add_session_arguments`, :func:`open_session`,
-:func:`summary_lines`) are shared with the interim ``tpad-rt play``.
+:func:`summary_lines`) are the offline session's; ``tpad-rt play`` reuses the arguments.
 """
 
 from __future__ import annotations
@@ -37,8 +37,6 @@ from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.recording import Recording, write_recording
 from tpad_rt.texture import CompiledTexture, load_compiled
 
-#: The default input of ``play`` (``render`` requires one).
-DEFAULT_INPUT = "scripted://swipe?speed_mm_s=100"
 DEFAULT_OUTPUT = "sim://"
 
 
@@ -118,6 +116,9 @@ def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_
     device = Device.from_file(args.device) if args.device else Device.default()
     texture = load_compiled(args.texture)
     source = stack.enter_context(open_input(args.input))
+    if source.live:
+        raise ConfigError(f"input {args.input}: follows a live finger, which cannot be rendered offline; "
+                          "use tpad-rt play, or a scripted:// or file:// input")
     endless = endless_ok and args.duration is None and source.duration_s is None
     input_s = math.inf if endless else input_span_s(source, args.duration)
     options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
