@@ -41,17 +41,15 @@ stores in program order: the Python side writes a whole idle slot, then
 
 from __future__ import annotations
 
-import hashlib
-from pathlib import Path
-
 import numba
 import numpy as np
 from llvmlite import ir
 from numba import types
-from numba.core import caching, cgutils
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 from tpad_rt.kernel import render
+from tpad_rt.kernel.cache_stamp import stamp_cache
 from tpad_rt.kernel.layout import CFG_TEXTURE_T0_S, FINGER_COLS, STATE_NEXT_INDEX, TEL_COLS, TEX_PROG_COLS
 from tpad_rt.kernel.render import render_block
 
@@ -122,35 +120,9 @@ _F8 = np.float64
 _F4 = np.float32
 _I8 = np.int64
 
-# numba keys a cfunc's disk cache on its own file, but render_block and everything it
-# inlines is compiled into these callbacks: stamp them with this file and every source
-# render.py stamps its own functions with (docs/kernel.md "inlining and cache stamps").
-_THIS_FILE = Path(__file__).resolve()
-
-
-def _sources_stamp() -> tuple[str, ...]:
-    """SHA-256 of this file, then of every source compiled into ``render_block``."""
-    return (hashlib.sha256(_THIS_FILE.read_bytes()).hexdigest(), *render._sources_stamp())
-
-
-def _stamped_locator(base: type) -> type:
-    """numba cache locator ``base``, for this file only, stamped with :func:`_sources_stamp`."""
-
-    class Locator(base):  # type: ignore[valid-type, misc]
-        @classmethod
-        def from_function(cls, py_func, py_file):  # type: ignore[no-untyped-def]
-            return super().from_function(py_func, py_file) if Path(py_file).resolve() == _THIS_FILE else None
-
-        def get_source_stamp(self) -> tuple[str, ...]:
-            return _sources_stamp()
-
-    return Locator
-
-
-caching.CacheImpl._locator_classes[:0] = [
-    _stamped_locator(base)
-    for base in (caching.UserProvidedCacheLocator, caching.InTreeCacheLocator, caching.UserWideCacheLocator)
-]
+# render_block and everything it inlines is compiled into these callbacks: their disk
+# cache is stamped with this file and every source render.py stamps its own with.
+stamp_cache(__file__, *render.COMPILED_SOURCES)
 
 
 @intrinsic

@@ -34,15 +34,13 @@ then summed from them in a fixed order, whatever blocks the step was rendered in
 
 from __future__ import annotations
 
-import hashlib
 import math
-from pathlib import Path
 
 import numba
 import numpy as np
-from numba.core import caching
 
 from tpad_rt.kernel import layout, texture_eval
+from tpad_rt.kernel.cache_stamp import stamp_cache
 from tpad_rt.kernel.layout import (
     CFG_CARRIER_HZ,
     CFG_CONTROL_INTERVAL,
@@ -149,37 +147,9 @@ _RADIANS_PER_UNIT = _TWO_PI * 2.0**-PHASE_BITS
 _COARSE_COS = np.cos(_TWO_PI * np.arange(1 << _COARSE_BITS) / (1 << _COARSE_BITS))
 _COARSE_SIN = np.sin(_TWO_PI * np.arange(1 << _COARSE_BITS) / (1 << _COARSE_BITS))
 
-# numba keys a function's disk cache on its own source file only, but render_block has
-# the texture evaluation, the layout constants and the friction model compiled into it:
-# editing one of those would leave a stale render_block in the cache. This module's
-# functions are cached under a stamp of every one of those files instead.
-_COMPILED_SOURCES = tuple(Path(module.__file__).resolve() for module in (layout, texture_eval, friction))
-_THIS_FILE = Path(__file__).resolve()
-
-
-def _sources_stamp() -> tuple[str, ...]:
-    """SHA-256 of this file and of every other source compiled into the kernel."""
-    return tuple(hashlib.sha256(path.read_bytes()).hexdigest() for path in (_THIS_FILE, *_COMPILED_SOURCES))
-
-
-def _watching_sources(base: type) -> type:
-    """numba cache locator ``base``, for this file only, stamped with :func:`_sources_stamp`."""
-
-    class Locator(base):  # type: ignore[valid-type, misc]
-        @classmethod
-        def from_function(cls, py_func, py_file):  # type: ignore[no-untyped-def]
-            return super().from_function(py_func, py_file) if Path(py_file).resolve() == _THIS_FILE else None
-
-        def get_source_stamp(self) -> tuple[str, ...]:
-            return _sources_stamp()
-
-    return Locator
-
-
-caching.CacheImpl._locator_classes[:0] = [
-    _watching_sources(base)
-    for base in (caching.UserProvidedCacheLocator, caching.InTreeCacheLocator, caching.UserWideCacheLocator)
-]
+# render_block has the texture evaluation, the layout constants and the friction
+# model compiled into it: its disk cache is stamped with all of those files.
+COMPILED_SOURCES = stamp_cache(__file__, layout.__file__, texture_eval.__file__, friction.__file__)
 
 # error_model="numpy": a division by zero gives inf/nan instead of raising, so no
 # exception checks are compiled in (nothing here may raise inside an audio callback).
