@@ -1,0 +1,87 @@
+"""A JACK server on the dummy backend, started and stopped by PID.
+
+The real-time stand-in for a sound card that the tests and the latency benchmark use
+(ARCHITECTURE.md section 5 says why each flag): ``dummy_server(rate_hz,
+period_frames)`` starts ``jackd -n NAME -p 16 -d dummy -r RATE -p PERIOD``, waits for
+it with ``jack_wait -s NAME -w`` and yields NAME (point clients at it with
+``JACK_DEFAULT_SERVER=NAME``); on exit it sends SIGTERM to the PID and waits.
+
+NAME is the first of ``PREFIX-0`` .. ``PREFIX-3`` no running server has: names are
+reused, not random, because JACK keeps a small table of servers in shared memory and
+reclaims the entry of a server that died without cleaning up (a killed run) only when
+a new server takes the same name. jackd logs to a file, never to a pipe nobody reads
+(a full pipe would block it).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+import signal
+import subprocess
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+from tpad_rt.errors import BackendError
+
+#: Seconds to wait for the server to come up, and for a process to exit after SIGTERM.
+START_TIMEOUT_S = 10
+EXIT_TIMEOUT_S = 10
+#: Server names tried per prefix (JACK's own table holds few servers).
+MAX_SERVERS = 4
+
+
+def program(name: str) -> str:
+    """The path of JACK program ``name``; BackendError naming the Debian package if missing."""
+    path = shutil.which(name)
+    if path is None:
+        raise BackendError(f"program '{name}' not found (Debian: apt-get install jackd2)")
+    return path
+
+
+def free_server_name(jack_wait: str, prefix: str) -> str:
+    """The first of ``{prefix}-0`` .. ``{prefix}-{MAX_SERVERS - 1}`` no running server has."""
+    for index in range(MAX_SERVERS):
+        name = f"{prefix}-{index}"
+        probe = subprocess.run([jack_wait, "-s", name, "-c"], capture_output=True, text=True, timeout=10)
+        if "not running" in probe.stdout:
+            return name
+    raise BackendError(f"{MAX_SERVERS} JACK servers named {prefix}-N already run")
+
+
+def stop_process(process: subprocess.Popen) -> None:
+    """SIGTERM ``process`` (by PID) and wait; SIGKILL if it does not exit within EXIT_TIMEOUT_S."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGTERM)
+    try:
+        process.wait(EXIT_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+
+
+@contextlib.contextmanager
+def dummy_server(rate_hz: int = 192000, period_frames: int = 64, *, prefix: str = "tpadrt",
+                 log: Path | None = None) -> Iterator[str]:
+    """Run a dummy JACK server at ``rate_hz`` (Hz) with ``period_frames`` periods; yields its name.
+
+    ``log``: where jackd's output goes (default: a temporary file). Raises BackendError
+    when jackd or jack_wait is missing or the server does not come up.
+    """
+    jackd, jack_wait = program("jackd"), program("jack_wait")
+    name = free_server_name(jack_wait, prefix)
+    sink = open(log, "w+b") if log is not None else tempfile.TemporaryFile()  # noqa: SIM115
+    process = subprocess.Popen(
+        [jackd, "-n", name, "-p", "16", "-d", "dummy", "-r", str(rate_hz), "-p", str(period_frames)],
+        stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        waited = subprocess.run([jack_wait, "-s", name, "-w", "-t", str(START_TIMEOUT_S)],
+                                capture_output=True, text=True, timeout=START_TIMEOUT_S + 5)
+        if waited.returncode != 0 or process.poll() is not None:
+            sink.seek(0)
+            raise BackendError(f"jackd {name} did not start: {sink.read().decode(errors='replace')[-2000:]}")
+        yield name
+    finally:
+        stop_process(process)
+        sink.close()
