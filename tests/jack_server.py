@@ -8,30 +8,54 @@ at the server (``JACK_DEFAULT_SERVER``), re-initialises PortAudio so the JACK ho
 appears; on exit it terminates PortAudio (closing any stream left: PortAudio's JACK
 host API asserts if the server is gone first) before the server stops, and
 initialises PortAudio again afterwards.
+
+``server_process(rate_hz, period_frames)`` runs the same server for tests that kill
+it under a client of their own subprocess: it yields the :class:`RunningServer`
+(name and process) and leaves this process's PortAudio alone; ``wait_until_playing``
+tells when a client's stream has started on it.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import subprocess
+import time
 from collections.abc import Iterator
 
 from conftest import require_program, require_system
-from tpad_rt.jackd import dummy_server
+from tpad_rt.jackd import RunningServer, dummy_server
 from tpad_rt.outputs import audio
 
-@contextlib.contextmanager
-def jack_server(rate_hz: int = 192000, period_frames: int = 64) -> Iterator[str]:
-    """Run a dummy JACK server; yields its name (also in ``JACK_DEFAULT_SERVER``)."""
+
+def _require_jack() -> None:
+    """Skip (fail under TPAD_RT_REQUIRE_SYSTEM=1) without PortAudio, jackd or jack_wait."""
     try:
-        import sounddevice
+        import sounddevice  # noqa: F401
     except OSError:
         require_system(False, "PortAudio (libportaudio2)")
     require_program("jackd")
     require_program("jack_wait")
+
+
+@contextlib.contextmanager
+def server_process(rate_hz: int = 192000, period_frames: int = 64) -> Iterator[RunningServer]:
+    """Run a dummy JACK server without touching this process's PortAudio; yields it (name, process)."""
+    _require_jack()
+    with dummy_server(rate_hz, period_frames) as server:
+        yield server
+
+
+@contextlib.contextmanager
+def jack_server(rate_hz: int = 192000, period_frames: int = 64) -> Iterator[str]:
+    """Run a dummy JACK server; yields its name (also in ``JACK_DEFAULT_SERVER``)."""
+    _require_jack()
+    import sounddevice
+
     previous = os.environ.get("JACK_DEFAULT_SERVER")
     try:
-        with dummy_server(rate_hz, period_frames) as name:
+        with dummy_server(rate_hz, period_frames) as server:
+            name = server.name
             os.environ["JACK_DEFAULT_SERVER"] = name
             try:
                 audio.rescan_devices()
@@ -45,3 +69,17 @@ def jack_server(rate_hz: int = 192000, period_frames: int = 64) -> Iterator[str]
         else:
             os.environ["JACK_DEFAULT_SERVER"] = previous
         sounddevice._initialize()
+
+
+def wait_until_playing(server_name: str, timeout_s: float = 120) -> bool:
+    """Poll ``jack_lsp -c`` until a PortAudio output port is connected on ``server_name`` (a started
+    stream: PortAudio connects its ports in Pa_StartStream); False if that does not happen in ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        listing = subprocess.run(["jack_lsp", "-s", server_name, "-c"], capture_output=True, text=True).stdout
+        lines = listing.splitlines()
+        for port, following in zip(lines, lines[1:]):
+            if port.startswith("PortAudio:out_") and following.startswith((" ", "\t")):
+                return True
+        time.sleep(0.05)
+    return False

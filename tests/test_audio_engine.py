@@ -9,6 +9,7 @@ against the stream's own clock, underflows against an empty-callback baseline
 from __future__ import annotations
 
 import gc
+import os
 import subprocess
 import sys
 import threading
@@ -18,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from jack_server import jack_server
+from jack_server import jack_server, server_process, wait_until_playing
 
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
@@ -321,3 +322,44 @@ def test_a_stream_that_stops_under_the_renderer_is_reported(jack: str) -> None:
         renderer.join(timeout_s=10)
     renderer.stop()  # reported once; closes the stream
     assert not renderer.running
+
+
+#: A Renderer on audio:// whose server the test kills: join re-raises, stop returns, audio is refused after.
+LOST_SERVER_APP = f"""
+import sys
+from tpad_rt.engine import Renderer
+from tpad_rt.errors import BackendError
+renderer = Renderer(output="audio://", texture={str(GRATING)!r})
+renderer.start()
+try:
+    renderer.join(timeout_s=120)
+except BackendError as error:
+    print("join:", error, flush=True)
+renderer.stop()
+print("stopped", renderer.running, flush=True)
+try:
+    Renderer(output="audio://").start()
+except BackendError as error:
+    print("again:", error, flush=True)
+"""
+
+
+def test_a_dead_server_is_reported_and_the_app_stops_and_exits_cleanly() -> None:
+    with server_process(RATE_HZ, BLOCK) as server:
+        app = subprocess.Popen([sys.executable, "-c", LOST_SERVER_APP], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True,
+                               env={**os.environ, "JACK_DEFAULT_SERVER": server.name})
+        try:
+            assert wait_until_playing(server.name), "the app's stream never started"
+            server.process.kill()
+            server.process.wait()
+            out, err = app.communicate(timeout=120)
+        finally:
+            if app.poll() is None:
+                app.kill()
+    assert app.returncode == 0, err  # no SIGABRT from PortAudio's clean-up at exit, no hang in stop
+    lines = out.splitlines()
+    assert lines[0].startswith("join: audio: the stream on device 0 'system'")
+    assert lines[0].endswith("stopped (device lost or server gone)")
+    assert lines[1] == "stopped False"
+    assert lines[2].startswith("again: audio: an output stream was lost earlier in this process")

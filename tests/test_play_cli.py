@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from jack_server import jack_server
+from jack_server import jack_server, server_process, wait_until_playing
 from xvfb import display, xvfb_server  # noqa: F401 - fixtures
 
 from tpad_rt.cli.play import AUTO_SWIPE
@@ -126,3 +126,24 @@ def test_on_a_terminal_it_shows_the_panel_and_ctrl_c_stops_with_a_ramp(tmp_path:
         assert label in text
     assert "(stopped by Ctrl-C)" in text and "Traceback" not in text
     assert np.all(read_recording(record).drive[-64:] == 0)
+
+
+@pytest.mark.system
+def test_a_jack_server_dying_mid_play_ends_in_one_line_and_status_1() -> None:
+    with server_process(192000, 64) as server:
+        env = {**{k: v for k, v in os.environ.items() if k != "DISPLAY"}, "JACK_DEFAULT_SERVER": server.name}
+        child = subprocess.Popen([sys.executable, "-m", "tpad_rt", "play", "textures/grating.yaml", "--input",
+                                  "scripted://swipe?speed_mm_s=1", "--duration", "600"], cwd=REPO, env=env,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            assert wait_until_playing(server.name), "play's stream never started"
+            server.process.kill()
+            server.process.wait()
+            out, err = child.communicate(timeout=120)
+        finally:
+            if child.poll() is None:
+                child.kill()
+    assert child.returncode == 1, (out, err)
+    assert out.startswith("output audio://") and "JACK" in out.splitlines()[0]
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith("tpad-rt play: audio: the stream on device ") and "(device lost or server gone)" in err

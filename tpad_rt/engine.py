@@ -242,12 +242,17 @@ class Renderer:
         self.check()
 
     def _close_stream(self) -> None:
+        """Stop and close the audio stream; abandon it instead if its device or server went away."""
         stream, self._stream = self._stream, None
-        if stream is not None:
-            try:
-                stream.stop()
-            finally:
-                stream.close()
+        if stream is None:
+            return
+        if stream.lost():
+            stream.abandon()
+            return
+        try:
+            stream.stop()
+        finally:
+            stream.close()
 
     def join(self, timeout_s: float | None = None) -> None:
         """Wait (at most ``timeout_s`` s; None: no limit) until another thread stops the renderer or an

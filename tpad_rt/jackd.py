@@ -3,8 +3,14 @@
 The real-time stand-in for a sound card that the tests and the latency benchmark use
 (ARCHITECTURE.md section 5 says why each flag): ``dummy_server(rate_hz,
 period_frames)`` starts ``jackd -n NAME -p 16 -d dummy -r RATE -p PERIOD``, waits for
-it with ``jack_wait -s NAME -w`` and yields NAME (point clients at it with
-``JACK_DEFAULT_SERVER=NAME``); on exit it sends SIGTERM to the PID and waits.
+it with ``jack_wait -s NAME -w`` and yields a :class:`RunningServer` (point clients at
+it with ``JACK_DEFAULT_SERVER=NAME``); on exit it sends SIGTERM to the PID and waits.
+
+``sync=True`` adds ``-S``: JACK's synchronous mode, in which the server waits for its
+clients within the cycle and declares one period of playback latency on its output
+ports. In the default asynchronous mode jackd2 declares (and buffers) two periods, so
+that a late client costs a period of latency instead of an xrun: at 64-frame periods
+that is 0.333 ms more between a callback and the DAC (bench/latency measures both).
 
 NAME is the first of ``PREFIX-0`` .. ``PREFIX-3`` no running server has: names are
 reused, not random, because JACK keeps a small table of servers in shared memory and
@@ -21,6 +27,7 @@ import signal
 import subprocess
 import tempfile
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 from tpad_rt.errors import BackendError
@@ -61,19 +68,29 @@ def stop_process(process: subprocess.Popen) -> None:
         process.wait()
 
 
+@dataclass(frozen=True)
+class RunningServer:
+    """A running jackd: its server ``name`` (for ``JACK_DEFAULT_SERVER``) and its ``process``."""
+
+    name: str
+    process: subprocess.Popen
+
+
 @contextlib.contextmanager
-def dummy_server(rate_hz: int = 192000, period_frames: int = 64, *, prefix: str = "tpadrt",
-                 log: Path | None = None) -> Iterator[str]:
-    """Run a dummy JACK server at ``rate_hz`` (Hz) with ``period_frames`` periods; yields its name.
+def dummy_server(rate_hz: int = 192000, period_frames: int = 64, *, sync: bool = False, prefix: str = "tpadrt",
+                 log: Path | None = None) -> Iterator[RunningServer]:
+    """Run a dummy JACK server at ``rate_hz`` (Hz) with ``period_frames`` periods, synchronous mode if ``sync``.
 
     ``log``: where jackd's output goes (default: a temporary file). Raises BackendError
-    when jackd or jack_wait is missing or the server does not come up.
+    when jackd or jack_wait is missing or the server does not come up. Stopping a
+    server the caller already stopped is fine.
     """
     jackd, jack_wait = program("jackd"), program("jack_wait")
     name = free_server_name(jack_wait, prefix)
     sink = open(log, "w+b") if log is not None else tempfile.TemporaryFile()  # noqa: SIM115
+    mode = ["-S"] if sync else []
     process = subprocess.Popen(
-        [jackd, "-n", name, "-p", "16", "-d", "dummy", "-r", str(rate_hz), "-p", str(period_frames)],
+        [jackd, "-n", name, *mode, "-p", "16", "-d", "dummy", "-r", str(rate_hz), "-p", str(period_frames)],
         stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
     try:
         waited = subprocess.run([jack_wait, "-s", name, "-w", "-t", str(START_TIMEOUT_S)],
@@ -81,7 +98,7 @@ def dummy_server(rate_hz: int = 192000, period_frames: int = 64, *, prefix: str 
         if waited.returncode != 0 or process.poll() is not None:
             sink.seek(0)
             raise BackendError(f"jackd {name} did not start: {sink.read().decode(errors='replace')[-2000:]}")
-        yield name
+        yield RunningServer(name, process)
     finally:
         stop_process(process)
         sink.close()

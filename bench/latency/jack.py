@@ -1,7 +1,8 @@
 """A JACK dummy server and CPU hogs for the latency benchmark, started and stopped by PID.
 
 ``jack_server(rate_hz, period_frames)`` runs :func:`tpad_rt.jackd.dummy_server` under
-the names ``tpadrt-bench-0..3`` and yields an environment for child processes
+the names ``tpadrt-bench-0..3``, in JACK's synchronous mode (``-S``) unless
+``sync=False``, and yields an environment for child processes
 (``JACK_DEFAULT_SERVER=NAME``). This process never loads PortAudio: every measured
 configuration runs in a fresh child process, which initialises PortAudio while the
 server runs. ``cpu_hogs(n)`` runs ``n`` processes spinning a pure-Python loop, stopped
@@ -22,11 +23,13 @@ from tpad_rt.jackd import dummy_server, stop_process
 
 
 @contextlib.contextmanager
-def jack_server(rate_hz: int, period_frames: int, log: Path | None = None) -> Iterator[dict[str, str]]:
-    """Run a dummy JACK server; yields the environment its clients need. ``log``: jackd's output."""
+def jack_server(rate_hz: int, period_frames: int, log: Path | None = None, *,
+                sync: bool = True) -> Iterator[dict[str, str]]:
+    """Run a dummy JACK server (synchronous mode unless ``sync`` is False); yields the environment its
+    clients need. ``log``: jackd's output."""
     try:
-        with dummy_server(rate_hz, period_frames, prefix="tpadrt-bench", log=log) as name:
-            yield {**os.environ, "JACK_DEFAULT_SERVER": name}
+        with dummy_server(rate_hz, period_frames, sync=sync, prefix="tpadrt-bench", log=log) as server:
+            yield {**os.environ, "JACK_DEFAULT_SERVER": server.name}
     except BackendError as err:
         raise SystemExit(f"bench/latency: {err}") from None
 

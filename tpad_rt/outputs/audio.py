@@ -18,11 +18,20 @@ rescan_devices()
 output_devices() -> list[AudioDevice], find_output_device(spec) -> AudioDevice
 accepted_rates(device, channels, rates=CANDIDATE_RATES) -> list[int]
 AudioStream(device, rate_hz, block_frames, channels, callback_address, user_data_address)
-    ``start()``, ``stop()``, ``close()``, ``active()``, ``time_s()``, ``output_latency_s``
+    ``start()``, ``stop()``, ``close()``, ``active()``, ``lost()``, ``abandon()``, ``time_s()``,
+    ``output_latency_s``
+
+A lost stream (its device or JACK server went away) cannot be stopped or closed:
+PortAudio's JACK host API waits 10 minutes for the dead server's process thread to
+acknowledge a stop, and asserts (SIGABRT) when it unregisters the ports of a dead
+server, which Pa_CloseStream and Pa_Terminate do. ``abandon()`` leaks such a stream
+and keeps sounddevice from terminating PortAudio at exit; audio then stays unusable
+in this process (BackendError saying so).
 """
 
 from __future__ import annotations
 
+import atexit
 from dataclasses import dataclass
 from typing import Any
 
@@ -41,6 +50,9 @@ _PA_DITHER_OFF = 0x00000002
 _PA_NO_ERROR = 0
 _PA_FORMAT_IS_SUPPORTED = 0
 _PA_UNANTICIPATED_HOST_ERROR = -9999
+
+#: Streams given up by AudioStream.abandon (kept referenced: PortAudio still holds them).
+_ABANDONED: list[Any] = []
 
 
 @dataclass(frozen=True)
@@ -78,13 +90,22 @@ def portaudio() -> tuple[Any, Any]:
     return sounddevice._ffi, sounddevice._lib
 
 
+def _require_no_lost_stream() -> None:
+    """BackendError when a stream was abandoned in this process (PortAudio cannot be used again)."""
+    if _ABANDONED:
+        raise BackendError("audio: an output stream was lost earlier in this process (device or server gone) "
+                           "and PortAudio cannot be re-initialised around it; restart the program")
+
+
 def rescan_devices() -> None:
     """Re-initialise PortAudio so it sees host APIs that started since (e.g. a JACK server).
 
-    Pa_Terminate closes every stream still open in this process.
+    Pa_Terminate closes every stream still open in this process. Raises BackendError
+    after a stream was abandoned (module docstring).
     """
     import sounddevice
 
+    _require_no_lost_stream()
     portaudio()
     sounddevice._terminate()
     sounddevice._initialize()
@@ -119,7 +140,8 @@ class AudioDevice:
 
 
 def output_devices() -> list[AudioDevice]:
-    """Every PortAudio device with output channels."""
+    """Every PortAudio device with output channels; BackendError after a stream was abandoned."""
+    _require_no_lost_stream()
     ffi, lib = portaudio()
     devices = []
     for index in range(_check(lib.Pa_GetDeviceCount(), "cannot count the devices")):
@@ -192,6 +214,7 @@ class AudioStream:
 
     def __init__(self, device: AudioDevice, rate_hz: int, block_frames: int, channels: int,
                  callback_address: int, user_data_address: int):
+        _require_no_lost_stream()
         ffi, lib = portaudio()
         self.device = device
         self.rate_hz = rate_hz
@@ -227,6 +250,30 @@ class AudioStream:
     def active(self) -> bool:
         """True while the stream runs (False once it stopped, or the device went away); BackendError on error."""
         return self._call("Pa_IsStreamActive", "cannot poll the stream") == 1
+
+    def lost(self) -> bool:
+        """True when the stream ended by itself: started, never stopped, yet no longer active.
+
+        The callbacks tpad-rt opens streams with always continue, so this is a device
+        or server that went away. False for a closed stream.
+        """
+        if self._stream is None:
+            return False
+        return not self.active() and self._call("Pa_IsStreamStopped", "cannot poll the stream") == 0
+
+    def abandon(self) -> None:
+        """Let go of a lost stream without stopping or closing it (module docstring says why).
+
+        Keeps sounddevice's exit handler from calling Pa_Terminate, which would close it;
+        afterwards opening or listing devices raises BackendError in this process.
+        """
+        if self._stream is None:
+            return
+        import sounddevice
+
+        _ABANDONED.append(self._stream)
+        self._stream = None
+        atexit.unregister(sounddevice._exit_handler)
 
     def time_s(self) -> float:
         """The stream's clock (s), the clock of the callback's time info."""
