@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import tpad_rt
 from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.recording import read_recording
@@ -112,3 +113,13 @@ def test_output_that_cannot_open_fails_start(tmp_path: Path) -> None:
 def test_record_needs_npz() -> None:
     with pytest.raises(ConfigError, match="must end in .npz"):
         Renderer(output="null://").record("out.wav")
+
+
+def test_the_package_offers_the_renderer_and_imports_it_only_when_asked() -> None:
+    code = ("import sys, tpad_rt; assert 'tpad_rt.engine' not in sys.modules; "
+            "from tpad_rt import Renderer; import tpad_rt.engine; assert Renderer is tpad_rt.engine.Renderer; "
+            "print('ok')")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert done.stdout == "ok\n", done.stderr
+    with pytest.raises(AttributeError, match="has no attribute 'Renderr'"):
+        tpad_rt.Renderr  # noqa: B018

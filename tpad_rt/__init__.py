@@ -11,6 +11,10 @@ Device model (``tpad_rt.device``)
     Device.from_file(path) / Device.default(): calibration, circuit and limits
 Textures (``tpad_rt.texture``)
     load_compiled(path) / compile_texture(model) -> CompiledTexture (.evaluate(x, y, ...))
+Real time (``tpad_rt.Renderer``, from ``tpad_rt.engine``; imported on first use)
+    Renderer(device, output="audio://", texture=...): a context manager; start, stop
+    (ramped), set_texture, push_finger, lift, join, check, stats, telemetry, record,
+    recent_fingers, now_s
 Rendering (``tpad_rt.pipeline``)
     RenderOptions, Pipeline(device, texture, fs_hz, options): push_finger, lift,
     set_texture, start, stop, render(block), drain_telemetry
@@ -26,8 +30,19 @@ Physics (``tpad_rt.physics``, SI units, NumPy-vectorised, numba-callable)
     plate.amplification_number, plate.power_ratio
 """
 
+from typing import Any
+
 from tpad_rt.errors import BackendError, ConfigError, TpadError
 
 __version__ = "0.1.0"
 
-__all__ = ["BackendError", "ConfigError", "TpadError", "__version__"]
+__all__ = ["BackendError", "ConfigError", "Renderer", "TpadError", "__version__"]
+
+
+def __getattr__(name: str) -> Any:
+    """``tpad_rt.Renderer``, imported on first use (numba and the kernels load then, not at ``import tpad_rt``)."""
+    if name == "Renderer":
+        from tpad_rt.engine import Renderer
+
+        return Renderer
+    raise AttributeError(f"module 'tpad_rt' has no attribute '{name}'")
