@@ -12,7 +12,8 @@ initialises PortAudio again afterwards.
 ``server_process(rate_hz, period_frames)`` runs the same server for tests that kill
 it under a client of their own subprocess: it yields the :class:`RunningServer`
 (name and process) and leaves this process's PortAudio alone; ``wait_until_playing``
-tells when a client's stream has started on it.
+tells when a client's stream has started on it; ``kill_server_under(command)`` runs a
+client on such a server and kills the server under it.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import os
 import subprocess
 import time
 from collections.abc import Iterator
+from typing import Any
 
 from conftest import require_program, require_system
 from tpad_rt.jackd import RunningServer, dummy_server
@@ -69,6 +71,24 @@ def jack_server(rate_hz: int = 192000, period_frames: int = 64) -> Iterator[str]
         else:
             os.environ["JACK_DEFAULT_SERVER"] = previous
         sounddevice._initialize()
+
+
+def kill_server_under(command: list[str], **popen: Any) -> subprocess.CompletedProcess[str]:
+    """Run ``command`` (a client of a dummy server of its own), SIGKILL the server once the client's stream
+    plays, and return how the client ended (its output as text; it may take 120 s to end)."""
+    with server_process() as server:
+        env = {**popen.pop("env", os.environ), "JACK_DEFAULT_SERVER": server.name}
+        client = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                                  **popen)
+        try:
+            assert wait_until_playing(server.name), "the client's stream never started"
+            server.process.kill()
+            server.process.wait()
+            out, err = client.communicate(timeout=120)
+        finally:
+            if client.poll() is None:
+                client.kill()
+    return subprocess.CompletedProcess(command, client.returncode, out, err)
 
 
 def wait_until_playing(server_name: str, timeout_s: float = 120) -> bool:

@@ -9,7 +9,6 @@ against the stream's own clock, underflows against an empty-callback baseline
 from __future__ import annotations
 
 import gc
-import os
 import subprocess
 import sys
 import threading
@@ -19,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from jack_server import jack_server, server_process, wait_until_playing
+from jack_server import jack_server, kill_server_under
 
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
@@ -345,20 +344,9 @@ except BackendError as error:
 
 
 def test_a_dead_server_is_reported_and_the_app_stops_and_exits_cleanly() -> None:
-    with server_process(RATE_HZ, BLOCK) as server:
-        app = subprocess.Popen([sys.executable, "-c", LOST_SERVER_APP], stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True,
-                               env={**os.environ, "JACK_DEFAULT_SERVER": server.name})
-        try:
-            assert wait_until_playing(server.name), "the app's stream never started"
-            server.process.kill()
-            server.process.wait()
-            out, err = app.communicate(timeout=120)
-        finally:
-            if app.poll() is None:
-                app.kill()
-    assert app.returncode == 0, err  # no SIGABRT from PortAudio's clean-up at exit, no hang in stop
-    lines = out.splitlines()
+    app = kill_server_under([sys.executable, "-c", LOST_SERVER_APP])
+    assert app.returncode == 0, app.stderr  # no SIGABRT from PortAudio's clean-up at exit, no hang in stop
+    lines = app.stdout.splitlines()
     assert lines[0].startswith("join: audio: the stream on device 0 'system'")
     assert lines[0].endswith("stopped (device lost or server gone)")
     assert lines[1] == "stopped False"

@@ -49,10 +49,11 @@ import numpy as np
 from tpad_rt import __version__
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, TpadError
+from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel.layout import (
-    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_X_MM, FINGER_Y_MM, FLAG_POWER, FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE,
-    STATE_NEXT_INDEX, STATE_RAMP_START, TEL_NAMES, TEX_PROG_COLS,
+    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, FLAG_POWER,
+    FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEL_NAMES, TEX_PROG_COLS,
 )
 from tpad_rt.outputs import Output, audio, open_output, output_forms
 from tpad_rt.pipeline import Pipeline, RenderOptions
@@ -369,6 +370,31 @@ class Renderer:
             self._table.set_texture(compiled, self.now_s(), running=True)
         else:
             self._pipeline.set_texture(compiled)
+
+    @property
+    def texture(self) -> CompiledTexture:
+        """The texture rendered (the last one set)."""
+        return self._texture
+
+    def texture_t0_s(self) -> float:
+        """The stream time (s) at which the rendered texture started (its time origin; 0.0 before a run)."""
+        table = self._last_table
+        return float(table.slot_t0_s[table.active_slot]) if table is not None else 0.0
+
+    def recent_fingers(self) -> np.ndarray:
+        """The newest finger samples pushed (at most ``finger_ring - 2``), oldest first, as FINGER_DTYPE.
+
+        Read without a lock while a producer may push: the ring's oldest row is left out.
+        """
+        arrays = self._pipeline.arrays
+        count = int(arrays.finger_count[0])
+        rows = arrays.finger[np.arange(max(0, count - len(arrays.finger) + 2), count) % len(arrays.finger)]
+        samples = np.zeros(len(rows), dtype=FINGER_DTYPE)
+        for name, column in (("t_s", FINGER_T_S), ("x_mm", FINGER_X_MM), ("y_mm", FINGER_Y_MM),
+                             ("force_n", FINGER_FORCE_N)):
+            samples[name] = rows[:, column]
+        samples["down"] = rows[:, FINGER_DOWN] > 0.5
+        return samples
 
     def now_s(self) -> float:
         """The stream time (s) of the sample at the DAC now (0.0 before the stream runs)."""

@@ -33,6 +33,7 @@ import numpy.typing as npt
 
 from tpad_rt.errors import ConfigError
 from tpad_rt.inputs import Input
+from tpad_rt.felt import texture_at_finger
 from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel.layout import TEL_NAMES
 from tpad_rt.outputs import Output
@@ -168,30 +169,9 @@ class OfflineRender:
 def texture_under_finger(result: RenderResult, texture: CompiledTexture) -> tuple[np.ndarray, np.ndarray]:
     """The texture's relative friction where the finger was at each block's middle, and where that is known.
 
-    The finger's position is interpolated linearly between the input's samples around
-    the block's middle time; its direction of motion is that segment's. ``valid`` is
+    :func:`tpad_rt.felt.texture_at_finger` at the blocks' middle times: ``valid`` is
     False where the finger was lifted or the render ran past the input's last sample.
     This is what the finger should have felt, free of the kernel's own extrapolation.
     """
     middle_s = result.blocks["t"] + 0.5 * result.block_frames / result.fs_hz
-    finger = result.finger
-    after = np.searchsorted(finger["t_s"], middle_s, side="right")
-    valid = (after > 0) & (after < len(finger))
-    before = np.clip(after - 1, 0, max(len(finger) - 1, 0))
-    after = np.clip(after, 0, max(len(finger) - 1, 0))
-    if len(finger):
-        valid &= finger["down"][before] & finger["down"][after]
-    mu = np.ones(len(middle_s))
-    if not valid.any():
-        return mu, valid
-    b, a = before[valid], after[valid]
-    span_s = finger["t_s"][a] - finger["t_s"][b]
-    share = (middle_s[valid] - finger["t_s"][b]) / span_s
-    dx, dy = finger["x_mm"][a] - finger["x_mm"][b], finger["y_mm"][a] - finger["y_mm"][b]
-    length = np.hypot(dx, dy)
-    moving = length > 0
-    ux = np.divide(dx, length, out=np.zeros_like(dx), where=moving)
-    uy = np.divide(dy, length, out=np.zeros_like(dy), where=moving)
-    mu[valid] = texture.evaluate(finger["x_mm"][b] + share * dx, finger["y_mm"][b] + share * dy, ux, uy,
-                                 middle_s[valid])
-    return mu, valid
+    return texture_at_finger(result.finger, texture, middle_s)

@@ -5,14 +5,16 @@ device first, then the default output), else the simulated plate ``sim://``;
 ``--input auto`` picks ``mouse://`` when an X display answers, else endless
 back-and-forth swipes (:data:`AUTO_SWIPE`). The first line says both choices and why.
 A :class:`~tpad_rt.inputs.live.LiveFeed` feeds the input into the renderer; a status
-panel (finger, target friction and, on ``sim://``, the friction of a simulated plate
-driven by the last drive samples, volts, power, underflows, callback load, time)
+panel (finger, target friction and, on ``sim://``, the texture under the finger and
+the friction of a simulated plate driven by the drive samples up to that moment,
+volts, power, underflows, callback load, time)
 refreshes :data:`STATUS_HZ` times a second on a terminal (nothing on a pipe). Play
 ends at ``--duration``, when a finite input ends, or on Ctrl-C (exit status 0): the
 drive ramps to 0 (``Renderer.stop``), a summary follows, and ``--record`` writes the
 recording (the ``tpad-rt render`` format). An error (bad file or URL, missing or lost
-audio device, an input failing) ends with the output ramped and closed, one line on
-stderr and exit status 1 (``tpad_rt.cli.main``).
+audio device, an input failing) ends with the output ramped and closed (a lost
+device's stream is abandoned: docs/realtime.md), one line on stderr and exit status 1
+(``tpad_rt.cli.main``).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from tpad_rt.cli.render import add_session_arguments
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.felt import texture_at_finger
 from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import screen_size_px
@@ -48,7 +51,7 @@ from tpad_rt.pipeline import RenderOptions
 AUTO_SWIPE = "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1"
 #: Status refreshes per second.
 STATUS_HZ = 5
-#: Drive (s) the status's simulated plate is run over before the block it reports (its ring-up).
+#: Drive (s) the status's simulated plate is run over before the sample it reports (its ring-up).
 PROBE_WARMUP_S = 0.02
 
 
@@ -183,7 +186,8 @@ def _loop(session: Session, feed: LiveFeed, interrupted: threading.Event, durati
 @dataclass
 class Session:
     """A running play (from when the renderer and the feed run): the renderer, the last telemetry row, the
-    peak volts, and the simulated-plate friction samples."""
+    peak volts, and on sim:// the simulated plate's friction, the texture under the finger, and their
+    differences."""
 
     renderer: Renderer
     console: Console
@@ -191,6 +195,7 @@ class Session:
     latest: dict[str, float] = field(default_factory=dict)
     peak_v: float = 0.0
     achieved: float | None = None
+    felt: float | None = None
     friction_errors: list[float] = field(default_factory=list)
 
     def elapsed_s(self) -> float:
@@ -210,23 +215,34 @@ class Session:
         self.achieved = self._achieved_mu()
 
     def _achieved_mu(self) -> float | None:
-        """Friction a simulated plate feels after the last drive samples (sim:// only, else None); kept
-        for the summary against the target when touching and not saturated."""
-        table = self.renderer.callback_table
-        if not self.renderer.output_url.startswith("sim") or table is None or not self.latest:
+        """Friction a simulated plate feels (sim:// only, else None), and the texture under the finger then.
+
+        The plate is simulated over PROBE_WARMUP_S of drive, then the block of drive that
+        ends at the newest sample whose time the finger samples cover; the texture under
+        the finger at that block's middle is what the plate should give (not the kernel's target, which is extrapolated ``horizon_ms``
+        ahead). Their difference is kept for the summary when touching and not saturated.
+        """
+        renderer, table = self.renderer, self.renderer.callback_table
+        if not renderer.output_url.startswith("sim") or table is None or not self.latest:
             return None
-        block = self.renderer.block_frames
-        end = table.next_sample
-        start = end - round(PROBE_WARMUP_S * self.renderer.rate_hz) - block
+        fingers = renderer.recent_fingers()
+        if not len(fingers):
+            return None
+        block = renderer.block_frames
+        end = min(table.next_sample, int(fingers["t_s"][-1] * renderer.rate_hz))
+        start = end - round(PROBE_WARMUP_S * renderer.rate_hz) - block
         if start < 0:
             return None
         drive = table.drive[np.arange(start, end) % len(table.drive)]
-        plate = SimOutput(self.renderer.device, self.renderer.rate_hz)
-        plate.write(drive[:-block], self.latest)
-        plate.write(drive[-block:], self.latest)
+        plate = SimOutput(renderer.device, renderer.rate_hz)
+        plate.write(drive[:-block], self.latest)  # ring-up
+        plate.write(drive[-block:], self.latest)  # the block reported: its mean amplitude
         achieved = plate.latest()["achieved_mu"]
-        if int(self.latest["saturated"]) & (FLAG_WATCHDOG | FLAG_VOLTAGE | FLAG_POWER) == 0:
-            self.friction_errors.append(abs(self.latest["target_mu"] - achieved))
+        middle_s = (end - 0.5 * block) / renderer.rate_hz
+        felt, known = texture_at_finger(fingers, renderer.texture, np.array([middle_s]), renderer.texture_t0_s())
+        self.felt = float(felt[0]) if known[0] else None
+        if self.felt is not None and int(self.latest["saturated"]) & (FLAG_WATCHDOG | FLAG_VOLTAGE | FLAG_POWER) == 0:
+            self.friction_errors.append(abs(self.felt - achieved))
         return achieved
 
     def panel(self) -> Table:
@@ -240,6 +256,7 @@ class Session:
             grid.add_row("finger", f"({row['x_mm']:5.1f}, {row['y_mm']:5.1f}) mm  {row['speed_mm_s']:4.0f} mm/s  "
                          + ("lifted" if lifted else "down"))
             grid.add_row("friction", f"target {row['target_mu']:.2f}"
+                         + ("" if self.felt is None else f", under the finger {self.felt:.2f}")
                          + ("" if self.achieved is None else f", simulated plate {self.achieved:.2f}"))
             grid.add_row("drive", f"{row['voltage_v']:5.1f} V of {self.renderer.device.max_voltage_v:g} V"
                          + ("  SATURATED" if int(row["saturated"]) & (FLAG_VOLTAGE | FLAG_POWER) else ""))
@@ -269,6 +286,6 @@ class Session:
         ]
         if self.friction_errors:
             errors = np.array(self.friction_errors)
-            lines.append(f"friction |target - simulated plate| at {len(errors)} status samples (touching, not "
-                         f"saturated): mean {errors.mean():.4f}, max {errors.max():.4f}")
+            lines.append(f"friction |texture under the finger - simulated plate| at {len(errors)} status samples "
+                         f"(touching, not saturated): mean {errors.mean():.4f}, max {errors.max():.4f}")
         return [line.replace("nan", "n/a") for line in lines]
