@@ -7,8 +7,8 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
     context manager; ``start()``, ``stop()``, ``set_texture(texture_or_path)``,
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
     ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``record(path)``,
-    ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``.callback_table``, ``.rate_hz``,
-    ``.block_frames``, ``.running``
+    ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``recent_fingers()``,
+    ``texture_t0_s()``, ``.texture``, ``.callback_table``, ``.rate_hz``, ``.block_frames``, ``.running``
 
 Example::
 
@@ -100,6 +100,9 @@ class Renderer:
     rate (naming the rate needed); BackendError (at :meth:`start`) when the audio
     device cannot run the stream. Errors met later by the stream or the engine's
     thread are re-raised by :meth:`stop`, :meth:`check` and on leaving a ``with`` block.
+    A lost audio device (a stream that stopped by itself, e.g. a JACK server that died)
+    is a BackendError; its stream is abandoned, not closed (docs/realtime.md), and audio
+    stays unusable in this process: restart it.
 
     Finger samples come from one thread at a time (:meth:`push_finger` is a
     lock-free single-producer write); :meth:`set_texture` from one thread at a time.

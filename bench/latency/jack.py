@@ -15,6 +15,7 @@ import contextlib
 import os
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -32,6 +33,22 @@ def jack_server(rate_hz: int, period_frames: int, log: Path | None = None, *,
             yield {**os.environ, "JACK_DEFAULT_SERVER": server.name}
     except BackendError as err:
         raise SystemExit(f"bench/latency: {err}") from None
+
+
+def wait_for_no_clients(env: dict[str, str], timeout_s: float = 30.0) -> bool:
+    """Poll ``jack_lsp`` until the server has no PortAudio client left (a worker that exited without closing
+    its stream stays a zombie client until the server notices); False if one is still there after ``timeout_s``.
+
+    In synchronous mode the server waits for a zombie client every cycle until it drops it, which would
+    slow the stream clock of the next run."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        ports = subprocess.run(["jack_lsp", "-s", env["JACK_DEFAULT_SERVER"]], capture_output=True, text=True,
+                               env=env).stdout
+        if "PortAudio" not in ports:
+            return True
+        time.sleep(0.05)
+    return False
 
 
 @contextlib.contextmanager

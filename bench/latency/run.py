@@ -1,27 +1,31 @@
 """Real-time latency benchmark: callback compute time, underflows under load, push-to-output
 latency and start-up time, on a JACK dummy server at 192 kHz.
 
-    python bench/latency/run.py                 # full run: 30 s per load configuration
-    python bench/latency/run.py --quick         # 5 s per configuration, fewer start-ups
+    python bench/latency/run.py                 # full run: 30 s per load and callback, in 6 runs
+    python bench/latency/run.py --quick         # 6 s in 3 runs, fewer start-ups
     python bench/latency/run.py --seconds 60    # longer load runs
 
 Writes bench/results/latency.json and latency.md and prints the tables. Every measured
 configuration runs in a fresh process (bench/latency/worker.py) against a dummy JACK
-server this script starts and stops by PID (bench/latency/jack.py); every figure is a
-distribution or a count next to a baseline measured in the same run:
+server this script starts and stops by PID (bench/latency/jack.py), in JACK's
+synchronous mode (``jackd -S``) but for one comparison; every figure is a distribution
+or a count next to a baseline measured in the same run:
 
 1. compute time per block (p50/p99/max, us) of the tpad-rt ``render_callback``
    (a Renderer rendering the grating under a moving finger) next to the empty
    ``silence_callback``, at blocks 16, 32, 64 and 256 (one server per period size),
    from the callbacks' own per-block records;
-2. at 64 frames, callbacks delivered (against the stream clock) and underflows over
-   ``--seconds``, idle, under GIL load (Python threads spinning in this process) and
-   under CPU load (one spinning process per core), for the empty ``@cfunc``, the
-   tpad-rt ``@cfunc`` and a sounddevice Python callback running ``Pipeline.render``;
+2. at 64 frames, callbacks delivered (against the stream clock) and underflows, idle,
+   under GIL load (Python threads spinning in this process) and under CPU load (one
+   spinning process per core), for the empty ``@cfunc``, the tpad-rt ``@cfunc`` and a
+   sounddevice Python callback running ``Pipeline.render``: in rounds of one run of
+   each callback (rotated order), each callback compared with the baseline run of its
+   round by a one-sided sign test;
 3. push-to-output latency of the tpad-rt callback: from ``push_finger`` to the DAC time
    of the first block that read the sample (its entry time plus the host's
    ``outputBufferDacTime - currentTime``), split into the wait for that callback
-   (tpad-rt's part) and the DAC delay (the server's);
+   (tpad-rt's part) and the DAC delay (the server's); also on a server in JACK's
+   default asynchronous mode, which buffers one period more;
 4. start-up: from spawning a process that imports tpad_rt, builds a Renderer on
    ``audio://`` and starts it, to its first sample at the DAC (warm numba cache), next
    to ``python -c "import tpad_rt"``.
@@ -34,6 +38,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import re
@@ -51,7 +56,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 
-from jack import cpu_hogs, jack_server  # noqa: E402
+from jack import cpu_hogs, jack_server, wait_for_no_clients  # noqa: E402
 
 RATE_HZ = 192000
 COMPUTE_BLOCKS = (16, 32, 64, 256)
@@ -65,11 +70,17 @@ TARGET_S = 2 * LOAD_BLOCK / RATE_HZ
 
 @dataclass(frozen=True)
 class Plan:
-    """Seconds per compute-time run, per load run; start-up runs."""
+    """Seconds per compute-time run; seconds per load and callback, split into ``load_runs`` runs; start-up runs."""
 
     compute_s: float
     load_s: float
     startups: int
+    load_runs: int = 6
+
+    @property
+    def run_s(self) -> float:
+        """Seconds of one load run."""
+        return self.load_s / self.load_runs
 
 
 def _worker(args: list[str], env: dict[str, str], timeout_s: float) -> dict[str, Any]:
@@ -109,25 +120,46 @@ def playback_latency_frames(env: dict[str, str]) -> int | None:
 
 def measure_loads(plan: Plan, gil_threads: int, log: Callable[[str], None], logs: Path,
                   report: dict[str, Any]) -> list[dict[str, Any]]:
-    """Part 2 (and 3): the three callbacks idle, under GIL load, under CPU load, at 64 frames."""
+    """Part 2 (and 3): the three callbacks idle, under GIL load, under CPU load, at 64 frames.
+
+    Per load, ``plan.load_runs`` rounds; each round runs every callback once for
+    ``plan.run_s`` seconds, in an order rotated from round to round, so that each
+    tpad-rt run has a baseline run next to it in time (the machine's other work drifts).
+    """
     rows = []
     with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-load.log") as env:
         report["server_playback_latency_frames"] = playback_latency_frames(env)
+        names = list(CALLBACKS)
         for load in LOADS:
-            for callback in CALLBACKS:
-                load_average = os.getloadavg()[0]
-                args = ["stream", callback, "--block", str(LOAD_BLOCK), "--seconds", str(plan.load_s),
-                        "--gil-threads", str(gil_threads if load == "gil" else 0)]
-                if load == "cpu":
-                    with cpu_hogs(os.cpu_count() or 1):
-                        time.sleep(0.5)
-                        result = _worker(args, env, plan.load_s + 120)
-                else:
-                    result = _worker(args, env, plan.load_s + 120)
-                rows.append({"load": load, "callback": callback, "load_average_1min": load_average, **result})
-                log(f"{load:4s} {callback:7s}: {result.get('callbacks')} of {result.get('expected', float('nan')):.0f} "
-                    f"callbacks, {result.get('underflows')} underflows {result.get('error', '')}")
+            for run in range(plan.load_runs):
+                for callback in names[run % len(names):] + names[:run % len(names)]:
+                    load_average = os.getloadavg()[0]
+                    args = ["stream", callback, "--block", str(LOAD_BLOCK), "--seconds", str(plan.run_s),
+                            "--gil-threads", str(gil_threads if load == "gil" else 0)]
+                    if load == "cpu":
+                        with cpu_hogs(os.cpu_count() or 1):
+                            time.sleep(0.5)
+                            result = _worker(args, env, plan.run_s + 120)
+                    else:
+                        result = _worker(args, env, plan.run_s + 120)
+                    result["client_gone_after"] = wait_for_no_clients(env)
+                    rows.append({"load": load, "callback": callback, "run": run, "load_average_1min": load_average,
+                                 **result})
+                    log(f"{load:4s} run {run} {callback:7s}: {result.get('callbacks')} of "
+                        f"{result.get('expected', float('nan')):.0f} callbacks, {result.get('underflows')} underflows "
+                        f"{result.get('error', '')}")
     return rows
+
+
+def measure_async_latency(plan: Plan, log: Callable[[str], None], logs: Path) -> dict[str, Any]:
+    """Part 3's comparison: the tpad-rt callback idle at 64 frames on a server in JACK's default
+    asynchronous mode (every other part runs ``jackd -S``)."""
+    with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-async.log", sync=False) as env:
+        frames = playback_latency_frames(env)
+        result = _worker(["stream", "tpad", "--block", str(LOAD_BLOCK), "--seconds", str(plan.compute_s)], env,
+                         plan.compute_s + 120)
+    log(f"async server: {_compute_text(result)}")
+    return {"server_playback_latency_frames": frames, "load_average_1min": os.getloadavg()[0], **result}
 
 
 def _run_s(command: list[str], env: dict[str, str]) -> float:
@@ -184,49 +216,88 @@ def _compute_text(result: dict[str, Any]) -> str:
     return f"compute p50 {c['p50']:.2f} us, p99 {c['p99']:.2f}, max {c['max']:.1f} ({c['n']} blocks)"
 
 
+def _load_runs(report: dict[str, Any], load: str, callback: str) -> list[dict[str, Any]]:
+    """Part 2's runs of ``callback`` under ``load`` that gave figures, in run order."""
+    return sorted((row for row in report["loads"] if row["load"] == load and row["callback"] == callback
+                   and "error" not in row), key=lambda row: row.get("run", 0))
+
+
+def _sign_test(runs: list[dict[str, Any]], baseline: list[dict[str, Any]]) -> dict[str, Any]:
+    """Runs with more / fewer / as many underflows as the baseline run of the same round, and the one-sided
+    sign-test p-value of "more" (scipy's exact binomial test over the rounds that differ)."""
+    from scipy.stats import binomtest
+
+    base = {row.get("run", 0): row["underflows"] for row in baseline}
+    pairs = [(row["underflows"], base[row.get("run", 0)]) for row in runs if row.get("run", 0) in base]
+    more = sum(mine > theirs for mine, theirs in pairs)
+    fewer = sum(mine < theirs for mine, theirs in pairs)
+    p_value = binomtest(more, more + fewer, 0.5, alternative="greater").pvalue if more + fewer else 1.0
+    return {"pairs": len(pairs), "more": more, "fewer": fewer, "equal": len(pairs) - more - fewer,
+            "p_more": float(p_value),
+            "median_difference": float(np.median([mine - theirs for mine, theirs in pairs])) if pairs else None}
+
+
 def summarise(report: dict[str, Any]) -> dict[str, Any]:
-    """Ratios and verdicts derived from the raw figures."""
-    loads = {(row["load"], row["callback"]): row for row in report["loads"]}
-    ratios = []
+    """Per load and callback: totals over the runs, per-run underflows, the paired comparison with the
+    baseline; and the verdicts on issue 4's targets."""
+    groups = []
     for load in LOADS:
-        base = loads.get((load, "silence"), {}).get("underflows")
+        baseline = _load_runs(report, load, "silence")
         for callback in CALLBACKS:
-            row = loads.get((load, callback), {})
-            if "error" in row or base is None:
+            runs = _load_runs(report, load, callback)
+            if not runs:
                 continue
-            ratios.append({"load": load, "callback": callback,
-                           "delivered_fraction": row["callbacks"] / row["expected"],
-                           "underflows_over_baseline": row["underflows"] / max(base, 1),
-                           "underflows_minus_baseline": row["underflows"] - base})
-    gil = {r["callback"]: r for r in ratios if r["load"] == "gil"}
-    idle_tpad = loads.get(("idle", "tpad"), {})
-    latency = idle_tpad.get("latency_ms", {})
-    idle = {r["callback"]: r for r in ratios if r["load"] == "idle"}
-    # the noise between two native callbacks with no load at all, in this run (the dummy driver's own xruns
-    # grow with the window and with the machine's other work), but at least the tests' margin
-    margin = max(UNDERFLOW_MARGIN, abs(idle["tpad"]["underflows_minus_baseline"]) if "tpad" in idle else 0)
+            callbacks = sum(row["callbacks"] for row in runs)
+            expected = sum(row["expected"] for row in runs)
+            due_wall = sum(row.get("due_wall", math.nan) for row in runs)
+            group = {"load": load, "callback": callback, "runs": len(runs), "callbacks": callbacks,
+                     "expected": expected, "delivered_fraction": callbacks / expected, "due_wall": due_wall,
+                     "delivered_wall_fraction": callbacks / due_wall,
+                     "underflows": sum(row["underflows"] for row in runs),
+                     "underflows_per_run": [row["underflows"] for row in runs],
+                     "compute_p50_us": float(np.median([row["compute_us"]["p50"] for row in runs])),
+                     "compute_p99_us": float(np.median([row["compute_us"]["p99"] for row in runs])),
+                     "compute_max_us": max(row["compute_us"]["max"] for row in runs)}
+            if callback != "silence" and baseline:
+                group["vs_baseline"] = _sign_test(runs, baseline)
+            latency = [row["latency_ms"] for row in runs if row.get("latency_ms", {}).get("n")]
+            if latency:
+                group["latency_p50_ms"] = float(np.median([value["p50"] for value in latency]))
+                group["latency_p99_ms"] = float(np.median([value["p99"] for value in latency]))
+                group["latency_max_ms"] = max(value["max"] for value in latency)
+                group["latency_n"] = sum(value["n"] for value in latency)
+                group["wait_p50_ms"] = float(np.median([row["wait_ms"]["p50"] for row in runs]))
+                group["wait_p99_ms"] = float(np.median([row["wait_ms"]["p99"] for row in runs]))
+                group["dac_delay_ms"] = float(np.median([row["read_dac_delay_ms"]["p50"] for row in runs]))
+                group["output_latency_ms"] = float(np.median([row["output_latency_s"] for row in runs])) * 1e3
+            groups.append(group)
+    by = {(group["load"], group["callback"]): group for group in groups}
+    gil_tpad, gil_python = by.get(("gil", "tpad"), {}), by.get(("gil", "python"), {})
+    idle_tpad = by.get(("idle", "tpad"), {})
+    gil_test = gil_tpad.get("vs_baseline", {})
+    python_test = gil_python.get("vs_baseline", {})
     verdict = {
-        "gil_margin": margin,
-        "gil_tpad_minus_baseline": gil["tpad"]["underflows_minus_baseline"] if "tpad" in gil else None,
-        "gil_tpad_within_margin": bool("tpad" in gil and gil["tpad"]["underflows_minus_baseline"] <= margin),
-        "tpad_underflows_idle": loads.get(("idle", "tpad"), {}).get("underflows"),
-        "tpad_underflows_gil": loads.get(("gil", "tpad"), {}).get("underflows"),
-        "python_underflows_idle": loads.get(("idle", "python"), {}).get("underflows"),
-        "python_underflows_gil": loads.get(("gil", "python"), {}).get("underflows"),
-        "gil_python_collapsed": bool(gil and (gil["python"]["delivered_fraction"] < 0.5
-                                              or gil["python"]["underflows_minus_baseline"] > 10 * UNDERFLOW_MARGIN)),
+        "significance": SIGNIFICANCE,
+        "gil_tpad_vs_baseline": gil_test,
+        "gil_tpad_within_margin": bool(gil_test and gil_test["p_more"] >= SIGNIFICANCE),
+        "gil_python_vs_baseline": python_test,
+        "gil_python_delivered_fraction": gil_python.get("delivered_wall_fraction"),
+        "gil_python_collapsed": bool(gil_python and (gil_python["delivered_wall_fraction"] < 0.5
+                                                     or python_test.get("p_more", 1.0) < SIGNIFICANCE)),
         "latency_target_ms": TARGET_S * 1e3,
-        "latency_p50_ms": latency.get("p50"),
-        "latency_target_met": bool(latency.get("p50") is not None and latency["p50"] <= TARGET_S * 1e3),
-        "tpad_part_p50_ms": idle_tpad.get("wait_ms", {}).get("p50"),
-        "server_dac_delay_ms": idle_tpad.get("read_dac_delay_ms", {}).get("p50"),
+        "latency_p50_ms": idle_tpad.get("latency_p50_ms"),
+        "latency_target_met": bool(idle_tpad.get("latency_p50_ms") is not None
+                                   and idle_tpad["latency_p50_ms"] <= TARGET_S * 1e3),
+        "tpad_part_p50_ms": idle_tpad.get("wait_p50_ms"),
+        "server_dac_delay_ms": idle_tpad.get("dac_delay_ms"),
+        "async_latency_p50_ms": report.get("async", {}).get("latency_ms", {}).get("p50"),
     }
-    return {"ratios": ratios, "verdict": verdict}
+    return {"groups": groups, "verdict": verdict}
 
 
-#: Underflows beyond the empty-callback baseline still "within its margin" (the tests' margin per 1.5 s
-#: run is 5; the dummy driver logs a few xruns per 5 s by itself).
-UNDERFLOW_MARGIN = 5
+#: The one-sided sign test's level: tpad-rt is "within the baseline's margin" under a load unless its
+#: runs had more underflows than their paired baseline runs at p < SIGNIFICANCE.
+SIGNIFICANCE = 0.05
 
 
 def markdown(report: dict[str, Any]) -> str:
@@ -238,7 +309,8 @@ def markdown(report: dict[str, Any]) -> str:
         f"Generated by `python bench/latency/run.py{' --quick' if report['quick'] else ''}"
         f"{'' if report['quick'] else ' --seconds ' + format(plan['load_s'], 'g')}`"
         f"{' (a QUICK run: short windows, rough figures)' if report['quick'] else ''}; "
-        f"JACK dummy server at {RATE_HZ} Hz (`jackd -p 16 -d dummy -r {RATE_HZ} -p BLOCK`, "
+        f"JACK dummy server at {RATE_HZ} Hz in synchronous mode (`jackd -S -p 16 -d dummy -r {RATE_HZ} -p BLOCK`; "
+        "part 3 also measures JACK's default asynchronous mode), "
         f"jackd SCHED_FIFO as root: {machine['root']}); {machine['cpu']}, {machine['cores']} cores, "
         f"Python {machine['python']}, numba {machine['numba']}. Every configuration ran in a fresh process; "
         "bench/latency/README.md says how each figure is measured. "
@@ -262,30 +334,40 @@ def markdown(report: dict[str, Any]) -> str:
         c = row["compute_us"]
         lines.append(f"| {row['block']} | {period_us:.0f} | {CALLBACKS[row['callback']]} | {c['n']} | {c['p50']:.2f} "
                      f"| {c['p99']:.2f} | {c['max']:.1f} | {c['p99'] / period_us:.1%} | {row['underflows']} |")
+    groups = {(group["load"], group["callback"]): group for group in report["summary"]["groups"]}
     lines += [
         "",
-        f"## 2. Underflows at {LOAD_BLOCK} frames over {format(plan['load_s'], 'g')} s per row",
+        f"## 2. Underflows at {LOAD_BLOCK} frames: {format(plan['load_s'], 'g')} s per load and callback, "
+        f"in {plan['load_runs']} runs of {format(plan['load_s'] / plan['load_runs'], 'g')} s",
         "",
         f"GIL load: {report['gil_threads']} Python thread(s) spinning a pure-Python loop in the measured process; "
         f"CPU load: {machine['cores']} processes `python -c 'while True: pass'` (one per core). "
-        "Expected callbacks: from the stream's own clock (`Pa_GetStreamTime`) over the window. "
-        "Ratio: underflows / max(baseline underflows, 1), baseline = the empty `@cfunc` under the same load.",
+        "Each load runs in rounds; a round runs the three callbacks once each, in a rotated order, so every run "
+        "has a baseline run (the empty `@cfunc`) next to it in time: the machine's other work drifts, and the "
+        "dummy driver's xruns come in bursts. Due: the callbacks CLOCK_MONOTONIC says were due in the window; "
+        "expected: the same from the stream's own clock (`Pa_GetStreamTime`), which a server in synchronous "
+        "mode slows down while it waits for a late client (and for a while after it). *Runs above / below the baseline*: rounds in which the callback had more / fewer "
+        "underflows than the baseline run of the same round; *p*: one-sided sign test of \"more\" over the rounds "
+        "that differ. Compute time: medians over the runs of each run's p50 and p99, and the largest max.",
         "",
-        "| load | callback | delivered / expected | underflows | vs baseline | compute p50 / p99 / max us |",
-        "| --- | --- | ---: | ---: | ---: | ---: |",
+        "| load | callback | delivered / due (wall clock) | delivered / expected (stream clock) | underflows "
+        "| per run | runs above / below / equal baseline | p (more than baseline) | compute p50 / p99 / max us |",
+        "| --- | --- | ---: | ---: | ---: | --- | ---: | ---: | ---: |",
     ]
-    ratios = {(r["load"], r["callback"]): r for r in report["summary"]["ratios"]}
-    for row in report["loads"]:
-        if "error" in row:
-            lines.append(f"| {row['load']} | {CALLBACKS[row['callback']]} | error: {row['error']} | | | |")
-            continue
-        ratio = ratios.get((row["load"], row["callback"]))
-        c = row["compute_us"]
-        lines.append(
-            f"| {row['load']} | {CALLBACKS[row['callback']]} | {row['callbacks']} / {row['expected']:.0f} "
-            f"({row['callbacks'] / row['expected']:.1%}) | {row['underflows']} "
-            f"| {'-' if ratio is None else format(ratio['underflows_over_baseline'], '.1f') + 'x'} "
-            f"| {c['p50']:.1f} / {c['p99']:.1f} / {c['max']:.0f} |")
+    for load in LOADS:
+        for callback in CALLBACKS:
+            group = groups.get((load, callback))
+            if group is None:
+                lines.append(f"| {load} | {CALLBACKS[callback]} | error | | | | | | |")
+                continue
+            test = group.get("vs_baseline")
+            lines.append(
+                f"| {load} | {CALLBACKS[callback]} | {group['callbacks']} / {group['due_wall']:.0f} "
+                f"({group['delivered_wall_fraction']:.1%}) | {group['callbacks']} / {group['expected']:.0f} "
+                f"({group['delivered_fraction']:.1%}) | {group['underflows']} "
+                f"| {', '.join(str(n) for n in group['underflows_per_run'])} "
+                f"| {_pairs_text(test)} | {'-' if test is None else format(test['p_more'], '.3f')} "
+                f"| {group['compute_p50_us']:.1f} / {group['compute_p99_us']:.1f} / {group['compute_max_us']:.0f} |")
     lines += [
         "",
         "## 3. Push-to-output latency (tpad-rt `@cfunc`, finger sample pushed every 2 ms)",
@@ -293,28 +375,24 @@ def markdown(report: dict[str, Any]) -> str:
         "From `push_finger` (CLOCK_MONOTONIC just before the call) to the DAC time of the first block whose start "
         "saw the sample (its entry time + `outputBufferDacTime - currentTime` from PortAudio's time info). "
         "wait = push to that callback's entry (tpad-rt's part: at most one period plus scheduling); "
-        "DAC delay = what the host API reports between entry and the block's first sample at the DAC (the server's). "
+        "DAC delay = what the host API reports between entry and the block's first sample at the DAC: the "
+        "playback latency the server declares for its output port. "
         f"Target (issue 4): median <= one block + one period = {TARGET_S * 1e3:.3f} ms at 64 frames "
-        "(2 x block / rate at other block sizes).",
+        "(2 x block / rate at other block sizes). Part 2's rows: medians over the runs of each run's figures.",
         "",
-        "| run | block | samples | latency p50 ms | p99 ms | max ms | wait p50 / p99 ms | DAC delay ms "
+        "| run | jackd mode | block | samples | latency p50 ms | p99 ms | max ms | wait p50 / p99 ms | DAC delay ms "
         "| stream outputLatency ms | target ms | median met |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |",
     ]
-    latency_rows = [("idle (part 1)", row) for row in report["compute"] if row["callback"] == "tpad"]
-    latency_rows += [(f"{row['load']} (part 2)", {**row, "block": LOAD_BLOCK}) for row in report["loads"]
-                     if row["callback"] == "tpad"]
-    for name, row in latency_rows:
-        latency = row.get("latency_ms", {})
-        if "error" in row or not latency.get("n"):
-            lines.append(f"| {name} | {row['block']} | error: {row.get('error', 'no samples')} | | | | | | | | |")
-            continue
-        target_ms = 2 * row["block"] / RATE_HZ * 1e3
-        lines.append(
-            f"| {name} | {row['block']} | {latency['n']} | {latency['p50']:.3f} | {latency['p99']:.3f} "
-            f"| {latency['max']:.3f} | {row['wait_ms']['p50']:.3f} / {row['wait_ms']['p99']:.3f} "
-            f"| {row['read_dac_delay_ms']['p50']:.3f} | {row['output_latency_s'] * 1e3:.3f} | {target_ms:.3f} "
-            f"| {'yes' if latency['p50'] <= target_ms else 'no'} |")
+    latency_rows = [(f"idle (part 1, {format(plan['compute_s'], 'g')} s)", "sync (-S)", _latency_cells(row))
+                    for row in report["compute"] if row["callback"] == "tpad"]
+    latency_rows += [(f"{load} (part 2)", "sync (-S)", _group_latency_cells(groups.get((load, "tpad"), {})))
+                     for load in LOADS]
+    if "async" in report:
+        latency_rows.append((f"idle ({format(plan['compute_s'], 'g')} s)", "async (default)",
+                             _latency_cells({**report["async"], "block": LOAD_BLOCK})))
+    for name, mode, cells in latency_rows:
+        lines.append(f"| {name} | {mode} | {cells} |")
     startup = report["startup"]
     lines += ["", f"## 4. Start-up to the first sample ({len(startup.get('runs', []))} runs each, warm numba cache)",
               ""]
@@ -366,31 +444,51 @@ def markdown(report: dict[str, Any]) -> str:
         "",
         "## Issue 4's targets (this run)",
         "",
-        f"- Underflows of the tpad-rt `@cfunc` under GIL load within the empty-callback baseline's margin: "
-        f"{v['gil_tpad_minus_baseline']} beyond the baseline, margin {v['gil_margin']} (the larger of the tests' "
-        f"{UNDERFLOW_MARGIN} and the difference between the same two callbacks idle in this run: the dummy "
-        f"driver's own xruns grow with the window and the machine's other work): "
+        f"- Underflows of the tpad-rt `@cfunc` under GIL load within the empty-callback baseline's margin "
+        f"(not more than the baseline run of the same round in a way a one-sided sign test finds at "
+        f"p < {v['significance']}): {_pairs_text(v['gil_tpad_vs_baseline'] or None)} rounds above / below / equal, "
+        f"p = {_fmt(v['gil_tpad_vs_baseline'].get('p_more'))}: "
         f"**{'met' if v['gil_tpad_within_margin'] else 'NOT met'}**. The plain Python callback collapses "
-        f"(under half the callbacks delivered, or more than {10 * UNDERFLOW_MARGIN} underflows beyond the "
-        f"baseline): **{'yes' if v['gil_python_collapsed'] else 'NO'}**. Each callback against itself idle: "
-        f"tpad-rt `@cfunc` {v['tpad_underflows_idle']} idle -> {v['tpad_underflows_gil']} under GIL load; "
-        f"Python callback {v['python_underflows_idle']} -> {v['python_underflows_gil']}. Underflows that both "
-        "native callbacks show idle are the dummy server's (and this shared machine's: other JACK servers of "
-        "concurrent test runs also run SCHED_FIFO on its 2 cores), not the GIL's.",
-        f"- Median push-to-output latency at 64 frames (idle) {_fmt(v['latency_p50_ms'])} ms against "
+        f"(under half the callbacks delivered, or more underflows than the baseline at p < {v['significance']}): "
+        f"{_percent(v['gil_python_delivered_fraction'])} delivered, "
+        f"{_pairs_text(v['gil_python_vs_baseline'] or None)} rounds above / below / equal: "
+        f"**{'yes' if v['gil_python_collapsed'] else 'NO'}**.",
+        f"- Median push-to-output latency at 64 frames (idle, `jackd -S`) {_fmt(v['latency_p50_ms'])} ms against "
         f"{v['latency_target_ms']:.3f} ms: **{'met' if v['latency_target_met'] else 'NOT met'}**. Of it, the wait "
         f"for the callback that reads the sample (tpad-rt's part) is {_fmt(v['tpad_part_p50_ms'])} ms and the DAC "
         f"delay PortAudio reports (`outputBufferDacTime - currentTime`) is {_fmt(v['server_dac_delay_ms'])} ms "
-        f"= {_periods(v['server_dac_delay_ms'])} periods, the playback latency the dummy server declares for its "
-        f"output port (`jack_lsp -l`: {report.get('server_playback_latency_frames')} frames; the stream's "
-        "`outputLatency` from `Pa_GetStreamInfo` says one period). That server latency alone "
-        f"{'reaches' if (v['server_dac_delay_ms'] or 0) >= v['latency_target_ms'] - 1e-3 else 'is below'} the "
-        "target; it is a property of the server, not of tpad-rt. tpad-rt's own part is the wait for the next "
-        "callback (below one period at the median; no extra buffering, the kernel reads the ring at the block "
-        "start). Against the target reading 'tpad-rt's part <= one block + one period': "
-        f"**{'met' if (v['tpad_part_p50_ms'] or 1e9) <= v['latency_target_ms'] else 'NOT met'}**.",
+        f"= {_periods(v['server_dac_delay_ms'])} periods (`jack_lsp -l`: "
+        f"{report.get('server_playback_latency_frames')} frames of playback latency on the server's output port). "
+        "On a server in JACK's default asynchronous mode (no `-S`), which declares and buffers one more period "
+        f"(`jack_lsp -l`: {report.get('async', {}).get('server_playback_latency_frames')} frames), the median is "
+        f"{_fmt(v['async_latency_p50_ms'])} ms: run jackd with `-S` where latency matters (docs/realtime.md).",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _pairs_text(test: dict[str, Any] | None) -> str:
+    return "-" if test is None else f"{test['more']} / {test['fewer']} / {test['equal']}"
+
+
+def _latency_cells(row: dict[str, Any]) -> str:
+    """Part 3's cells (block .. median met) for one run's figures."""
+    latency = row.get("latency_ms", {})
+    if "error" in row or not latency.get("n"):
+        return f"{row.get('block', '')} | error: {row.get('error', 'no samples')} | | | | | | | |"
+    target_ms = 2 * row["block"] / RATE_HZ * 1e3
+    return (f"{row['block']} | {latency['n']} | {latency['p50']:.3f} | {latency['p99']:.3f} | {latency['max']:.3f} "
+            f"| {row['wait_ms']['p50']:.3f} / {row['wait_ms']['p99']:.3f} | {row['read_dac_delay_ms']['p50']:.3f} "
+            f"| {row['output_latency_s'] * 1e3:.3f} | {target_ms:.3f} | {'yes' if latency['p50'] <= target_ms else 'no'}")
+
+
+def _group_latency_cells(group: dict[str, Any]) -> str:
+    """Part 3's cells for part 2's runs of one load (medians over the runs)."""
+    if "latency_p50_ms" not in group:
+        return f"{LOAD_BLOCK} | error: no samples | | | | | | | |"
+    return (f"{LOAD_BLOCK} | {group['latency_n']} | {group['latency_p50_ms']:.3f} | {group['latency_p99_ms']:.3f} "
+            f"| {group['latency_max_ms']:.3f} | {group['wait_p50_ms']:.3f} / {group['wait_p99_ms']:.3f} "
+            f"| {group['dac_delay_ms']:.3f} | {group['output_latency_ms']:.3f} | {TARGET_S * 1e3:.3f} "
+            f"| {'yes' if group['latency_p50_ms'] <= TARGET_S * 1e3 else 'no'}")
 
 
 def _load_range(report: dict[str, Any]) -> str:
@@ -400,6 +498,10 @@ def _load_range(report: dict[str, Any]) -> str:
 
 def _periods(value_ms: float | None) -> str:
     return "n/a" if value_ms is None else f"{value_ms * 1e-3 * RATE_HZ / LOAD_BLOCK:.2f}"
+
+
+def _percent(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.1%}"
 
 
 def _fmt(value: float | None) -> str:
@@ -422,8 +524,10 @@ def machine() -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="5 s load runs, 3 s compute runs, 5 start-ups")
-    parser.add_argument("--seconds", type=float, default=None, help="seconds per load run (default 30; --quick 5)")
+    parser.add_argument("--quick", action="store_true",
+                        help="6 s per load and callback in 3 runs, 3 s compute runs, 5 start-ups")
+    parser.add_argument("--seconds", type=float, default=None,
+                        help="seconds per load and callback, split into 6 runs (default 30; --quick 6, 3 runs)")
     parser.add_argument("--gil-threads", type=int, default=1, help="Python threads spinning for GIL load (default 1)")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for latency.json/.md")
     parser.add_argument("--rewrite-md", action="store_true",
@@ -436,16 +540,17 @@ def main(argv: list[str] | None = None) -> int:
         (args.out / "latency.md").write_text(markdown(report))
         print(markdown(report))
         return 0
-    plan = Plan(compute_s=3.0, load_s=5.0, startups=5) if args.quick else Plan(compute_s=10.0, load_s=30.0,
-                                                                               startups=15)
+    plan = Plan(compute_s=3.0, load_s=6.0, startups=5, load_runs=3) if args.quick else Plan(
+        compute_s=10.0, load_s=30.0, startups=15, load_runs=6)
     if args.seconds is not None:
-        plan = Plan(plan.compute_s, args.seconds, plan.startups)
+        plan = Plan(plan.compute_s, args.seconds, plan.startups, plan.load_runs)
     log = lambda line: print(line, flush=True)  # noqa: E731
     report: dict[str, Any] = {"quick": args.quick, "rate_hz": RATE_HZ, "plan": asdict(plan),
                               "gil_threads": args.gil_threads, "machine": machine()}
     with tempfile.TemporaryDirectory(prefix="tpadrt-latency-") as logs:
         report["compute"] = measure_compute(plan, log, Path(logs))
         report["loads"] = measure_loads(plan, args.gil_threads, log, Path(logs), report)
+        report["async"] = measure_async_latency(plan, log, Path(logs))
         report["startup"] = measure_startup(plan, log, Path(logs))
         report["jackd_xrun_lines"] = {path.name: sum("xrun" in line.lower() for line in path.read_text().splitlines())
                                       for path in sorted(Path(logs).glob("jackd-*.log"))}

@@ -23,7 +23,9 @@ then, like an application, pushes a finger sample every 2 ms from the main threa
 the callback's record ring, for ``S`` seconds, while ``N`` other Python threads spin a
 pure-Python loop (GIL load). Reports callbacks and underflows in that window, the
 callbacks the stream's own clock (``Pa_GetStreamTime``) expects in it, every block's
-compute time, and (``tpad``) each finger sample's push-to-output latency. The
+compute time, the callbacks CLOCK_MONOTONIC says were due in it (a server in synchronous
+mode slows its own clock while it waits for a late client), and (``tpad``) each finger
+sample's push-to-output latency. The
 ``python`` configuration exits without closing its stream (a JACK client starved of
 the GIL can hang in deactivation; the server cleans up after a client that exits).
 
@@ -164,14 +166,14 @@ def stream_native(callback: str, block: int, seconds: float, gil_threads: int) -
     time.sleep(0.2)  # past the start
     _gil_hogs(gil_threads)
     ring = RecordRing(table)
-    begin_s, begin = clock(), table.stats.copy()
+    begin_s, begin, begin_wall_s = clock(), table.stats.copy(), time.monotonic()
     _app_loop(seconds, push, ring.poll)
-    end_s, end = clock(), table.stats.copy()
+    end_s, end, end_wall_s = clock(), table.stats.copy(), time.monotonic()
     rows = ring.rows()
     result = {
         "callbacks": int(end[cb.STAT_CALLBACKS] - begin[cb.STAT_CALLBACKS]),
         "underflows": int(end[cb.STAT_UNDERFLOWS] - begin[cb.STAT_UNDERFLOWS]),
-        "expected": (end_s - begin_s) * RATE_HZ / block,
+        "expected": (end_s - begin_s) * RATE_HZ / block, "due_wall": (end_wall_s - begin_wall_s) * RATE_HZ / block,
         "records": int(len(rows)), "records_lost": ring.lost,
         "compute_us": _percentiles(rows[:, cb.BLOCK_COMPUTE_NS], 1e-3),
         "dac_delay_ms": _percentiles(rows[:, cb.BLOCK_DAC_DELAY_NS], 1e-6),
@@ -242,17 +244,18 @@ def stream_python(block: int, seconds: float, gil_threads: int) -> None:
     stream.start()
     time.sleep(0.2)
     _gil_hogs(gil_threads)
-    begin_s, begin = stream.time, list(counts)
+    begin_s, begin, begin_wall_s = stream.time, list(counts), time.monotonic()
 
     def push(x_mm: float) -> None:
         pipeline.push_finger(pipeline.time_s, x_mm, 20.0, 0.5)
 
     _app_loop(seconds, push, lambda: None)
-    end_s, end = stream.time, list(counts)
+    end_s, end, end_wall_s = stream.time, list(counts), time.monotonic()
     kept = compute_ns[begin[0]:min(end[0], PY_RECORDS)]
     _result({
         "callbacks": end[0] - begin[0], "underflows": end[1] - begin[1],
-        "expected": (end_s - begin_s) * RATE_HZ / block, "records": int(len(kept)), "records_lost": 0,
+        "expected": (end_s - begin_s) * RATE_HZ / block, "due_wall": (end_wall_s - begin_wall_s) * RATE_HZ / block,
+        "records": int(len(kept)), "records_lost": 0,
         "compute_us": _percentiles(kept, 1e-3), "output_latency_s": float(stream.latency),
     })
     sys.stdout.flush()
