@@ -49,14 +49,14 @@ def server_process(rate_hz: int = 192000, period_frames: int = 64) -> Iterator[R
 
 
 @contextlib.contextmanager
-def jack_server(rate_hz: int = 192000, period_frames: int = 64) -> Iterator[str]:
-    """Run a dummy JACK server; yields its name (also in ``JACK_DEFAULT_SERVER``)."""
+def jack_server(rate_hz: int = 192000, period_frames: int = 64, *, sync: bool = False) -> Iterator[str]:
+    """Run a dummy JACK server (synchronous mode if ``sync``); yields its name (also in ``JACK_DEFAULT_SERVER``)."""
     _require_jack()
     import sounddevice
 
     previous = os.environ.get("JACK_DEFAULT_SERVER")
     try:
-        with dummy_server(rate_hz, period_frames) as server:
+        with dummy_server(rate_hz, period_frames, sync=sync) as server:
             name = server.name
             os.environ["JACK_DEFAULT_SERVER"] = name
             try:

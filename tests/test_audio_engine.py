@@ -23,6 +23,7 @@ from jack_server import jack_server, kill_server_under
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError
+from tpad_rt.jackd import playback_latency_frames
 from tpad_rt.kernel import callback as cb
 from tpad_rt.outputs import audio
 from tpad_rt.pipeline import Pipeline
@@ -148,6 +149,9 @@ def test_renderer_keeps_the_stream_clock(jack: str) -> None:
     assert 0 < stats["callback_load_p99"] < 1
     assert stats["blocks"] > 0 and stats["power_peak_w"] <= stats["power_budget_w"]
     assert 0 < stats["latency_ms_p50"] <= stats["latency_ms_p99"]
+    # the host's callback-to-DAC delay is the playback latency the server declares (2 periods: async mode)
+    assert stats["dac_delay_ms"] == pytest.approx(playback_latency_frames(jack) / RATE_HZ * 1e3, rel=1e-3)
+    assert stats["latency_ms_p50"] > stats["dac_delay_ms"]
 
 
 class GilHog:

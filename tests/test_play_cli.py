@@ -59,8 +59,9 @@ def test_a_finite_input_ends_the_play_and_the_recording_ends_in_silence(tmp_path
 
 
 @pytest.mark.system
-def test_with_a_jack_server_auto_picks_the_jack_device() -> None:
-    with jack_server(192000, 64):
+@pytest.mark.parametrize(("sync", "periods"), [(False, 2), (True, 1)])
+def test_with_a_jack_server_auto_picks_the_jack_device_and_says_how_it_buffers(sync: bool, periods: int) -> None:
+    with jack_server(192000, 64, sync=sync):
         done = _play("textures/grating.yaml", "--duration", "1",
                      env={k: v for k, v in os.environ.items() if k != "DISPLAY"})
     assert done.returncode == 0, done.stderr
@@ -68,6 +69,12 @@ def test_with_a_jack_server_auto_picks_the_jack_device() -> None:
     assert lines[0].startswith("output audio://") and "JACK" in lines[0] and "runs 192000 Hz" in lines[0]
     callbacks = int(lines[1].split(": ")[1].split()[0])
     assert callbacks > 0
+    period_ms = 64 / 192000 * 1e3
+    latency = next(line for line in lines if line.startswith("push-to-output latency"))
+    assert latency.endswith(f"(of which the host reports {periods * period_ms:.2f} ms from callback to DAC)")
+    hint = [line for line in lines if line.startswith("the JACK server buffers")]
+    assert hint == ([] if sync else [f"the JACK server buffers 2 periods before the DAC: started with jackd -S "
+                                     f"(synchronous mode) it buffers one, {period_ms:.2f} ms less"])
 
 
 @pytest.mark.system

@@ -8,7 +8,7 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
     ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``record(path)``,
     ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``recent_fingers()``,
-    ``texture_t0_s()``, ``.texture``, ``.callback_table``, ``.rate_hz``, ``.block_frames``, ``.running``
+    ``texture_t0_s()``, ``.texture``, ``.audio_device``, ``.callback_table``, ``.rate_hz``, ``.block_frames``, ``.running``
 
 Example::
 
@@ -140,6 +140,7 @@ class Renderer:
         self._push_ns = np.zeros(options.finger_ring, dtype=np.int64)
         self._last_t_s = -math.inf
         self._output_latency_s = math.nan
+        self._audio_device: audio.AudioDevice | None = None
         self._record_path: Path | None = None
         self._recorded: list[dict[str, np.ndarray]] = []
         self._drive_chunks: list[np.ndarray] = []
@@ -178,6 +179,7 @@ class Renderer:
         device = None
         if self._audio is not None:
             device = audio.find_output_device(self._audio.device)
+            self._audio_device = device
             if self._audio.channel > device.channels:
                 raise BackendError(f"audio: channel {self._audio.channel}: device {device} has "
                                    f"{device.channels} output channel(s)")
@@ -375,6 +377,11 @@ class Renderer:
             self._pipeline.set_texture(compiled)
 
     @property
+    def audio_device(self) -> audio.AudioDevice | None:
+        """The audio device of the current or last run (None before it, or on a non-audio output)."""
+        return self._audio_device
+
+    @property
     def texture(self) -> CompiledTexture:
         """The texture rendered (the last one set)."""
         return self._texture
@@ -436,7 +443,9 @@ class Renderer:
         ``voltage_saturated``, ``power_saturated`` (blocks), ``power_mean_w``,
         ``power_peak_w``, ``power_budget_w``, ``power_avg_w`` (from telemetry);
         ``latency_ms_p50/p99``: from a push to the DAC time of the first block that
-        read it, over the recent blocks.
+        read it, over the recent blocks; ``dac_delay_ms``: the part of it the host
+        reports from a callback to the DAC (median over the recent blocks; 0 on paced
+        outputs).
         """
         if self._table is not None:
             self._drain(self._table)
@@ -453,6 +462,8 @@ class Renderer:
         for name, q in (("p50", 50), ("p99", 99), ("max", 100)):
             result[f"compute_us_{name}"] = float(np.percentile(compute_us, q)) if len(compute_us) else math.nan
         result["callback_load_p99"] = result["compute_us_p99"] * 1e-6 * self.rate_hz / self.block_frames
+        dac_delay_ms = blocks[:, cb.BLOCK_DAC_DELAY_NS] * 1e-6
+        result["dac_delay_ms"] = float(np.median(dac_delay_ms)) if len(dac_delay_ms) else math.nan
         latency_ms = self._latencies_ms(blocks)
         for name, q in (("p50", 50), ("p99", 99)):
             result[f"latency_ms_{name}"] = float(np.percentile(latency_ms, q)) if len(latency_ms) else math.nan

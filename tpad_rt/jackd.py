@@ -22,6 +22,7 @@ a new server takes the same name. jackd logs to a file, never to a pipe nobody r
 from __future__ import annotations
 
 import contextlib
+import re
 import shutil
 import signal
 import subprocess
@@ -55,6 +56,15 @@ def free_server_name(jack_wait: str, prefix: str) -> str:
         if "not running" in probe.stdout:
             return name
     raise BackendError(f"{MAX_SERVERS} JACK servers named {prefix}-N already run")
+
+
+def playback_latency_frames(server_name: str) -> int | None:
+    """The playback latency (frames, max of the range) server ``server_name`` declares for its
+    ``system:playback_1`` port (``jack_lsp -l``); None when it does not say (or is not running)."""
+    listing = subprocess.run([program("jack_lsp"), "-s", server_name, "-l", "system:playback_1"],
+                             capture_output=True, text=True, timeout=10).stdout
+    match = re.search(r"port playback latency = \[ (\d+) (\d+) \]", listing)
+    return int(match.group(2)) if match else None
 
 
 def stop_process(process: subprocess.Popen) -> None:

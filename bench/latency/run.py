@@ -41,7 +41,6 @@ import json
 import math
 import os
 import platform
-import re
 import subprocess
 import sys
 import tempfile
@@ -57,6 +56,8 @@ ROOT = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 
 from jack import cpu_hogs, jack_server, wait_for_no_clients  # noqa: E402
+
+from tpad_rt.jackd import playback_latency_frames  # noqa: E402
 
 RATE_HZ = 192000
 COMPUTE_BLOCKS = (16, 32, 64, 256)
@@ -110,14 +111,6 @@ def measure_compute(plan: Plan, log: Callable[[str], None], logs: Path) -> list[
     return rows
 
 
-def playback_latency_frames(env: dict[str, str]) -> int | None:
-    """The playback latency (frames) the server declares for its system:playback_1 port (``jack_lsp -l``)."""
-    done = subprocess.run(["jack_lsp", "-s", env["JACK_DEFAULT_SERVER"], "-l", "system:playback_1"],
-                          capture_output=True, text=True, env=env)
-    match = re.search(r"port playback latency = \[ (\d+) (\d+) \]", done.stdout)
-    return int(match.group(2)) if match else None
-
-
 def measure_loads(plan: Plan, gil_threads: int, log: Callable[[str], None], logs: Path,
                   report: dict[str, Any]) -> list[dict[str, Any]]:
     """Part 2 (and 3): the three callbacks idle, under GIL load, under CPU load, at 64 frames.
@@ -128,7 +121,7 @@ def measure_loads(plan: Plan, gil_threads: int, log: Callable[[str], None], logs
     """
     rows = []
     with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-load.log") as env:
-        report["server_playback_latency_frames"] = playback_latency_frames(env)
+        report["server_playback_latency_frames"] = playback_latency_frames(env["JACK_DEFAULT_SERVER"])
         names = list(CALLBACKS)
         for load in LOADS:
             for run in range(plan.load_runs):
@@ -155,7 +148,7 @@ def measure_async_latency(plan: Plan, log: Callable[[str], None], logs: Path) ->
     """Part 3's comparison: the tpad-rt callback idle at 64 frames on a server in JACK's default
     asynchronous mode (every other part runs ``jackd -S``)."""
     with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-async.log", sync=False) as env:
-        frames = playback_latency_frames(env)
+        frames = playback_latency_frames(env["JACK_DEFAULT_SERVER"])
         result = _worker(["stream", "tpad", "--block", str(LOAD_BLOCK), "--seconds", str(plan.compute_s)], env,
                          plan.compute_s + 120)
     log(f"async server: {_compute_text(result)}")

@@ -277,13 +277,20 @@ class Session:
             f"{stats['underflows']} underflows",
             f"callback compute: p50 {stats['compute_us_p50']:.1f} us, p99 {stats['compute_us_p99']:.1f} us "
             f"({100 * stats['callback_load_p99']:.1f} % of a block)",
-            f"push-to-output latency: p50 {stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms",
+            f"push-to-output latency: p50 {stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms"
+            + (f" (of which the host reports {stats['dac_delay_ms']:.2f} ms from callback to DAC)"
+               if stats["dac_delay_ms"] > 0 else ""),
             f"drive: peak {self.peak_v:.2f} V of {self.renderer.device.max_voltage_v:g} V max; saturated "
             f"{100 * stats['voltage_saturated'] / blocks:.1f} % of blocks (voltage), "
             f"{100 * stats['power_saturated'] / blocks:.1f} % (power)",
             f"power: mean {stats['power_mean_w']:.3f} W, peak {stats['power_peak_w']:.3f} W "
             f"(cap {stats['power_budget_w']:g} W, average budget {stats['power_avg_w']:g} W)",
         ]
+        period_ms = 1e3 * stats["block_frames"] / stats["rate_hz"]
+        device = self.renderer.audio_device
+        if device is not None and "JACK" in device.host_api and stats["dac_delay_ms"] > 1.5 * period_ms:
+            lines.append(f"the JACK server buffers {stats['dac_delay_ms'] / period_ms:.0f} periods before the DAC: "
+                         f"started with jackd -S (synchronous mode) it buffers one, {period_ms:.2f} ms less")
         if self.friction_errors:
             errors = np.array(self.friction_errors)
             lines.append(f"friction |texture under the finger - simulated plate| at {len(errors)} status samples "
