@@ -8,7 +8,8 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
     ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``record(path)``,
     ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``recent_fingers()``,
-    ``texture_t0_s()``, ``.texture``, ``.audio_device``, ``.callback_table``, ``.rate_hz``, ``.block_frames``, ``.running``
+    ``texture_t0_s()``, ``.texture``, ``.audio_device``, ``.callback_table``, ``.rate_hz``,
+    ``.block_frames``, ``.running``
 
 Example::
 

@@ -339,7 +339,8 @@ def markdown(report: dict[str, Any]) -> str:
         "has a baseline run (the empty `@cfunc`) next to it in time: the machine's other work drifts, and the "
         "dummy driver's xruns come in bursts. Due: the callbacks CLOCK_MONOTONIC says were due in the window; "
         "expected: the same from the stream's own clock (`Pa_GetStreamTime`), which a server in synchronous "
-        "mode slows down while it waits for a late client (and for a while after it). *Runs above / below the baseline*: rounds in which the callback had more / fewer "
+        "mode slows down while it waits for a late client (and for a while after it). "
+        "*Runs above / below the baseline*: rounds in which the callback had more / fewer "
         "underflows than the baseline run of the same round; *p*: one-sided sign test of \"more\" over the rounds "
         "that differ. Compute time: medians over the runs of each run's p50 and p99, and the largest max.",
         "",
@@ -471,7 +472,8 @@ def _latency_cells(row: dict[str, Any]) -> str:
     target_ms = 2 * row["block"] / RATE_HZ * 1e3
     return (f"{row['block']} | {latency['n']} | {latency['p50']:.3f} | {latency['p99']:.3f} | {latency['max']:.3f} "
             f"| {row['wait_ms']['p50']:.3f} / {row['wait_ms']['p99']:.3f} | {row['read_dac_delay_ms']['p50']:.3f} "
-            f"| {row['output_latency_s'] * 1e3:.3f} | {target_ms:.3f} | {'yes' if latency['p50'] <= target_ms else 'no'}")
+            f"| {row['output_latency_s'] * 1e3:.3f} | {target_ms:.3f} "
+            f"| {'yes' if latency['p50'] <= target_ms else 'no'}")
 
 
 def _group_latency_cells(group: dict[str, Any]) -> str:

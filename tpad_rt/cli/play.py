@@ -219,8 +219,9 @@ class Session:
 
         The plate is simulated over PROBE_WARMUP_S of drive, then the block of drive that
         ends at the newest sample whose time the finger samples cover; the texture under
-        the finger at that block's middle is what the plate should give (not the kernel's target, which is extrapolated ``horizon_ms``
-        ahead). Their difference is kept for the summary when touching and not saturated.
+        the finger at that block's middle is what the plate should give (not the kernel's
+        target, which is extrapolated ``horizon_ms`` ahead). Their difference is kept for
+        the summary when touching and not saturated.
         """
         renderer, table = self.renderer, self.renderer.callback_table
         if not renderer.output_url.startswith("sim") or table is None or not self.latest:
