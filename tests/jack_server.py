@@ -1,8 +1,8 @@
 """A real JACK server (dummy backend) for the audio tests, started and stopped by PID.
 
-``jack_server(rate_hz, period_frames)`` is a context manager around
-:func:`tpad_rt.jackd.dummy_server` (which starts ``jackd -n NAME -p 16 -d dummy -r RATE
--p PERIOD`` with a NAME no running server has and stops it by PID): it skips the test
+``jack_server(rate_hz, period_frames, sync=False)`` is a context manager around
+:func:`tpad_rt.jackd.dummy_server` (which starts ``jackd -n NAME [-S] -p 16 -d dummy -r
+RATE -p PERIOD`` with a NAME no running server has and stops it by PID): it skips the test
 without jackd or PortAudio (fails it under TPAD_RT_REQUIRE_SYSTEM=1), points clients
 at the server (``JACK_DEFAULT_SERVER``), re-initialises PortAudio so the JACK host API
 appears; on exit it terminates PortAudio (closing any stream left: PortAudio's JACK

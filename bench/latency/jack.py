@@ -37,10 +37,8 @@ def jack_server(rate_hz: int, period_frames: int, log: Path | None = None, *,
 
 def wait_for_no_clients(env: dict[str, str], timeout_s: float = 30.0) -> bool:
     """Poll ``jack_lsp`` until the server has no PortAudio client left (a worker that exited without closing
-    its stream stays a zombie client until the server notices); False if one is still there after ``timeout_s``.
-
-    In synchronous mode the server waits for a zombie client every cycle until it drops it, which would
-    slow the stream clock of the next run."""
+    its stream stays a client until the server notices), so that each run starts with no client of an
+    earlier one; False if one is still there after ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         ports = subprocess.run(["jack_lsp", "-s", env["JACK_DEFAULT_SERVER"]], capture_output=True, text=True,
