@@ -183,9 +183,8 @@ def _run_with_progress(render: OfflineRender, console: Console) -> None:
         task = progress.add_task("render", total=render.total_blocks, audio="")
         while not render.done:
             render.step()
-            if render.blocks_done % 256 == 0 or render.done:
-                audio = f"{render.blocks_done * seconds_per_block:.2f} s of audio"
-                progress.update(task, completed=render.blocks_done, total=render.total_blocks, audio=audio)
+            audio = f"{render.blocks_done * seconds_per_block:.2f} s of audio"
+            progress.update(task, completed=render.blocks_done, total=render.total_blocks, audio=audio)
 
 
 def _percent(mask: np.ndarray) -> str:
