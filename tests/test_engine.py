@@ -123,3 +123,20 @@ def test_the_package_offers_the_renderer_and_imports_it_only_when_asked() -> Non
     assert done.stdout == "ok\n", done.stderr
     with pytest.raises(AttributeError, match="has no attribute 'Renderr'"):
         tpad_rt.Renderr  # noqa: B018
+
+
+def test_telemetry_can_be_iterated_while_it_runs_until_it_stops() -> None:
+    renderer = Renderer(output="null://", texture=Path(__file__).resolve().parents[1] / "textures" / "grating.yaml")
+    with pytest.raises(RuntimeError, match="not running"):
+        next(renderer.iter_telemetry())
+    renderer.start()
+    stopper = threading.Timer(0.3, renderer.stop)
+    stopper.start()
+    chunks = []
+    for rows in renderer.iter_telemetry(period_s=0.02):
+        renderer.push_finger(30.0, 20.0)
+        chunks.append(rows)
+    stopper.join()
+    t = np.concatenate([rows["t"] for rows in chunks])
+    assert len(chunks) > 2 and np.all(np.diff(t) > 0)
+    assert len(t) == renderer.stats()["blocks"]  # every row, once

@@ -13,7 +13,7 @@ Textures (``tpad_rt.texture``)
     load_compiled(path) / compile_texture(model) -> CompiledTexture (.evaluate(x, y, ...))
 Real time (``tpad_rt.Renderer``, from ``tpad_rt.engine``; imported on first use)
     Renderer(device, output="audio://", texture=...): a context manager; start, stop
-    (ramped), set_texture, push_finger, lift, join, check, stats, telemetry, record,
+    (ramped), set_texture, push_finger, lift, join, check, stats, telemetry, iter_telemetry, record,
     recent_fingers, now_s
 Rendering (``tpad_rt.pipeline``)
     RenderOptions, Pipeline(device, texture, fs_hz, options): push_finger, lift,

@@ -6,7 +6,7 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
          options=RenderOptions())
     context manager; ``start()``, ``stop()``, ``set_texture(texture_or_path)``,
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
-    ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``record(path)``,
+    ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``iter_telemetry(period_s)``, ``record(path)``,
     ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``recent_fingers()``,
     ``texture_t0_s()``, ``.texture``, ``.audio_device``, ``.callback_table``, ``.rate_hz``,
     ``.block_frames``, ``.running``
@@ -40,6 +40,7 @@ import math
 import threading
 import time
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import asdict
 from pathlib import Path
 from types import TracebackType
@@ -498,6 +499,22 @@ class Renderer:
         with self._telemetry_lock:
             chunks, self._pending, self._pending_rows = list(self._pending), deque(), 0
         return _joined(chunks)
+
+    def iter_telemetry(self, period_s: float = 0.05) -> Iterator[dict[str, np.ndarray]]:
+        """Yield the new telemetry rows (as :meth:`telemetry` gives them) every ``period_s`` (s) while the
+        renderer runs, skipping empty periods; the last rows after it stops, then end (re-raising an
+        error the run met). One consumer at a time: :meth:`telemetry` takes the same rows. Raises
+        RuntimeError unless running when iteration starts."""
+        if not self.running:
+            raise RuntimeError("Renderer.iter_telemetry: not running (start() first)")
+        while not self._ended.wait(period_s):
+            rows = self.telemetry()
+            if len(rows["t"]):
+                yield rows
+        rows = self.telemetry()
+        if len(rows["t"]):
+            yield rows
+        self.check()
 
     def record(self, path: str | Path) -> None:
         """Record the drive and telemetry from now on; :meth:`stop` writes them to ``path`` (.npz, the
