@@ -36,6 +36,7 @@ import numpy as np
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, TpadError
 from tpad_rt.kernel import layout
+from tpad_rt.kernel.atomics import publish
 from tpad_rt.kernel.render import render_block
 from tpad_rt.texture import CompiledTexture
 
@@ -324,11 +325,12 @@ class Pipeline:
     ) -> None:
         """Append a finger sample: stream time (s, non-decreasing), plate position (mm), force (N; NaN: unknown).
 
-        Writes the ring row first, then bumps the count the kernel reads (single producer).
+        Writes the ring row first, then bumps the count the kernel reads (single producer), with a
+        release store (:func:`tpad_rt.kernel.atomics.publish`).
         """
         finger, count = self._arrays.finger, self._arrays.finger_count
         finger[count[0] % finger.shape[0]] = (t_s, x_mm, y_mm, force_n, 1.0 if down else 0.0)
-        count[0] += 1
+        publish(count, 0, int(count[0]) + 1)  # after the row: a release store
 
     def lift(self, t_s: float) -> None:
         """The finger leaves the plate at stream time ``t_s`` (s): the drive ramps to 0."""

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from tpad_rt.kernel import callback as cb
+from tpad_rt.kernel.atomics import publish
 from tpad_rt.kernel.layout import CFG_FS_HZ, CFG_TEXTURE_T0_S, STATE_NEXT_INDEX
 from tpad_rt.pipeline import KernelArrays
 from tpad_rt.texture import CompiledTexture
@@ -130,7 +131,7 @@ class CallbackTable:
                 time.sleep(0.0005)
         idle = 1 - self.active_slot
         self._write_slot(idle, texture, t0_s)
-        self.table[cb.TAB_ACTIVE_SLOT] = idle
+        publish(self.table, cb.TAB_ACTIVE_SLOT, idle)  # after the slot: a release store
         self._flip_callbacks = int(self.stats[cb.STAT_CALLBACKS])
 
     def recent_blocks(self) -> np.ndarray:

@@ -32,11 +32,14 @@ The pointer table (int64; addresses are ``ndarray.ctypes.data``):
 - a drive ring (float32, ``TAB_DRIVE``, ``TAB_DRIVE_FRAMES``) holding the last samples
   rendered (sample ``n`` at ``n % frames``), for recordings;
 - the statistics (int64 ``[STAT_SIZE]``) and the per-block record ring (int64
-  ``[TAB_BLOCK_ROWS, BLOCK_COLS]``, row ``callbacks % rows``).
+  ``[TAB_BLOCK_ROWS, BLOCK_COLS]``, row ``callbacks % rows``);
+- ``TAB_FINGER_SEEN``: the finger count the running callback acquired (below).
 
-A 64-bit aligned store is atomic on the platforms numba targets, and x86-64 keeps
-stores in program order: the Python side writes a whole idle slot, then
-``TAB_ACTIVE_SLOT``; the callback reads the index once per callback.
+The Python side publishes with release stores (:func:`tpad_rt.kernel.atomics.publish`)
+and the callback reads with acquire loads, so it never sees an index before the data
+it covers, on any CPU: a whole idle slot, then ``TAB_ACTIVE_SLOT`` (read once per
+callback); a finger row, then ``finger_count`` (acquired once per callback into
+``TAB_FINGER_SEEN``, which the kernel reads in its place).
 """
 
 from __future__ import annotations
@@ -48,7 +51,8 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from tpad_rt.kernel import render
+from tpad_rt.kernel import atomics, render
+from tpad_rt.kernel.atomics import load_acquire
 from tpad_rt.kernel.cache_stamp import stamp_cache
 from tpad_rt.kernel.layout import CFG_TEXTURE_T0_S, FINGER_COLS, STATE_NEXT_INDEX, TEL_COLS, TEX_PROG_COLS
 from tpad_rt.kernel.render import render_block
@@ -80,7 +84,8 @@ TAB_DRIVE_FRAMES = 22
 TAB_STATS = 23                # int64[STAT_SIZE]
 TAB_BLOCKS = 24               # int64[TAB_BLOCK_ROWS, BLOCK_COLS]
 TAB_BLOCK_ROWS = 25
-TAB_SLOTS = 26                # two texture slots of SLOT_SIZE entries each
+TAB_FINGER_SEEN = 26          # finger_count as this callback acquired it (written by the callback)
+TAB_SLOTS = 27                # two texture slots of SLOT_SIZE entries each
 # --- a texture slot: offsets from TAB_SLOTS + k * SLOT_SIZE -------------------------
 SLOT_PROG = 0                 # prog [SLOT_PROG_ROWS, TEX_PROG_COLS] int64
 SLOT_PROG_ROWS = 1
@@ -122,7 +127,7 @@ _I8 = np.int64
 
 # render_block and everything it inlines is compiled into these callbacks: their disk
 # cache is stamped with this file and every source render.py stamps its own with.
-stamp_cache(__file__, *render.COMPILED_SOURCES)
+stamp_cache(__file__, atomics.__file__, *render.COMPILED_SOURCES)
 
 
 @intrinsic
@@ -162,17 +167,19 @@ def _monotonic_ns(typingctx):  # type: ignore[no-untyped-def]
 @numba.njit(inline="always", nogil=True, error_model="numpy")
 def _begin(table, first_sample, frames, time_info):  # type: ignore[no-untyped-def]
     """Start a callback's record: its row in the block ring (``first_sample``, entry time, DAC delay,
-    finger count, ``frames``)."""
+    finger count, ``frames``). The finger count is load-acquired once into ``TAB_FINGER_SEEN``: the
+    rows of those samples are then visible, and the kernel reads that count, not the live one."""
     entry_ns = _monotonic_ns()
     stats = numba.carray(_pointer(table[TAB_STATS]), STAT_SIZE, _I8)
     blocks = numba.carray(_pointer(table[TAB_BLOCKS]), (table[TAB_BLOCK_ROWS], BLOCK_COLS), _I8)
     times = numba.carray(time_info, 3, _F8)  # PaStreamCallbackTimeInfo: adc, current, dac (s)
     finger_count = numba.carray(_pointer(table[TAB_FINGER_COUNT]), 1, _I8)
+    table[TAB_FINGER_SEEN] = load_acquire(finger_count, 0)
     row = blocks[stats[STAT_CALLBACKS] % blocks.shape[0]]
     row[BLOCK_SAMPLE_INDEX] = first_sample
     row[BLOCK_ENTRY_NS] = entry_ns
     row[BLOCK_DAC_DELAY_NS] = np.int64((times[2] - times[1]) * 1e9)
-    row[BLOCK_FINGER_COUNT] = finger_count[0]
+    row[BLOCK_FINGER_COUNT] = table[TAB_FINGER_SEEN]
     row[BLOCK_FRAMES] = frames
     return stats, row, entry_ns
 
@@ -215,10 +222,10 @@ def render_callback(input_buffer, output_buffer, frames, time_info, status_flags
     dev = numba.carray(_pointer(table[TAB_DEV]), (table[TAB_DEV_ROWS], table[TAB_DEV_COLS]), _F8)
     power_ring = numba.carray(_pointer(table[TAB_POWER_RING]), table[TAB_POWER_RING_SIZE], _F8)
     finger = numba.carray(_pointer(table[TAB_FINGER]), (table[TAB_FINGER_ROWS], FINGER_COLS), _F8)
-    finger_count = numba.carray(_pointer(table[TAB_FINGER_COUNT]), 1, _I8)
+    finger_count = table[TAB_FINGER_SEEN:TAB_FINGER_SEEN + 1]  # acquired in _begin
     telem = numba.carray(_pointer(table[TAB_TELEM]), (table[TAB_TELEM_ROWS], TEL_COLS), _F8)
     telem_count = numba.carray(_pointer(table[TAB_TELEM_COUNT]), 1, _I8)
-    active = table[TAB_ACTIVE_SLOT]
+    active = load_acquire(table, TAB_ACTIVE_SLOT)  # the slot's contents were written before it
     slot = table[TAB_SLOTS + active * SLOT_SIZE: TAB_SLOTS + (active + 1) * SLOT_SIZE]
     prog = numba.carray(_pointer(slot[SLOT_PROG]), (slot[SLOT_PROG_ROWS], TEX_PROG_COLS), _I8)
     params = numba.carray(_pointer(slot[SLOT_PARAMS]), slot[SLOT_PARAMS_SIZE], _F8)
