@@ -317,8 +317,7 @@ class Renderer:
                     rendered = due - 1
                 for _ in range(due - rendered):
                     table.call(block)
-                    row = table.arrays.telem[(table.arrays.telem_count[0] - 1) % len(table.arrays.telem)]
-                    output.write(block, dict(zip(TEL_NAMES, row.tolist())))
+                    output.write(block, self._pipeline.last_telemetry_row())
                 rendered = max(rendered, due)
                 time.sleep(min(0.005, self.block_frames / self.rate_hz))
 

@@ -145,12 +145,11 @@ class OfflineRender:
         self._pushed_until_s = float(ends_s[-1])
         self._finger.append(samples)
         pushed_by = np.searchsorted(samples["t_s"], ends_s, side="right")  # samples due by each block's end
-        telem, telem_count = pipeline.arrays.telem, pipeline.arrays.telem_count
         row: dict[str, float] = {}
         for k in range(count):
             self._push(samples[pushed_by[k - 1] if k else 0:pushed_by[k]])
             pipeline.render(block)
-            row = dict(zip(TEL_NAMES, telem[(telem_count[0] - 1) % len(telem)].tolist()))
+            row = pipeline.last_telemetry_row()
             for output in self.outputs:
                 output.write(block, row)
                 row.update(output.latest())

@@ -13,6 +13,7 @@ Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
     ``.set_texture(texture, t_s=None)``, ``.start()``, ``.stop()``
     ``.render(out)``: the next ``len(out)`` float32 samples (1.0 = ``volts_per_full_scale``)
     ``.drain_telemetry() -> dict[str, np.ndarray]``: rows since the last drain, keyed by TEL_NAMES
+    ``.last_telemetry_row() -> dict[str, float]``: the newest row, not drained
     ``.warm_up()``, ``.arrays`` (KernelArrays: every array ``render_block`` takes, in its order)
 KernelArrays
     NamedTuple ``cfg, dev, state, power_ring, finger, finger_count, prog, params, img, stack,
@@ -367,6 +368,11 @@ class Pipeline:
             raise ValueError(f"out: must hold 1 to {MAX_BLOCK} samples, got {out.size}")
         render_block(out, self.sample_index, *self._arrays)
         self.sample_index += out.size
+
+    def last_telemetry_row(self) -> dict[str, float]:
+        """The newest telemetry row (the last rendered block's), by ``layout.TEL_NAMES``; not drained."""
+        telem, count = self._arrays.telem, self._arrays.telem_count
+        return dict(zip(layout.TEL_NAMES, telem[(count[0] - 1) % telem.shape[0]].tolist()))
 
     def drain_telemetry(self) -> dict[str, np.ndarray]:
         """The telemetry rows written since the last drain, one array per ``layout.TEL_NAMES`` column.
