@@ -26,3 +26,12 @@ class ConfigError(TpadError):
 
 class BackendError(TpadError):
     """An input or output backend could not be opened or failed while running."""
+
+
+class SampleError(TpadError, ValueError):
+    """A finger sample (or another value handed to the renderer at run time) is out of its range.
+
+    A ValueError for API users and a TpadError for the command line: the message names
+    the argument, the accepted range and the value (``x_mm: must be a finite number in
+    [-130, 260] mm, got nan``).
+    """
