@@ -66,6 +66,21 @@ FLAG_VOLTAGE = 1              # drive limited by max_voltage_v
 FLAG_POWER = 2                # drive limited by the power cap or average budget
 FLAG_SPEED_FLOOR = 4          # finger slower than the speed floor
 FLAG_WATCHDOG = 8             # no fresh finger sample, or finger lifted: gate closed
+FLAG_FAULT = 16               # a non-finite or absurd value met: the drive ramps to 0 (FAULT_* say where)
+
+# --- fault causes: bits of STATE_FAULT_CAUSES ----------------------------------
+FAULT_FINGER = 1              # the finger sample or the velocity from it is non-finite or absurd
+FAULT_TEXTURE = 2             # the texture's value (or the command from it) is not finite
+FAULT_DEVICE = 4              # a device table value (amplitude, power per V^2, tau) is not finite and > 0
+FAULT_POWER = 8               # the power estimate or the cap from it is not finite
+FAULT_STATE = 16              # the kernel's own state held a value out of its range (reset)
+FAULT_OUTPUT = 32             # a sample past the voltage limit or not finite reached the output guard (zeroed)
+FAULT_NAMES = ("finger", "texture", "device", "power", "state", "output")
+# The kernel's own bounds (looser than the boundary's, tpad_rt/limits.py): a finger beyond
+# them is a fault; a speed above MAX_SPEED_MM_S is clamped to it.
+ABSURD_POSITION_MM = 1e6
+ABSURD_FORCE_N = 1e4
+MAX_SPEED_MM_S = 1e5
 
 # --- texture program: int64[N, 4] rows (opcode, params_offset, aux0, aux1) ---
 OP_PUSH_ONE = 0
@@ -144,9 +159,15 @@ STATE_TABLE_SMOOTHING_S = 28
 STATE_NEXT_PHASE = 29         # STATE_NEXT_INDEX % control_interval
 STATE_FIRST_SEGMENT_SAMPLES = 30  # samples of the open step's first rendered piece (0: none yet)
 STATE_FIRST_SEGMENT_V2 = 31   # their sum of e^2 (V^2)
+# The fault guard's counters (tpad_rt/kernel/render.py "Faults"):
+STATE_FAULT_STEPS = 32        # control steps that met a fault
+STATE_FAULT_EVENTS = 33       # faults that began (a fault step after a step without)
+STATE_FAULT_CAUSES = 34       # OR of the FAULT_* bits met so far
+STATE_FAULT_PREVIOUS = 35     # 1.0 if the last control step met a fault
+STATE_FAULT_SAMPLES = 36      # samples the output guard zeroed
 # Per-sample tables, indexed by j, the sample's offset in its control step:
 MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
-STATE_COS_TABLE = 32          # cos(j w), w the carrier's phase step (rad)
+STATE_COS_TABLE = 40          # cos(j w), w the carrier's phase step (rad)
 STATE_SIN_TABLE = STATE_COS_TABLE + MAX_CONTROL_INTERVAL       # sin(j w)
 STATE_DECAY_TABLE = STATE_SIN_TABLE + MAX_CONTROL_INTERVAL     # d^(j + 1), d the smoothing decay
 STATE_ENVELOPE = STATE_DECAY_TABLE + MAX_CONTROL_INTERVAL      # the open step's envelope e_j (V)

@@ -42,6 +42,8 @@ import numpy as np
 from tpad_rt.kernel import layout, texture_eval
 from tpad_rt.kernel.cache_stamp import stamp_cache
 from tpad_rt.kernel.layout import (
+    ABSURD_FORCE_N,
+    ABSURD_POSITION_MM,
     CFG_CARRIER_HZ,
     CFG_CONTROL_INTERVAL,
     CFG_DEFAULT_FORCE_N,
@@ -73,11 +75,19 @@ from tpad_rt.kernel.layout import (
     FINGER_T_S,
     FINGER_X_MM,
     FINGER_Y_MM,
+    FAULT_DEVICE,
+    FAULT_FINGER,
+    FAULT_OUTPUT,
+    FAULT_POWER,
+    FAULT_STATE,
+    FAULT_TEXTURE,
+    FLAG_FAULT,
     FLAG_POWER,
     FLAG_SPEED_FLOOR,
     FLAG_VOLTAGE,
     FLAG_WATCHDOG,
     MAX_CONTROL_INTERVAL,
+    MAX_SPEED_MM_S,
     STATE_AMPLITUDE_M,
     STATE_CAP_V,
     STATE_CARRIER_COS,
@@ -86,6 +96,11 @@ from tpad_rt.kernel.layout import (
     STATE_COS_TABLE,
     STATE_DECAY_TABLE,
     STATE_ENVELOPE,
+    STATE_FAULT_CAUSES,
+    STATE_FAULT_EVENTS,
+    STATE_FAULT_PREVIOUS,
+    STATE_FAULT_SAMPLES,
+    STATE_FAULT_STEPS,
     STATE_FINGER_SAMPLE,
     STATE_FIRST_SEGMENT_SAMPLES,
     STATE_FIRST_SEGMENT_V2,
@@ -210,7 +225,9 @@ def _force_cell(cfg: np.ndarray, dev: np.ndarray, force_n: float) -> tuple[int, 
     """Columns ``(i, i + 1)`` of the force grid around ``force_n`` (N) and the weight of the second, clamped."""
     last = dev.shape[1] - 1
     position = (force_n - cfg[CFG_FORCE_GRID_START_N]) / cfg[CFG_FORCE_GRID_STEP_N]
-    position = min(max(position, 0.0), float(last))
+    if not position > 0.0:  # NaN too: never an index from a non-finite value
+        position = 0.0
+    position = min(position, float(last))
     i = min(int(position), max(last - 1, 0))
     return i, min(i + 1, last), position - i
 
@@ -258,6 +275,15 @@ def _ring_sum(power_ring: np.ndarray) -> float:
 
 
 @_inline
+def _repaired_ring_sum(power_ring: np.ndarray, cap_w: float) -> float:
+    """Sum of the power ring (W) after entering every slot that is not a finite power >= 0 as ``cap_w``."""
+    for slot in range(power_ring.shape[0]):
+        if not 0.0 <= power_ring[slot] < math.inf:
+            power_ring[slot] = cap_w
+    return _ring_sum(power_ring)
+
+
+@_inline
 def _envelope_sums(state: np.ndarray, first: int, stop: int) -> tuple[float, float]:
     """Peak (V) and sum of squares (V^2) of the open step's envelope ``e_j``, ``first <= j < stop``.
 
@@ -291,22 +317,27 @@ def _envelope_sums(state: np.ndarray, first: int, stop: int) -> tuple[float, flo
 
 
 @_inline
-def _close_step(state: np.ndarray, power_ring: np.ndarray) -> None:
+def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> None:
     """Account for the open control step: its power into the ring, its smoothing and ramp advanced.
 
     The step's power is ``p1(force) * mean(e^2)`` over its rendered samples, the sum of
     ``e^2`` taken in one fixed order (the first segment's sum when it covered the whole
     step, else the same sum recomputed), whatever the blocks were. The ring's
     running sum is recomputed from scratch each time the last slot is written, so its
-    rounding error never accumulates beyond one window.
+    rounding error never accumulates beyond one window. A step whose power is not a
+    finite number >= 0 is entered as ``power_cap_w``.
     """
-    samples = int(state[STATE_STEP_SAMPLES])
-    if state[STATE_STEP_OPEN] == 0.0 or samples == 0:
+    if state[STATE_STEP_OPEN] == 0.0 or not 0.0 < state[STATE_STEP_SAMPLES] <= MAX_CONTROL_INTERVAL:
         return
+    if not 0.0 <= state[STATE_RING_SLOT] < power_ring.shape[0]:
+        return  # a corrupt slot: _control_step resets it and counts a state fault
+    samples = int(state[STATE_STEP_SAMPLES])
     energy_v2 = state[STATE_FIRST_SEGMENT_V2]
     if state[STATE_FIRST_SEGMENT_SAMPLES] != samples:  # rendered in pieces: sum them in the same order
         energy_v2 = _envelope_sums(state, 0, samples)[1]
     power_w = state[STATE_POWER_PER_V2] * energy_v2 / samples
+    if not 0.0 <= power_w < math.inf:  # counted as the whole cap: the budget errs on the safe side
+        power_w = cfg[CFG_POWER_CAP_W]
     slot = int(state[STATE_RING_SLOT])
     state[STATE_WINDOW_SUM_W] += power_w - power_ring[slot]
     power_ring[slot] = power_w
@@ -365,8 +396,9 @@ def _newest_sample(finger: np.ndarray, count: int, t_s: float, hint: int) -> tup
 def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, row: int, window_s: float) -> tuple[float, float]:
     """Finger velocity (mm/s) from sample ``newest`` (at ``row``) and the oldest of its touch within ``window_s``.
 
-    The touch runs back while samples are down; ``(0, 0)`` without an older sample
-    or when the two samples share a time.
+    The touch runs back while samples are down and their positions are finite and
+    within ABSURD_POSITION_MM (a bad sample ends it, as a lift does); ``(0, 0)`` without
+    an older sample or when the two samples share a time.
     """
     rows = finger.shape[0]
     oldest = max(0, count - rows + 1)
@@ -374,7 +406,9 @@ def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, row: int, window
     first = row
     k = newest - 1
     earlier = _previous_slot(row, rows)
-    while k >= oldest and finger[earlier, FINGER_DOWN] != 0.0 and t_newest - finger[earlier, FINGER_T_S] <= window_s:
+    while (k >= oldest and finger[earlier, FINGER_DOWN] != 0.0 and t_newest - finger[earlier, FINGER_T_S] <= window_s
+           and abs(finger[earlier, FINGER_X_MM]) <= ABSURD_POSITION_MM
+           and abs(finger[earlier, FINGER_Y_MM]) <= ABSURD_POSITION_MM):
         first = earlier
         k -= 1
         earlier = _previous_slot(earlier, rows)
@@ -387,44 +421,66 @@ def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, row: int, window
 
 
 @_inline
-def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndarray, count: int) -> bool:
-    """Update the step's finger in ``state`` (position extrapolated, speed, force); True if it is active.
+def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndarray, count: int) -> int:
+    """Update the step's finger in ``state`` (position extrapolated, speed, force): 1 if it is active,
+    0 if not, -1 for a fault (the sample or the velocity from it is not finite, or is absurd).
 
     Active: a sample at or before ``t_s``, down, at most ``watchdog_s`` old. When not
-    active the previous step's finger is kept.
+    active, or at a fault, the previous step's finger is kept. A speed above
+    MAX_SPEED_MM_S is clamped to it (direction kept); a position beyond
+    ABSURD_POSITION_MM, extrapolated or not, or a force outside ``[0, ABSURD_FORCE_N]``
+    (NaN: unknown, the default applies) is a fault.
     """
-    newest, row = _newest_sample(finger, count, t_s, int(state[STATE_FINGER_SAMPLE]) - 1)
+    hint = state[STATE_FINGER_SAMPLE]
+    newest, row = _newest_sample(finger, count, t_s, int(hint) - 1 if 0.0 <= hint <= count else -1)
     state[STATE_FINGER_SAMPLE] = newest + 1.0
     if newest < 0:
-        return False
+        return 0
     age_s = t_s - finger[row, FINGER_T_S]
     watchdog_s = cfg[CFG_WATCHDOG_S]
     if finger[row, FINGER_DOWN] == 0.0 or age_s > watchdog_s:
-        return False
+        return 0
+    x_mm = finger[row, FINGER_X_MM]
+    y_mm = finger[row, FINGER_Y_MM]
+    force_n = finger[row, FINGER_FORCE_N]
+    if not (abs(x_mm) <= ABSURD_POSITION_MM and abs(y_mm) <= ABSURD_POSITION_MM
+            and (math.isnan(force_n) or 0.0 <= force_n <= ABSURD_FORCE_N)):
+        return -1
     if state[STATE_VELOCITY_SAMPLE] != newest + 1.0:
         vx, vy = _velocity_mm_s(finger, count, newest, row, cfg[CFG_VELOCITY_WINDOW_S])
+        fastest = max(abs(vx), abs(vy))
+        if not fastest < math.inf:
+            return -1
+        if fastest > MAX_SPEED_MM_S:
+            vx *= MAX_SPEED_MM_S / fastest
+            vy *= MAX_SPEED_MM_S / fastest
         state[STATE_VX_MM_S] = vx
         state[STATE_VY_MM_S] = vy
         state[STATE_VELOCITY_SAMPLE] = newest + 1.0
     vx = state[STATE_VX_MM_S]
     vy = state[STATE_VY_MM_S]
     lead_s = min(age_s + cfg[CFG_HORIZON_S], watchdog_s)
-    state[STATE_X_MM] = finger[row, FINGER_X_MM] + vx * lead_s
-    state[STATE_Y_MM] = finger[row, FINGER_Y_MM] + vy * lead_s
+    x_mm += vx * lead_s
+    y_mm += vy * lead_s
+    if not (abs(x_mm) <= ABSURD_POSITION_MM and abs(y_mm) <= ABSURD_POSITION_MM):
+        return -1
+    state[STATE_X_MM] = x_mm
+    state[STATE_Y_MM] = y_mm
     state[STATE_SPEED_MM_S] = math.sqrt(vx * vx + vy * vy)
-    force_n = finger[row, FINGER_FORCE_N]
     state[STATE_FORCE_N] = cfg[CFG_DEFAULT_FORCE_N] if math.isnan(force_n) else force_n
-    return True
+    return 1
 
 
 @_inline
 def _command_volts(
     t_s: float, cfg: np.ndarray, state: np.ndarray, amplitude_m_per_v: float,
     prog: np.ndarray, params: np.ndarray, img: np.ndarray, stack: np.ndarray,
-) -> tuple[float, int]:
+) -> tuple[float, int, int]:
     """Envelope volts (peak) the texture asks for at the step's finger, and FLAG_SPEED_FLOOR if floored.
 
-    Writes the clamped target friction to ``state``.
+    Returns ``(volts, FLAG_* bits, FAULT_* bits)``; writes the clamped target friction to
+    ``state``. A texture value that is not finite is a FAULT_TEXTURE, a command that is
+    not a finite number >= 0 (the device's constants) a FAULT_DEVICE: the volts are 0 then.
     """
     speed_mm_s = state[STATE_SPEED_MM_S]
     per_speed = 1.0 / speed_mm_s if speed_mm_s > 0.0 else 0.0
@@ -433,6 +489,8 @@ def _command_volts(
     mu = eval_texture(
         prog, params, img, stack, state[STATE_X_MM], state[STATE_Y_MM], ux, uy, t_s - cfg[CFG_TEXTURE_T0_S]
     )
+    if not abs(mu) < math.inf:
+        return 0.0, 0, FAULT_TEXTURE
     mu = min(max(mu, cfg[CFG_MU_FLOOR]), 1.0)
     state[STATE_TARGET_MU] = mu
     speed_m_s = speed_mm_s * 1e-3
@@ -443,25 +501,70 @@ def _command_volts(
     amplitude_m = amplitude_for_core(
         mu, cfg[CFG_CARRIER_HZ], speed_m_s, cfg[CFG_MU0], cfg[CFG_POISSON], cfg[CFG_PSI_STAR]
     )
-    return amplitude_m / amplitude_m_per_v, flags
+    command_v = amplitude_m / amplitude_m_per_v
+    if not 0.0 <= command_v < math.inf:
+        return 0.0, 0, FAULT_DEVICE
+    return command_v, flags, 0
 
 
 @_inline
-def _cap_volts(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray, p1_w: float, slot: int) -> tuple[float, int]:
-    """The step's envelope cap (volts peak) and the FLAG_* of the bound that sets it.
+def _cap_volts(
+    cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray, p1_w: float, slot: int
+) -> tuple[float, int, int]:
+    """The step's envelope cap (volts peak), the FLAG_* of the bound that sets it, and FAULT_* bits.
 
     ``min(max_voltage_v, sqrt(power_cap_w / p1), sqrt(allowance / p1))``, each limit
     times ``1 - SAFETY_MARGIN``; ``allowance = M * power_avg_w`` less the previous
     ``M - 1`` steps' powers (the ring without ``slot``, which this step will overwrite).
+    A running sum or ring slot that is not finite is rebuilt (FAULT_STATE); a power
+    bound that is not a finite number >= 0 gives a cap of 0 (FAULT_POWER).
     """
     keep = 1.0 - SAFETY_MARGIN
+    fault = 0
+    if not (abs(state[STATE_WINDOW_SUM_W]) < math.inf and abs(power_ring[slot]) < math.inf):
+        state[STATE_WINDOW_SUM_W] = _repaired_ring_sum(power_ring, cfg[CFG_POWER_CAP_W])
+        fault = FAULT_STATE
     previous_w = state[STATE_WINDOW_SUM_W] - power_ring[slot]
     allowance_w = max(power_ring.shape[0] * cfg[CFG_POWER_AVG_W] * keep - previous_w, 0.0)
     power_v = math.sqrt(min(cfg[CFG_POWER_CAP_W] * keep, allowance_w) / p1_w)
     voltage_v = cfg[CFG_MAX_VOLTAGE_V] * keep
     if voltage_v <= power_v:
-        return voltage_v, FLAG_VOLTAGE
-    return power_v, FLAG_POWER
+        return voltage_v, FLAG_VOLTAGE, fault
+    if power_v >= 0.0:
+        return power_v, FLAG_POWER, fault
+    return 0.0, FLAG_POWER, fault | FAULT_POWER
+
+
+@_inline
+def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
+    """Reset the carried values that are out of their ranges; FAULT_STATE if one was.
+
+    The smoothed volts must lie in ``[0, max_voltage_v]``, the gain ramp position in
+    ``[0, ramp samples]`` (both 0 for a fresh stream); a reset one restarts from 0 (no
+    ramp can start from a value that is not finite). The per-sample tables are then
+    rebuilt, in case they were overwritten too.
+    """
+    fault = 0
+    if not 0.0 <= state[STATE_SMOOTH_START_V] <= cfg[CFG_MAX_VOLTAGE_V]:
+        state[STATE_SMOOTH_START_V] = 0.0
+        fault = FAULT_STATE
+    if not 0.0 <= state[STATE_RAMP_START] <= max(state[STATE_RAMP_SAMPLES], 0.0):
+        state[STATE_RAMP_START] = 0.0
+        fault = FAULT_STATE
+    if fault:
+        state[STATE_TABLE_FS_HZ] = math.nan  # never equal: _refresh_tables rebuilds them
+    return fault
+
+
+@_inline
+def _note_fault(state: np.ndarray, causes: int) -> None:
+    """Count a control step that met the faults ``causes`` (FAULT_* bits); a new fault if the last step had none."""
+    if state[STATE_FAULT_PREVIOUS] == 0.0:
+        state[STATE_FAULT_EVENTS] += 1.0
+    state[STATE_FAULT_PREVIOUS] = 1.0
+    state[STATE_FAULT_STEPS] += 1.0
+    known = state[STATE_FAULT_CAUSES]
+    state[STATE_FAULT_CAUSES] = float((int(known) if 0.0 <= known < 2**31 else 0) | causes)
 
 
 @_inline
@@ -470,33 +573,71 @@ def _control_step(
     finger: np.ndarray, finger_count: np.ndarray,
     prog: np.ndarray, params: np.ndarray, img: np.ndarray, stack: np.ndarray,
 ) -> None:
-    """Close the open step and open one at sample ``n``: finger, texture, inverse model, limits, carrier."""
-    slot = _next_slot(int(state[STATE_RING_SLOT]), power_ring.shape[0]) if state[STATE_STEP_OPEN] != 0.0 else 0
-    _close_step(state, power_ring)
+    """Close the open step and open one at sample ``n``: finger, texture, inverse model, limits, carrier.
+
+    Faults (docs/kernel.md "Faults"): a finger, texture, device or power value that is
+    not finite or is absurd, or carried state out of its range, makes the step's
+    command 0 and closes the gate (the drive ramps to 0), sets FLAG_FAULT and counts it;
+    the next step starts afresh from the data it then finds.
+    """
+    fault = 0
+    slot = 0
+    if state[STATE_STEP_OPEN] != 0.0:
+        if 0.0 <= state[STATE_RING_SLOT] < power_ring.shape[0]:
+            slot = _next_slot(int(state[STATE_RING_SLOT]), power_ring.shape[0])
+        else:
+            fault = FAULT_STATE
+    _close_step(cfg, state, power_ring)
+    fault |= _repaired_state(cfg, state)
     _refresh_tables(cfg, state)
     fs_hz = cfg[CFG_FS_HZ]
     t_s = n / fs_hz
-    active = _read_finger(t_s, cfg, state, finger, finger_count[0])
+    finger_status = _read_finger(t_s, cfg, state, finger, finger_count[0])
+    if finger_status < 0:
+        fault |= FAULT_FINGER
     cell = _force_cell(cfg, dev, state[STATE_FORCE_N])
     amplitude_m_per_v = _device_value(dev, DEV_AMP_M_PER_V, cell)
-    if active:
-        command_v, flags = _command_volts(t_s, cfg, state, amplitude_m_per_v, prog, params, img, stack)
-    else:
+    p1_w = _device_value(dev, DEV_POWER_W_PER_V2, cell)
+    tau_s = _device_value(dev, DEV_TAU_S, cell)
+    if not (0.0 < amplitude_m_per_v < math.inf and 0.0 < p1_w < math.inf and 0.0 <= tau_s < math.inf):
+        fault |= FAULT_DEVICE
+        # The step's power is then counted as if a drive at max_voltage_v used the whole cap.
+        p1_w = cfg[CFG_POWER_CAP_W] / (cfg[CFG_MAX_VOLTAGE_V] * cfg[CFG_MAX_VOLTAGE_V])
+        tau_s = 0.0
+    command_v = 0.0
+    flags = 0
+    if finger_status > 0 and fault == 0:
+        command_v, flags, command_fault = _command_volts(
+            t_s, cfg, state, amplitude_m_per_v, prog, params, img, stack)
+        fault |= command_fault
+    elif finger_status == 0:
         command_v = state[STATE_COMMAND_V]
         flags = FLAG_WATCHDOG
-    p1_w = _device_value(dev, DEV_POWER_W_PER_V2, cell)
-    cap_v, limit_flag = _cap_volts(cfg, state, power_ring, p1_w, slot)
+    cap_v, limit_flag, cap_fault = _cap_volts(cfg, state, power_ring, p1_w, slot)
+    fault |= cap_fault
     if command_v > cap_v:
         command_v = cap_v
         flags |= limit_flag
+    elif not command_v >= 0.0:
+        fault |= FAULT_STATE
+    preemphasis_gain = tau_s / cfg[CFG_SMOOTHING_S] if cfg[CFG_PREEMPHASIS] != 0.0 else 0.0
+    if not 0.0 <= preemphasis_gain < math.inf:
+        fault |= FAULT_DEVICE
+    if fault:
+        command_v = 0.0
+        preemphasis_gain = 0.0
+        flags |= FLAG_FAULT
+        _note_fault(state, fault)
+    else:
+        state[STATE_FAULT_PREVIOUS] = 0.0
     state[STATE_COMMAND_V] = command_v
     state[STATE_CAP_V] = cap_v
-    state[STATE_AMPLITUDE_M] = command_v * amplitude_m_per_v
+    state[STATE_AMPLITUDE_M] = command_v * amplitude_m_per_v if fault == 0 else 0.0
     state[STATE_POWER_PER_V2] = p1_w
-    tau_s = _device_value(dev, DEV_TAU_S, cell)
-    state[STATE_PREEMPHASIS_GAIN] = tau_s / cfg[CFG_SMOOTHING_S] if cfg[CFG_PREEMPHASIS] != 0.0 else 0.0
-    state[STATE_GATE] = 1.0 if active and cfg[CFG_RUN] != 0.0 else 0.0
+    state[STATE_PREEMPHASIS_GAIN] = preemphasis_gain
+    state[STATE_GATE] = 1.0 if finger_status > 0 and fault == 0 and cfg[CFG_RUN] != 0.0 else 0.0
     state[STATE_RAMP_SAMPLES] = max(1.0, float(round(cfg[CFG_RAMP_S] * fs_hz)))
+    state[STATE_RAMP_START] = min(state[STATE_RAMP_START], state[STATE_RAMP_SAMPLES])
     phase_units = carrier_phase_units(n, carrier_step_units(cfg[CFG_CARRIER_HZ], fs_hz))
     state[STATE_CARRIER_COS], state[STATE_CARRIER_SIN] = _unit_phasor(phase_units)
     state[STATE_RING_SLOT] = slot
@@ -507,10 +648,14 @@ def _control_step(
 
 
 @_inline
-def _render_samples(out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float) -> None:
+def _render_samples(
+    out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float
+) -> int:
     """Render ``out[first:stop]``, all inside the open step, and store their envelope in ``state``.
 
-    No value is carried from one sample to the next, so the loop vectorises.
+    The output guard: a sample whose magnitude is not within ``limit`` (full scale;
+    NaN included) is written as 0 with envelope 0. Returns how many were. No value is
+    carried from one sample to the next, so the loop vectorises.
     """
     command_v = state[STATE_COMMAND_V]
     cap_v = state[STATE_CAP_V]
@@ -528,13 +673,40 @@ def _render_samples(out: np.ndarray, first: int, stop: int, state: np.ndarray, o
     sin_jw = state[STATE_SIN_TABLE + j0 : STATE_SIN_TABLE + j0 + count]
     envelope = state[STATE_ENVELOPE + j0 : STATE_ENVELOPE + j0 + count]
     samples = out[first:stop]
+    rejected = 0
     for k in range(count):
         drive_v = min(max(command_v + offset_v * decay[k], 0.0), cap_v)
         ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
         e_v = ramp * per_ramp_sample * drive_v
-        samples[k] = e_v * (sin0 * cos_jw[k] + cos0 * sin_jw[k])
-        envelope[k] = e_v
+        sample = e_v * (sin0 * cos_jw[k] + cos0 * sin_jw[k])
+        inside = abs(sample) <= limit
+        samples[k] = sample if inside else 0.0
+        envelope[k] = e_v if inside else 0.0
+        rejected += 0 if inside else 1
     state[STATE_STEP_SAMPLES] = j0 + count
+    return rejected
+
+
+@_inline
+def _step_flags(state: np.ndarray) -> int:
+    """The open step's FLAG_* bits (0 if the slot holds no such value)."""
+    flags = state[STATE_STEP_FLAGS]
+    return int(flags) if 0.0 <= flags < 256.0 else 0
+
+
+@_inline
+def _output_fault(state: np.ndarray, rejected: int) -> None:
+    """The output guard zeroed ``rejected`` samples of the open step: count them, close the gate, and
+    restart the smoothing and ramp from 0 with tables rebuilt at the next step (state out of range)."""
+    state[STATE_FAULT_SAMPLES] += rejected
+    if _step_flags(state) & FLAG_FAULT == 0:
+        _note_fault(state, FAULT_OUTPUT)
+    state[STATE_STEP_FLAGS] = float(_step_flags(state) | FLAG_FAULT)
+    state[STATE_COMMAND_V] = 0.0
+    state[STATE_SMOOTH_START_V] = 0.0
+    state[STATE_RAMP_START] = 0.0
+    state[STATE_GATE] = 0.0
+    state[STATE_TABLE_FS_HZ] = math.nan
 
 
 @_inline
@@ -586,25 +758,33 @@ def render_block(
     """
     interval = min(max(int(cfg[CFG_CONTROL_INTERVAL]), 1), MAX_CONTROL_INTERVAL)
     out_per_v = 1.0 / cfg[CFG_VOLTS_PER_FS]
+    limit = cfg[CFG_MAX_VOLTAGE_V] * out_per_v  # the output guard's bound, in full scale (<= 1)
+    if not limit <= 1.0:
+        limit = 1.0 if limit > 1.0 else 0.0
     total = out.shape[0]
     peak_v = 0.0
     energy_w = 0.0
     flags = 0
-    phase = int(state[STATE_NEXT_PHASE]) if start_index == state[STATE_NEXT_INDEX] else start_index % interval
+    next_phase = state[STATE_NEXT_PHASE]
+    continues = start_index == state[STATE_NEXT_INDEX] and 0.0 <= next_phase < interval
+    phase = int(next_phase) if continues else start_index % interval
     i = 0
     while i < total:
-        if phase == 0 or state[STATE_STEP_OPEN] == 0.0 or state[STATE_STEP_SAMPLES] >= interval:
+        if (phase == 0 or state[STATE_STEP_OPEN] == 0.0
+                or not 0.0 <= state[STATE_STEP_SAMPLES] < interval):
             _control_step(start_index + i, cfg, dev, state, power_ring, finger, finger_count, prog, params, img, stack)
         j0 = int(state[STATE_STEP_SAMPLES])
         stop = min(total, i + interval - phase, i + interval - j0)
-        _render_samples(out, i, stop, state, out_per_v)
+        rejected = _render_samples(out, i, stop, state, out_per_v, limit)
+        if rejected:
+            _output_fault(state, rejected)
         segment_peak_v, segment_v2 = _envelope_sums(state, j0, j0 + stop - i)
         if j0 == 0:
             state[STATE_FIRST_SEGMENT_V2] = segment_v2
             state[STATE_FIRST_SEGMENT_SAMPLES] = stop - i
         peak_v = max(peak_v, segment_peak_v)
         energy_w += state[STATE_POWER_PER_V2] * segment_v2
-        flags |= int(state[STATE_STEP_FLAGS])
+        flags |= _step_flags(state)
         phase += stop - i
         if phase == interval:
             phase = 0
