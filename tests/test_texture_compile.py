@@ -81,7 +81,7 @@ def test_evaluate_broadcasts() -> None:
 def test_load_compiled_reports_a_bad_file(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("description: x\nkind: grating\nperiod_mm: -2\nfriction: {low: 0.5, high: 1.0}\n")
-    with pytest.raises(ConfigError, match=r"bad.yaml: period_mm: must be > 0"):
+    with pytest.raises(ConfigError, match=r"bad.yaml: period_mm: must be >= 0.01"):
         load_compiled(bad)
 
 

@@ -9,6 +9,7 @@ periods at 250 mm from the origin, at most 5 pixels per mm).
 from __future__ import annotations
 
 import hashlib
+import math
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from test_texture_eval import assert_kernel_matches_reference, texture_model
 
+from tpad_rt.config.fields import MIN_LENGTH_MM
 from tpad_rt.texture import compile_texture
 
 WAVEFORMS = ("sine", "square", "triangle", "sawtooth")
@@ -118,7 +120,8 @@ def _shape(draw: st.DrawFn, outlines: bool) -> dict[str, Any]:
     if name == "circle":
         return {"circle": {"center_mm": draw(_POINT_MM), "radius_mm": draw(_LENGTH_MM)}}
     start = draw(_POINT_MM)
-    return {"line": {"from_mm": start, "to_mm": draw(st.one_of(st.just(start), _POINT_MM))}}
+    apart = _POINT_MM.filter(lambda end: math.dist(start, end) >= MIN_LENGTH_MM)  # shorter lines are refused
+    return {"line": {"from_mm": start, "to_mm": draw(st.one_of(st.just(start), apart))}}
 
 
 @st.composite

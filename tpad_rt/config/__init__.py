@@ -13,7 +13,7 @@ schema_json("texture" | "device") -> dict
     JSON Schema of a format
 
 Loading raises :class:`tpad_rt.errors.ConfigError`, one breadcrumb line per
-problem: ``textures/x.yaml: layers[1].period_mm: must be > 0, got -2 (line 9)``.
+problem: ``textures/x.yaml: layers[1].period_mm: must be >= 0.01, got -2 (line 9)``.
 The models are frozen pydantic models; image-based textures have
 ``load_image_array()``. docs/formats.md is the contract.
 """

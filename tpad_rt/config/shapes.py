@@ -7,34 +7,45 @@ A shape is written as a mapping with exactly one key naming it:
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 from pydantic import model_validator
 
-from tpad_rt.config.fields import Number, PointMm, Positive, StrictModel, rule_error
+from tpad_rt.config.fields import MIN_LENGTH_MM, CoordinateMm, LengthMm, PointMm, StrictModel, rule_error
 
 
 class Rect(StrictModel):
     """Axis-aligned rectangle; ``x_mm``, ``y_mm`` is its top-left corner."""
 
-    x_mm: Number
-    y_mm: Number
-    w_mm: Positive
-    h_mm: Positive
+    x_mm: CoordinateMm
+    y_mm: CoordinateMm
+    w_mm: LengthMm
+    h_mm: LengthMm
 
 
 class Circle(StrictModel):
     """Circle (a disk when used as a region)."""
 
     center_mm: PointMm
-    radius_mm: Positive
+    radius_mm: LengthMm
 
 
 class Line(StrictModel):
-    """Straight segment between two points."""
+    """Straight segment between two points: the same point (a dot), or at least MIN_LENGTH_MM apart."""
 
     from_mm: PointMm
     to_mm: PointMm
+
+    @model_validator(mode="after")
+    def _not_too_short(self) -> Line:
+        length_mm = math.dist(self.from_mm, self.to_mm)
+        if 0.0 < length_mm < MIN_LENGTH_MM:
+            raise rule_error(
+                f"must equal from_mm (a dot) or lie at least {MIN_LENGTH_MM:g} mm from it, got {length_mm:.3g} mm away",
+                "to_mm",
+            )
+        return self
 
 
 class _OneOf(StrictModel):

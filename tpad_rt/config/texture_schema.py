@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from annotated_types import Gt, Le, MaxLen, MinLen
+from annotated_types import Ge, Le, MaxLen, MinLen
 from pydantic import (
     AfterValidator,
     Field,
@@ -26,12 +26,12 @@ from pydantic import (
 )
 
 from tpad_rt.config.fields import (
+    AngleDeg,
     Flag,
     Fraction,
     FrictionLevel,
-    Number,
+    LengthMm,
     PointMm,
-    Positive,
     SizeMm,
     StrictModel,
     Text,
@@ -46,6 +46,17 @@ BASE_DIR = "base_dir"
 MAX_LAYERS = 16
 MAX_LAYER_DEPTH = 4
 
+#: Largest |gradient gain| (friction change per unit slope): a slope of 0.001 then already spans
+#: the whole friction range; more is a step, not a gradient.
+MAX_GAIN = 1000.0
+#: Largest |height| (mm) of a gradient's height map: far above any bump a finger feels.
+MAX_HEIGHT_MM = 100.0
+#: Slowest and fastest temporal texture (Hz): one cycle in 100 s; above ~1 kHz skin feels no change.
+MIN_FREQUENCY_HZ = 0.01
+MAX_FREQUENCY_HZ = 1000.0
+
+Gain = Annotated[float, Strict(), Ge(-MAX_GAIN), Le(MAX_GAIN)]
+HeightMm = Annotated[float, Strict(), Ge(-MAX_HEIGHT_MM), Le(MAX_HEIGHT_MM)]
 Waveform = Literal["sine", "square", "triangle", "sawtooth"]
 Wrap = Literal["tile", "clamp"]
 
@@ -157,8 +168,8 @@ class BumpHeight(StrictModel):
 
     shape: Literal["bump"]
     center_mm: PointMm
-    radius_mm: Positive
-    height_mm: Number
+    radius_mm: LengthMm
+    height_mm: HeightMm
 
 
 class RidgeHeight(StrictModel):
@@ -166,25 +177,25 @@ class RidgeHeight(StrictModel):
 
     shape: Literal["ridge"]
     center_mm: PointMm
-    angle_deg: Number = 0.0
-    width_mm: Positive
-    height_mm: Number
+    angle_deg: AngleDeg = 0.0
+    width_mm: LengthMm
+    height_mm: HeightMm
 
 
 class SineHeight(StrictModel):
     """Sinusoidal corrugation varying along ``angle_deg``."""
 
     shape: Literal["sine"]
-    period_mm: Positive
-    angle_deg: Number = 0.0
-    height_mm: Number
+    period_mm: LengthMm
+    angle_deg: AngleDeg = 0.0
+    height_mm: HeightMm
 
 
 class ImageHeight(_ImageMap):
     """Greyscale height map; value 1 is ``height_mm`` high."""
 
     shape: Literal["image"]
-    height_mm: Number
+    height_mm: HeightMm
 
 
 HeightMap = Annotated[Union[BumpHeight, RidgeHeight, SineHeight, ImageHeight], Field(discriminator="shape")]
@@ -197,9 +208,9 @@ class Grating(_Periodic):
     """Periodic bars."""
 
     kind: Literal["grating"]
-    period_mm: Positive
-    angle_deg: Number = 0.0
-    phase_deg: Number = 0.0
+    period_mm: LengthMm
+    angle_deg: AngleDeg = 0.0
+    phase_deg: AngleDeg = 0.0
     friction: FrictionRange
 
 
@@ -216,7 +227,7 @@ class Gradient(_Texture):
 
     kind: Literal["gradient"]
     height: HeightMap
-    gain: Number = 2.0
+    gain: Gain = 2.0
     friction: FrictionAroundBase
 
 
@@ -233,7 +244,7 @@ class Bumps(_Texture):
     kind: Literal["bumps"]
     centers_mm: Annotated[list[PointMm], MinLen(1)] | None = None
     grid: BumpGrid | None = None
-    radius_mm: Positive
+    radius_mm: LengthMm
     profile: Literal["cosine", "gaussian", "disk"] = "cosine"
     friction: BumpFriction
 
@@ -251,7 +262,7 @@ class Edges(_Texture):
 
     kind: Literal["edges"]
     shapes: Annotated[list[Outline], MinLen(1)]
-    width_mm: Positive = 1.0
+    width_mm: LengthMm = 1.0
     profile: Literal["step", "cosine"] = "step"
     friction: EdgeFriction
 
@@ -261,7 +272,7 @@ class Temporal(_Periodic):
 
     kind: Literal["temporal"]
     waveform: Waveform = "square"
-    frequency_hz: Annotated[float, Strict(), Gt(0), Le(1000)]
+    frequency_hz: Annotated[float, Strict(), Ge(MIN_FREQUENCY_HZ), Le(MAX_FREQUENCY_HZ)]
     friction: FrictionRange
 
 
