@@ -5,42 +5,63 @@ Values keep the units of their key names; ``tpad_rt.device`` converts to SI.
 
 from __future__ import annotations
 
+import bisect
+import math
 from typing import Annotated, ClassVar
 
-from annotated_types import Ge, Gt, Le, Lt, MinLen
+from annotated_types import Ge, Le, Lt, MinLen
 from pydantic import Strict, model_validator
 
-from tpad_rt.config.fields import Flag, NonNegative, Positive, StrictModel, Text, rule_error
+from tpad_rt.config.fields import Flag, StrictModel, Text, rule_error
+from tpad_rt.limits import MAX_FORCE_N
 
-PositiveTable = Annotated[list[Positive], MinLen(1)]
-ForceTable = Annotated[list[NonNegative], MinLen(1)]
+#: Forces closer than this (N) are not told apart: far finer than a finger-force calibration resolves,
+#: and it keeps the kernel's force grid from collapsing to a zero step.
+MIN_FORCE_STEP_N = 0.001
+#: The motional branch's quality factor sqrt(L / C) / R must lie in (MIN_Q, MAX_Q] at every force:
+#: above 0.5 the plate rings (an underdamped resonator, which sim:// models); a MAX_Q plate takes
+#: seconds to ring up, far beyond any TPaD.
+MIN_Q = 0.5
+MAX_Q = 1e6
+
+ThicknessMm = Annotated[float, Strict(), Ge(0.01), Le(100)]
+DensityGCm3 = Annotated[float, Strict(), Ge(0.1), Le(50)]
+YoungsModulusGpa = Annotated[float, Strict(), Ge(0.01), Le(2000)]
+PlateSideMm = Annotated[float, Strict(), Ge(1), Le(1000)]
+Volts = Annotated[float, Strict(), Ge(0.1), Le(10_000)]
+ForceN = Annotated[float, Strict(), Ge(0), Le(MAX_FORCE_N)]
+ForceTable = Annotated[list[ForceN], MinLen(1)]
+AmplitudeTable = Annotated[list[Annotated[float, Strict(), Ge(1e-6), Le(100)]], MinLen(1)]
+InductanceTable = Annotated[list[Annotated[float, Strict(), Ge(1e-6), Le(1e4)]], MinLen(1)]
+CapacitanceTable = Annotated[list[Annotated[float, Strict(), Ge(1e-3), Le(1e6)]], MinLen(1)]
+ResistanceTable = Annotated[list[Annotated[float, Strict(), Ge(1e-3), Le(1e7)]], MinLen(1)]
 
 
 class Plate(StrictModel):
     """The glass plate and the mode it is driven in (``[m, n]`` nodal lines along length, width)."""
 
     material: Text
-    thickness_mm: Positive
-    density_g_cm3: Positive
-    youngs_modulus_gpa: Positive
-    length_mm: Positive
-    width_mm: Positive
-    mode: tuple[Annotated[int, Strict(), Ge(1)], Annotated[int, Strict(), Ge(0)]]
+    thickness_mm: ThicknessMm
+    density_g_cm3: DensityGCm3
+    youngs_modulus_gpa: YoungsModulusGpa
+    length_mm: PlateSideMm
+    width_mm: PlateSideMm
+    mode: tuple[Annotated[int, Strict(), Ge(1), Le(1000)], Annotated[int, Strict(), Ge(0), Le(1000)]]
 
 
 class Actuator(StrictModel):
     """The piezo actuator bonded to the plate."""
 
-    thickness_mm: Positive
-    density_g_cm3: Positive
-    youngs_modulus_gpa: Positive
+    thickness_mm: ThicknessMm
+    density_g_cm3: DensityGCm3
+    youngs_modulus_gpa: YoungsModulusGpa
 
 
 class Amplifier(StrictModel):
     """Drive volts at DAC sample 1.0, and the peak drive never exceeded."""
 
-    volts_per_full_scale: Positive
-    max_voltage_v: Positive
+    volts_per_full_scale: Volts
+    max_voltage_v: Volts
 
     @model_validator(mode="after")
     def _within_full_scale(self) -> Amplifier:
@@ -62,8 +83,9 @@ class _ForceTables(StrictModel):
     def _consistent(self) -> _ForceTables:
         for index in range(1, len(self.force_n)):
             previous, force = self.force_n[index - 1], self.force_n[index]
-            if force <= previous:
-                message = f"must be > {previous:g} (forces must be strictly increasing), got {force:g}"
+            if force - previous < MIN_FORCE_STEP_N:
+                message = (f"must be >= {previous + MIN_FORCE_STEP_N:g} (forces must increase by at least "
+                           f"{MIN_FORCE_STEP_N:g} N), got {force:g}")
                 raise rule_error(message, "force_n", index)
         for name in self.tables:
             count = len(getattr(self, name))
@@ -76,26 +98,47 @@ class Calibration(_ForceTables):
     """Plate vibration amplitude per drive volt (peak) at each contact force."""
 
     tables = ("amplitude_um_per_v",)
-    amplitude_um_per_v: PositiveTable
+    amplitude_um_per_v: AmplitudeTable
 
 
 class Circuit(_ForceTables):
     """Butterworth-Van Dyke model: static capacitance, shunt, and motional branch per force."""
 
     tables = ("motional_l_h", "motional_c_pf", "motional_r_ohm")
-    c0_nf: Positive
-    shunt_ohm: Positive
-    motional_l_h: PositiveTable
-    motional_c_pf: PositiveTable
-    motional_r_ohm: PositiveTable
+    c0_nf: Annotated[float, Strict(), Ge(1e-3), Le(1e5)]
+    shunt_ohm: Annotated[float, Strict(), Ge(1e-3), Le(1e6)]
+    motional_l_h: InductanceTable
+    motional_c_pf: CapacitanceTable
+    motional_r_ohm: ResistanceTable
+
+    @model_validator(mode="after")
+    def _rings(self) -> Circuit:
+        """Q = sqrt(L / C) / R in (MIN_Q, MAX_Q] wherever the tables interpolate (checked after _consistent)."""
+        last = len(self.force_n) - 1
+        for index in range(max(last, 1)):
+            pair = slice(index, min(index + 1, last) + 1)
+            l_h, c_pf, r_ohm = self.motional_l_h[pair], self.motional_c_pf[pair], self.motional_r_ohm[pair]
+            # Linear interpolation keeps each of L, C, R between its knots: bounds on Q over the interval.
+            lowest = math.sqrt(min(l_h) / (max(c_pf) * 1e-12)) / max(r_ohm)
+            highest = math.sqrt(max(l_h) / (min(c_pf) * 1e-12)) / min(r_ohm)
+            if lowest > MIN_Q and highest <= MAX_Q:
+                continue
+            limit, value = (f"above {MIN_Q:g}", lowest) if lowest <= MIN_Q else (f"at most {MAX_Q:g}", highest)
+            forces = self.force_n[pair]
+            where = f"between force_n {forces[0]:g} and {forces[-1]:g} N" if len(forces) > 1 else "at its one force"
+            raise rule_error(
+                f"the quality factor sqrt(L / C) / R must stay {limit} at every force; it can reach {value:.3g} {where}",
+                "motional_r_ohm", index,
+            )
+        return self
 
 
 class FrictionModel(StrictModel):
     """Vezzoli/Sednaoui friction model constants (paper Eqs. 2-3)."""
 
-    mu0: Positive = 0.25
-    poisson: Annotated[float, Strict(), Gt(-1), Lt(0.5)] = 0.33
-    psi_star: Positive = 4.69
+    mu0: Annotated[float, Strict(), Ge(0.01), Le(10)] = 0.25
+    poisson: Annotated[float, Strict(), Ge(0), Lt(0.5)] = 0.33
+    psi_star: Annotated[float, Strict(), Ge(0.01), Le(1000)] = 4.69
 
 
 class DeviceFile(StrictModel):
@@ -110,7 +153,22 @@ class DeviceFile(StrictModel):
     calibration: Calibration
     circuit: Circuit
     friction_model: FrictionModel = FrictionModel()
-    speed_floor_mm_s: Positive = 5.0
-    power_budget_w: Positive
+    speed_floor_mm_s: Annotated[float, Strict(), Ge(0.1), Le(1000)] = 5.0
+    power_budget_w: Annotated[float, Strict(), Ge(0.001), Le(1000)]
     preemphasis: Flag = True
     source: Annotated[dict[Text, Text], MinLen(1)]
+
+    @model_validator(mode="after")
+    def _forces_told_apart(self) -> DeviceFile:
+        """Each circuit force equals a calibration force or lies MIN_FORCE_STEP_N from all of them."""
+        known = self.calibration.force_n
+        for index, force in enumerate(self.circuit.force_n):
+            at = bisect.bisect_left(known, force)
+            nearest = min(known[max(at - 1, 0):at + 1], key=lambda candidate: abs(candidate - force))
+            if 0.0 < abs(nearest - force) < MIN_FORCE_STEP_N:
+                raise rule_error(
+                    f"must equal calibration.force_n's {nearest:g} or differ from it by at least "
+                    f"{MIN_FORCE_STEP_N:g} N, got {force:g}",
+                    "circuit", "force_n", index,
+                )
+        return self
