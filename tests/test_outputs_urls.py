@@ -37,7 +37,7 @@ def test_sim_q_option() -> None:
                    "expected sim://?q=device or wav:///path/out.wav or null://"),
         ("audio", "not a URL (no 'scheme://'); expected sim://?q=device or wav:///path/out.wav or null://"),
         ("sim://?Q=3", "unknown option 'Q'; did you mean 'q'? (options: q); expected sim://?q=device"),
-        ("sim://?q=0.3", "option q: must be device or a number > 0.5, got '0.3'; expected sim://?q=device"),
+        ("sim://?q=0.3", "option q: must be device or a number in (0.5, 1e+06], got '0.3'; expected sim://?q=device"),
         ("sim://plate", "unexpected 'plate' after sim://; expected sim://?q=device"),
         ("null://?count=1", "unknown option 'count' (options: none); expected null://"),
         ("null://x", "unexpected 'x' after null://; expected null://"),

@@ -18,12 +18,16 @@ import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.config import DeviceFile, load_device
+from tpad_rt.config.breadcrumb import breadcrumb
 from tpad_rt.errors import ConfigError
 from tpad_rt.physics import electromech
 from tpad_rt.physics._validate import FloatOrArray, non_negative
 
 #: Where the device files of the paper's TPaDs live (in the source tree).
 CALIBRATION_DIR = Path(__file__).resolve().parents[1] / "calibration"
+
+#: Forces spread evenly over the tables at which :meth:`Device.derived_problems` checks (besides the knots).
+DERIVED_CHECK_POINTS = 4097
 
 _Table = npt.NDArray[np.float64]
 _TABLE_FIELDS = (
@@ -95,10 +99,14 @@ class Device:
             object.__setattr__(self, name, table)
 
     @classmethod
-    def from_spec(cls, spec: DeviceFile) -> Device:
-        """The Device described by a validated device file model (file units converted to SI)."""
+    def from_spec(cls, spec: DeviceFile, path: str | Path | None = None) -> Device:
+        """The Device described by a validated device file model (file units converted to SI).
+
+        Raises ConfigError (each line naming ``path``, the file, when given) if a table the
+        kernel is built from is not finite and > 0 at some force (:meth:`derived_problems`).
+        """
         plate, actuator, circuit = spec.plate, spec.actuator, spec.circuit
-        return cls(
+        device = cls(
             label=spec.label,
             description=spec.description,
             plate=Plate(
@@ -133,11 +141,15 @@ class Device:
             power_budget_w=spec.power_budget_w,
             preemphasis=spec.preemphasis,
         )
+        problems = device.derived_problems()
+        if problems:
+            raise ConfigError([breadcrumb(None if path is None else str(path), (), problem) for problem in problems])
+        return device
 
     @classmethod
     def from_file(cls, path: str | Path) -> Device:
         """The Device in the device file at ``path``; ConfigError listing every problem in it."""
-        return cls.from_spec(load_device(path))
+        return cls.from_spec(load_device(path), path)
 
     @classmethod
     def default(cls) -> Device:
@@ -181,3 +193,30 @@ class Device:
     def envelope_time_constant_s(self, force_n: npt.ArrayLike) -> FloatOrArray:
         """Time constant (s) of the vibration envelope, ``Q / (pi f0)`` with ``f0 = resonance_hz``."""
         return self.quality_factor(force_n) / (math.pi * self.resonance_hz)
+
+    def derived_problems(self) -> list[str]:
+        """One ``key: what is wrong`` line per derived table not finite and > 0 at some force; empty if fine.
+
+        Checked at every knot of the force tables and at DERIVED_CHECK_POINTS forces spread
+        evenly over them (the kernel's force grid is at most 4096 intervals): amplitude per
+        volt, power per squared volt at the carrier, envelope time constant.
+        """
+        knots = np.union1d(self.force_table_n, self.motional_force_table_n)
+        forces = np.union1d(knots, np.linspace(knots[0], knots[-1], DERIVED_CHECK_POINTS))
+        tables = (
+            ("calibration.amplitude_um_per_v", "plate amplitude per volt (m/V)", self.amplitude_m_per_v),
+            ("circuit", "power per squared volt at the carrier (W/V^2)", self.power_w_per_v2),
+            ("circuit", "envelope time constant Q / (pi f0) (s)", self.envelope_time_constant_s),
+        )
+        problems = []
+        for key, what, table in tables:
+            with np.errstate(all="ignore"):
+                values = np.asarray(table(forces), dtype=np.float64)
+            bad = np.flatnonzero(~(np.isfinite(values) & (values > 0.0)))
+            if bad.size:
+                problems.append(
+                    f"{key}: {what} must be finite and > 0 at every force, got {values[bad[0]]:g} at "
+                    f"{forces[bad[0]]:g} N: these values are outside what tpad-rt can render "
+                    "(docs/formats.md \"Ranges, and why\")"
+                )
+        return problems

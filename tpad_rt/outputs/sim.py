@@ -17,23 +17,24 @@ from collections.abc import Mapping
 import numpy as np
 import numpy.typing as npt
 
+from tpad_rt.config.device_schema import MAX_Q, MIN_Q
 from tpad_rt.device import Device
 from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, resonate, resonator_coefficients
 from tpad_rt.outputs.base import Output
 from tpad_rt.physics.friction import relative_friction_core
 from tpad_rt.urls import Option, Url, UrlForm, number
 
-_Q_NUMBER = number(0.5, low_closed=False)
+_Q_NUMBER = number(MIN_Q, low_closed=False, high=MAX_Q)
 
 
 def _quality_factor(text: str) -> float | str:
-    """``device`` (the device's Q at each block's force) or a number > 0.5."""
+    """``device`` (the device's Q at each block's force) or a number in (MIN_Q, MAX_Q], as device files allow."""
     if text == "device":
         return text
     try:
         return _Q_NUMBER(text)
-    except ValueError:
-        raise ValueError("must be device or a number > 0.5") from None
+    except ValueError as error:
+        raise ValueError(f"must be device or {str(error).removeprefix('must be ')}") from None
 
 
 #: The accepted URL.
@@ -55,8 +56,12 @@ class SimOutput(Output):
         self._achieved_mu: list[float] = []
 
     def write(self, samples: npt.NDArray[np.float32], block: Mapping[str, float]) -> None:
-        """Drive the plate with ``samples`` (at least one); ``block`` must carry ``force_n`` (N) and ``speed_mm_s``."""
+        """Drive the plate with ``samples`` (at least one); ``block`` must carry ``force_n`` (N) and ``speed_mm_s``.
+
+        A force below 0 (or NaN) counts as 0: the device tables are clamped at their ends anyway.
+        """
         force_n = float(block["force_n"])
+        force_n = force_n if force_n >= 0.0 else 0.0
         device = self.device
         if force_n != self._coef_force_n:
             q = self.q if self.q is not None else float(device.quality_factor(force_n))
