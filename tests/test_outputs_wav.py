@@ -54,3 +54,33 @@ def test_errors(tmp_path: Path) -> None:
         open_output(f"wav://{tmp_path}/a.wav?rate=1", device=Device.default(), fs_hz=48000)
     with pytest.raises(BackendError, match=r"wav: cannot write .*/no/such/dir/a\.wav \(No such file or directory\)"):
         open_output(f"wav://{tmp_path}/no/such/dir/a.wav", device=Device.default(), fs_hz=48000)
+
+
+@pytest.mark.parametrize(("bad", "problem"), [(np.nan, "not finite"), (-np.inf, "not finite"),
+                                              (1.5, r"beyond full scale \(\|sample\| > 1\)")])
+def test_a_bad_sample_is_refused_and_the_file_kept_valid_up_to_its_block(
+    tmp_path: Path, bad: float, problem: str
+) -> None:
+    path = tmp_path / "out.wav"
+    good = np.full(64, 0.5, dtype=np.float32)
+    block = good.copy()
+    block[10] = bad
+    output = open_output(f"wav://{path}", device=Device.default(), fs_hz=192000)
+    output.write(good, {})
+    expected = (rf"wav: .*out\.wav: drive sample 74 is {bad!r}, {problem}: .*this is a bug in tpad-rt, please "
+                r"report it; the file was closed holding the 64 samples before this block")
+    with pytest.raises(BackendError, match=expected):
+        output.write(block, {})
+    rate, data = wavfile.read(path)
+    assert rate == 192000 and np.array_equal(data, good)
+    with pytest.raises(BackendError, match=r"out\.wav is closed; nothing more can be written to it"):
+        output.write(good, {})
+    output.close()  # closing again is fine
+    assert np.array_equal(wavfile.read(path)[1], good)
+
+
+def test_full_scale_itself_is_written(tmp_path: Path) -> None:
+    samples = np.array([1.0, -1.0, 0.0], dtype=np.float32)
+    with open_output(f"wav://{tmp_path}/edge.wav", device=Device.default(), fs_hz=48000) as output:
+        output.write(samples, {})
+    assert np.array_equal(wavfile.read(tmp_path / "edge.wav")[1], samples)

@@ -112,3 +112,16 @@ def test_write_refuses_a_broken_recording_and_reports_unwritable_paths(tmp_path:
         write_recording(tmp_path / "r.npz", broken)
     with pytest.raises(BackendError, match="cannot write the recording"):
         write_recording(tmp_path / "no" / "r.npz", _recording())
+
+
+@pytest.mark.parametrize(("bad", "problem"), [(np.nan, "not finite"), (np.inf, "not finite"),
+                                              (-1.0001, r"beyond full scale \(\|sample\| > 1\)")])
+def test_write_refuses_a_bad_drive_sample_and_writes_nothing(tmp_path: Path, bad: float, problem: str) -> None:
+    recording = _recording()
+    recording.drive[200] = bad
+    path = tmp_path / "r.npz"
+    expected = (rf"r\.npz: recording not written: drive sample 200 is {float(np.float32(bad))!r}, {problem}: "
+                r"the drive held a value no output may carry; this is a bug in tpad-rt, please report it")
+    with pytest.raises(BackendError, match=expected):
+        write_recording(path, recording)
+    assert not path.exists()

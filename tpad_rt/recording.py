@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from tpad_rt.drive_guard import bad_sample_message, first_bad_sample
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.kernel.layout import TEL_NAMES
 
@@ -60,14 +61,20 @@ class Recording:
 def write_recording(path: str | Path, recording: Recording) -> None:
     """Write ``recording`` to ``path`` (exactly that name); BackendError when it cannot be written.
 
-    Raises ConfigError when ``recording`` itself breaks the format (see :func:`read_recording`).
+    Raises BackendError, writing nothing, when a drive sample is not finite or beyond full
+    scale (a bug in tpad-rt: the message names the first such sample), and ConfigError when
+    ``recording`` otherwise breaks the format (see :func:`read_recording`).
     """
     path = Path(path)
+    drive = np.asarray(recording.drive)
+    bad = first_bad_sample(drive) if drive.ndim == 1 and drive.dtype.kind == "f" else None
+    if bad is not None:
+        raise BackendError(f"{path}: recording not written: {bad_sample_message(bad, float(drive[bad]))}")
     entries = {
         "format": np.array(FORMAT),
         "format_version": np.array(FORMAT_VERSION),
         "fs": np.array(recording.fs_hz, dtype=np.int64),
-        "drive": np.asarray(recording.drive),
+        "drive": drive,
         "metadata_json": np.array(json.dumps(recording.metadata, allow_nan=False)),
         **recording.blocks,
     }

@@ -5,6 +5,10 @@ writes only integer PCM, so the header is written here: RIFF/WAVE with a ``fmt `
 chunk of format 3 (IEEE float), a ``fact`` chunk (required for non-PCM formats) and
 the ``data`` chunk; the sizes are filled in on :meth:`WavOutput.close`. Samples are
 the DAC values as they are (full scale 1.0 = ``volts_per_full_scale``).
+
+A block holding a sample that is not finite or beyond full scale (a bug in tpad-rt) is
+refused: the file is closed at once, its header counting the samples before that
+block, so it stays a valid WAV of the drive up to the fault, and the error says so.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.device import Device
+from tpad_rt.drive_guard import bad_sample_message, first_bad_sample
 from tpad_rt.errors import BackendError
 from tpad_rt.outputs.base import Output
 from tpad_rt.urls import Url, UrlForm
@@ -61,8 +66,20 @@ class WavOutput(Output):
             raise BackendError(f"wav: cannot write {self.path} ({error.strerror})") from None
 
     def write(self, samples: npt.NDArray[np.float32], block: Mapping[str, float]) -> None:
-        """Append ``samples``; BackendError when the file would pass the 4 GiB RIFF limit or a write fails."""
-        data = np.asarray(samples, dtype="<f4").tobytes()
+        """Append ``samples``; BackendError when the file would pass the 4 GiB RIFF limit, a write fails,
+        the file was closed, or a sample is not finite or beyond full scale (the file is then closed)."""
+        if self._file.closed:
+            raise BackendError(f"wav: {self.path} is closed; nothing more can be written to it")
+        values = np.asarray(samples, dtype="<f4")
+        bad = first_bad_sample(values)
+        if bad is not None:
+            written = self.data_bytes // _BYTES_PER_SAMPLE
+            self.close()
+            raise BackendError(
+                f"wav: {self.path}: {bad_sample_message(written + bad, float(values[bad]))}; the file was "
+                f"closed holding the {written} samples before this block"
+            )
+        data = values.tobytes()
         if self.data_bytes + len(data) > MAX_DATA_BYTES:
             raise BackendError(f"wav: {self.path} would exceed the 4 GiB WAV size limit; render a shorter span")
         try:
