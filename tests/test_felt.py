@@ -54,11 +54,11 @@ def test_the_renderer_keeps_its_newest_finger_samples_in_order() -> None:
     renderer = Renderer(output="null://", texture=TEXTURES / "grating.yaml")
     ring = renderer.options.finger_ring
     for k in range(ring + 10):
-        renderer.push_finger(float(k), 20.0, 0.5, t=k * 0.001)
+        renderer.push_finger(k * 0.1, 20.0, 0.5, t=k * 0.001)  # x_mm numbers the samples
     renderer.lift(t=(ring + 10) * 0.001)
     fingers = renderer.recent_fingers()
     assert len(fingers) == ring - 2
     assert np.all(np.diff(fingers["t_s"]) > 0)
-    assert fingers["x_mm"][-2] == ring + 9 and fingers["down"][-2] and not fingers["down"][-1]
-    assert fingers["x_mm"][-1] == ring + 9  # a lift keeps the last position
+    assert fingers["x_mm"][-2] == (ring + 9) * 0.1 and fingers["down"][-2] and not fingers["down"][-1]
+    assert fingers["x_mm"][-1] == (ring + 9) * 0.1  # a lift keeps the last position
     assert np.all(fingers["force_n"][:-1] == 0.5)

@@ -147,7 +147,7 @@ def test_set_texture_starts_temporal_textures_at_the_given_time() -> None:
     pulse = texture({"kind": "temporal", "waveform": "square", "frequency_hz": 10.0, "duty": 0.5,
                      "friction": {"low": 0.4, "high": 1.0}})
     for row in swipe(0.2):
-        p.push_finger(*row[:4], down=True)
+        p.push_finger(*row[:3], None if np.isnan(row[3]) else row[3], down=True)
     p.start()
     p.render(np.zeros(FS_HZ // 100, dtype=np.float32))
     p.set_texture(compile_texture(pulse))  # t0 = now (0.01 s): high for 50 ms, then low
@@ -182,7 +182,7 @@ def test_render_refuses_bad_buffers() -> None:
 def test_drain_telemetry_returns_the_rows_since_the_last_drain() -> None:
     p = pipeline(telemetry_ring=8)
     for row in swipe(0.1):
-        p.push_finger(*row[:4], down=True)
+        p.push_finger(*row[:3], None if np.isnan(row[3]) else row[3], down=True)
     p.start()
     for _ in range(5):
         p.render(np.zeros(100, dtype=np.float32))
@@ -225,7 +225,7 @@ def test_arrays_follow_render_block_argument_order_with_the_layout_shapes() -> N
 def test_warm_up_leaves_the_pipeline_untouched() -> None:
     p = pipeline()
     for row in swipe(0.05):
-        p.push_finger(*row[:4], down=True)
+        p.push_finger(*row[:3], None if np.isnan(row[3]) else row[3], down=True)
     p.start()
     p.render(np.zeros(1000, dtype=np.float32))
     before = [array.copy() for array in p.arrays]

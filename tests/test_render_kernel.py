@@ -142,7 +142,7 @@ def render_kernel(scenario: Scenario, blocks: Sequence[int] = (64,), push_ahead_
         limit_s = math.inf if push_ahead_s is None else stop / scenario.fs_hz + push_ahead_s
         while pushed < len(scenario.fingers) and scenario.fingers[pushed, 0] <= limit_s:
             t_s, x_mm, y_mm, force_n, down = scenario.fingers[pushed]
-            pipeline.push_finger(t_s, x_mm, y_mm, force_n, bool(down))
+            pipeline.push_finger(t_s, x_mm, y_mm, None if np.isnan(force_n) else force_n, bool(down))
             pushed += 1
         pipeline.render(out[start:stop])
         for name, values in pipeline.drain_telemetry().items():

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from tpad_rt.errors import ConfigError
+from tpad_rt.errors import ConfigError, SampleError
 from tpad_rt.inputs import Input
 from tpad_rt.felt import texture_at_finger
 from tpad_rt.inputs.base import FINGER_DTYPE
@@ -162,10 +162,15 @@ class OfflineRender:
         self.blocks_done += count
 
     def _push(self, samples: np.ndarray) -> None:
+        """Push ``samples`` (FINGER_DTYPE; force NaN: unknown) into the pipeline; a sample the pipeline
+        refuses is a ConfigError naming the input's time (inputs validate their samples: a bug otherwise)."""
         for sample in samples:
-            force_n = sample["force_n"] if self.force_n is None else self.force_n
-            self.pipeline.push_finger(float(sample["t_s"]), float(sample["x_mm"]), float(sample["y_mm"]),
-                                      force_n=float(force_n), down=bool(sample["down"]))
+            force_n = float(sample["force_n"]) if self.force_n is None else self.force_n
+            try:
+                self.pipeline.push_finger(float(sample["t_s"]), float(sample["x_mm"]), float(sample["y_mm"]),
+                                          force_n=None if math.isnan(force_n) else force_n, down=bool(sample["down"]))
+            except SampleError as error:
+                raise ConfigError(f"input sample at t = {float(sample['t_s']):g} s: {error}") from None
 
     def result(self) -> RenderResult:
         """The blocks rendered so far: telemetry, every output's measurements, and the drive if kept."""

@@ -9,7 +9,8 @@ RenderOptions(power_budget_w=None, power_avg_w=None, power_window_s=1.0, control
     the renderer's settings (frozen; ConfigError naming each bad field)
 Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
     ``.fs_hz``, ``.sample_index``, ``.time_s``, ``.device``, ``.texture``, ``.options``, ``.running``
-    ``.push_finger(t_s, x_mm, y_mm, force_n=nan, down=True)``, ``.lift(t_s)``
+    ``.push_finger(t_s, x_mm, y_mm, force_n=None, down=True)``, ``.lift(t_s)``: validated (SampleError)
+    ``.stream_time_s``, ``.position_range_mm``, ``.check_time(t_s, name)``, ``.faults() -> dict``
     ``.set_texture(texture, t_s=None)``, ``.start()``, ``.stop()``
     ``.render(out)``: the next ``len(out)`` float32 samples (1.0 = ``volts_per_full_scale``)
     ``.drain_telemetry() -> dict[str, np.ndarray]``: rows since the last drain, keyed by TEL_NAMES
@@ -21,24 +22,27 @@ KernelArrays
 force_grid(device) -> (start_n, step_n, intervals), device_tables(device) -> (dev, start_n, step_n)
     the uniform force grid of the device tables, and the tables on it
 
-docs/kernel.md is the design. One thread produces finger samples (:meth:`Pipeline.push_finger`
-writes the row, then bumps the count); the kernel may read them from another.
+docs/kernel.md is the design. :meth:`Pipeline.push_finger` validates the sample, then, under
+a lock (any number of producer threads), writes the ring row and bumps the count with a
+release store; the kernel reads them from another thread without a lock.
 """
 
 from __future__ import annotations
 
 import math
 import numbers
+import threading
 from dataclasses import dataclass
 from typing import Callable, NamedTuple
 
 import numpy as np
 
 from tpad_rt.device import Device
-from tpad_rt.errors import ConfigError, TpadError
+from tpad_rt.errors import ConfigError, SampleError, TpadError
 from tpad_rt.kernel import layout
 from tpad_rt.kernel.atomics import publish
 from tpad_rt.kernel.render import render_block
+from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_FORCE_N, position_range_mm
 from tpad_rt.texture import CompiledTexture
 
 #: Highest carrier frequency, as a fraction of the sample rate, the pipeline renders.
@@ -124,6 +128,15 @@ class RenderOptions:
         if self.preemphasis is not None and not isinstance(self.preemphasis, bool):
             found.append(("preemphasis", f"must be true, false or None, got {self.preemphasis!r}"))
         return [(name, problem) for name, problem in found if problem]
+
+
+def _checked(name: str, value: object, low: float, high: float, unit: str) -> float:
+    """``value`` as a float if it is a real number (not a bool) in ``[low, high]``; else SampleError
+    ``name: must be a finite number in [low, high] unit, got value``."""
+    number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
+    if not low <= number <= high:
+        raise SampleError(f"{name}: must be a finite number in [{low:g}, {high:g}] {unit}, got {value!r}")
+    return number
 
 
 def _number_problem(value: object, rule: str, holds: Callable[[float], bool]) -> str:
@@ -242,6 +255,9 @@ class Pipeline:
         self.fs_hz = fs_hz
         self.sample_index = 0
         self._drained = 0
+        self._producer = threading.Lock()  # push_finger may be called from several threads
+        self._last_t_s = -math.inf
+        self.position_range_mm = position_range_mm(device.plate.length_m * 1e3, device.plate.width_m * 1e3)
         dev, start_n, step_n = device_tables(device)
         window_steps = max(1, round(options.power_window_s * fs_hz / options.control_interval))
         self._arrays = KernelArrays(
@@ -321,23 +337,79 @@ class Pipeline:
         """Ramp the drive down to 0 (from the next control step) and keep it silent."""
         self._arrays.cfg[layout.CFG_RUN] = 0.0
 
-    def push_finger(
-        self, t_s: float, x_mm: float, y_mm: float, force_n: float = math.nan, down: bool = True
-    ) -> None:
-        """Append a finger sample: stream time (s, non-decreasing), plate position (mm), force (N; NaN: unknown).
+    @property
+    def stream_time_s(self) -> float:
+        """Stream time (s) of the next sample the kernel renders, whoever calls it (this pipeline's
+        :meth:`render`, or a real-time callback on its arrays)."""
+        return float(self._arrays.state[layout.STATE_NEXT_INDEX]) / self.fs_hz
 
-        Writes the ring row first, then bumps the count the kernel reads (single producer), with a
-        release store (:func:`tpad_rt.kernel.atomics.publish`).
+    def check_time(self, t_s: float, name: str = "t_s") -> float:
+        """``t_s`` as a float if it is a finite time (s) within FINGER_TIME_WINDOW_S of :attr:`stream_time_s`;
+        SampleError naming ``name``, the accepted range and the value otherwise."""
+        now_s = self.stream_time_s
+        low, high = now_s - FINGER_TIME_WINDOW_S, now_s + FINGER_TIME_WINDOW_S
+        return _checked(name, t_s, low, high, f"s (within {FINGER_TIME_WINDOW_S:g} s of the stream clock, now {now_s:.3f} s)")
+
+    def _checked_sample(
+        self, t_s: float, x_mm: float, y_mm: float, force_n: float | None
+    ) -> tuple[float, float, float, float]:
+        """``(t_s, x_mm, y_mm, force_n)`` as floats (force NaN when None), each checked; SampleError otherwise."""
+        (x_low, x_high), (y_low, y_high) = self.position_range_mm
+        plate = f"mm (one plate length beyond each edge of the {x_high / 2:g} x {y_high / 2:g} mm plate)"
+        return (
+            self.check_time(t_s),
+            _checked("x_mm", x_mm, x_low, x_high, plate),
+            _checked("y_mm", y_mm, y_low, y_high, plate.replace("length", "width")),
+            math.nan if force_n is None else _checked("force_n", force_n, 0.0, MAX_FORCE_N, "N (None: the default force)"),
+        )
+
+    def push_finger(
+        self, t_s: float, x_mm: float, y_mm: float, force_n: float | None = None, down: bool = True
+    ) -> None:
+        """Append a finger sample: stream time (s), plate position (mm), contact force (N; None: the
+        default), touching or not.
+
+        Raises SampleError (a ValueError) naming the argument and its range for a value that is
+        not a finite number, a time further than FINGER_TIME_WINDOW_S from :attr:`stream_time_s`
+        or before the previous sample's, a position beyond :attr:`position_range_mm` (one plate
+        length or width past each edge), a force outside ``[0, MAX_FORCE_N]``. Safe from several
+        threads (a lock orders them); writes the ring row, then bumps the count the kernel reads
+        with a release store (:func:`tpad_rt.kernel.atomics.publish`).
         """
-        finger, count = self._arrays.finger, self._arrays.finger_count
-        finger[count[0] % finger.shape[0]] = (t_s, x_mm, y_mm, force_n, 1.0 if down else 0.0)
-        publish(count, 0, int(count[0]) + 1)  # after the row: a release store
+        row = (*self._checked_sample(t_s, x_mm, y_mm, force_n), 1.0 if down else 0.0)
+        with self._producer:
+            if row[0] < self._last_t_s:
+                raise SampleError(f"t_s: must be >= the previous sample's time {self._last_t_s:.6f} s "
+                                  f"(finger times never decrease), got {row[0]:.6f}")
+            self._last_t_s = row[0]
+            finger, count = self._arrays.finger, self._arrays.finger_count
+            finger[count[0] % finger.shape[0]] = row
+            publish(count, 0, int(count[0]) + 1)  # after the row: a release store
 
     def lift(self, t_s: float) -> None:
-        """The finger leaves the plate at stream time ``t_s`` (s): the drive ramps to 0."""
+        """The finger leaves the plate at stream time ``t_s`` (s), where it last was: the drive ramps to 0.
+        Raises SampleError as :meth:`push_finger` for a bad time."""
+        x_mm, y_mm = self.last_position_mm()
+        self.push_finger(t_s, x_mm, y_mm, down=False)
+
+    def last_position_mm(self) -> tuple[float, float]:
+        """The plate position (mm) of the newest finger sample, ``(0, 0)`` before the first."""
         finger, count = self._arrays.finger, self._arrays.finger_count
         last = finger[(count[0] - 1) % finger.shape[0]]
-        self.push_finger(t_s, last[layout.FINGER_X_MM], last[layout.FINGER_Y_MM], down=False)
+        return float(last[layout.FINGER_X_MM]), float(last[layout.FINGER_Y_MM])
+
+    def faults(self) -> dict[str, object]:
+        """The kernel's fault counters (docs/kernel.md "Faults"): ``faults`` (faults that began),
+        ``fault_steps`` (control steps), ``fault_samples`` (samples the output guard zeroed) and
+        ``fault_causes`` (names of every FAULT_* cause met, in layout.FAULT_NAMES order)."""
+        state = self._arrays.state
+        causes = int(state[layout.STATE_FAULT_CAUSES])
+        return {
+            "faults": int(state[layout.STATE_FAULT_EVENTS]),
+            "fault_steps": int(state[layout.STATE_FAULT_STEPS]),
+            "fault_samples": int(state[layout.STATE_FAULT_SAMPLES]),
+            "fault_causes": [name for bit, name in enumerate(layout.FAULT_NAMES) if causes & (1 << bit)],
+        }
 
     def set_texture(self, texture: CompiledTexture, t_s: float | None = None) -> None:
         """Render ``texture`` from the next block; temporal textures start at ``t_s`` (s; None: now).
