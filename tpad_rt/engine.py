@@ -52,10 +52,11 @@ from tpad_rt import __version__
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, TpadError
 from tpad_rt.inputs.base import FINGER_DTYPE
+from tpad_rt.limits import MAX_RECORDING_SAMPLES
 from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel.layout import (
-    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, FLAG_POWER,
-    FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEL_NAMES, TEX_PROG_COLS,
+    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, FLAG_FAULT,
+    FLAG_POWER, FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEL_NAMES, TEX_PROG_COLS,
 )
 from tpad_rt.outputs import Output, audio, open_output, output_forms
 from tpad_rt.pipeline import Pipeline, RenderOptions
@@ -106,8 +107,10 @@ class Renderer:
     is a BackendError; its stream is abandoned, not closed (docs/realtime.md), and audio
     stays unusable in this process: restart it.
 
-    Finger samples come from one thread at a time (:meth:`push_finger` is a
-    lock-free single-producer write); :meth:`set_texture` from one thread at a time.
+    Finger samples may come from several threads (:meth:`push_finger` and :meth:`lift` take a
+    lock; the callback never does) and are validated at the call (SampleError);
+    :meth:`set_texture` from one thread at a time. The kernel's fault guard keeps the drive
+    finite and within the device's limits whatever reaches it (``stats()["faults"]``).
     """
 
     def __init__(self, device: Device | None = None, output: str = "audio://", *,
@@ -138,8 +141,10 @@ class Renderer:
         self._telemetry_lock = threading.Lock()
         self._pending: deque[dict[str, np.ndarray]] = deque()
         self._pending_rows = 0
-        self._totals = {"blocks": 0, "voltage_saturated": 0, "power_saturated": 0, "energy_w": 0.0, "peak_w": 0.0}
+        self._totals = {"blocks": 0, "voltage_saturated": 0, "power_saturated": 0, "fault_blocks": 0,
+                        "energy_w": 0.0, "peak_w": 0.0}
         self._push_ns = np.zeros(options.finger_ring, dtype=np.int64)
+        self._producer = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
         self._last_t_s = -math.inf
         self._output_latency_s = math.nan
         self._audio_device: audio.AudioDevice | None = None
@@ -147,6 +152,7 @@ class Renderer:
         self._recorded: list[dict[str, np.ndarray]] = []
         self._drive_chunks: list[np.ndarray] = []
         self._drive_from = 0  # next drive sample to copy out of the ring while recording
+        self._record_from = 0  # the recording's first drive sample
         self._texture = compiled
 
     # --- lifecycle -----------------------------------------------------------------
@@ -344,6 +350,7 @@ class Renderer:
             totals["blocks"] += count
             totals["voltage_saturated"] += int(np.count_nonzero(flags & FLAG_VOLTAGE))
             totals["power_saturated"] += int(np.count_nonzero(flags & FLAG_POWER))
+            totals["fault_blocks"] += int(np.count_nonzero(flags & FLAG_FAULT))
             totals["energy_w"] += float(rows["power_w"].sum())
             totals["peak_w"] = max(totals["peak_w"], float(rows["power_w"].max()))
             self._pending.append(rows)
@@ -352,12 +359,16 @@ class Renderer:
                 self._pending_rows -= len(self._pending.popleft()["t"])
             if self._record_path is not None:
                 if not self._recorded:
-                    self._drive_from = round(float(rows["t"][0]) * self.rate_hz)
+                    self._drive_from = self._record_from = round(float(rows["t"][0]) * self.rate_hz)
                 self._recorded.append(rows)
                 if frames - self._drive_from > len(table.drive):
                     raise TpadError(f"record: {frames - self._drive_from} drive samples were due but the ring "
                                     f"holds {len(table.drive)}: the recording lost samples (the watcher thread "
                                     "was held up for too long)")
+                if frames - self._record_from > MAX_RECORDING_SAMPLES:
+                    raise TpadError(f"record: longer than the {MAX_RECORDING_SAMPLES} drive samples a recording may "
+                                    f"keep in memory ({MAX_RECORDING_SAMPLES / self.rate_hz:.0f} s at {self.rate_hz} "
+                                    "Hz); record shorter runs")
                 self._drive_chunks.append(table.drive[np.arange(self._drive_from, frames) % len(table.drive)])
                 self._drive_from = max(self._drive_from, frames)
 
@@ -416,21 +427,29 @@ class Renderer:
     def push_finger(self, x_mm: float, y_mm: float, force_n: float | None = None, t: float | None = None) -> None:
         """A finger sample at plate position ``(x_mm, y_mm)`` (mm), contact force ``force_n`` (N; None: the
         default), stream time ``t`` (s; None: now). Times are kept non-decreasing (an earlier one is
-        raised to the previous). One producer thread at a time; no lock, no allocation in the ring.
+        raised to the previous). Safe from several threads (a lock orders the producers; the audio
+        callback reads without one); no allocation.
+
+        Raises SampleError (a ValueError) naming the argument, its range and the value for a value
+        that is not a finite number, a position beyond one plate length (width) past the plate's
+        edges, a force outside ``[0, tpad_rt.limits.MAX_FORCE_N]``, or a time further than
+        ``tpad_rt.limits.FINGER_TIME_WINDOW_S`` from the stream clock; nothing is pushed then.
         """
-        self._push(x_mm, y_mm, math.nan if force_n is None else force_n, t, down=True)
+        self._push(x_mm, y_mm, force_n, t, down=True)
 
     def lift(self, t: float | None = None) -> None:
-        """The finger leaves the plate at stream time ``t`` (s; None: now): the drive ramps to 0."""
-        arrays = self._pipeline.arrays
-        last = arrays.finger[(arrays.finger_count[0] - 1) % len(arrays.finger)]
-        self._push(float(last[FINGER_X_MM]), float(last[FINGER_Y_MM]), math.nan, t, down=False)
+        """The finger leaves the plate at stream time ``t`` (s; None: now): the drive ramps to 0.
+        Raises SampleError for a bad ``t`` (as :meth:`push_finger`)."""
+        self._push(*self._pipeline.last_position_mm(), None, t, down=False)
 
-    def _push(self, x_mm: float, y_mm: float, force_n: float, t: float | None, down: bool) -> None:
-        t_s = max(self.now_s() if t is None else t, self._last_t_s)
-        self._last_t_s = t_s
-        self._push_ns[self._pipeline.arrays.finger_count[0] % len(self._push_ns)] = monotonic_ns()
-        self._pipeline.push_finger(t_s, x_mm, y_mm, force_n, down)
+    def _push(self, x_mm: float, y_mm: float, force_n: float | None, t: float | None, down: bool) -> None:
+        with self._producer:
+            t_s = max(self.now_s() if t is None else self._pipeline.check_time(t, "t"), self._last_t_s)
+            pushed_ns = monotonic_ns()
+            index = int(self._pipeline.arrays.finger_count[0])
+            self._pipeline.push_finger(t_s, x_mm, y_mm, force_n, down)
+            self._push_ns[index % len(self._push_ns)] = pushed_ns
+            self._last_t_s = t_s
 
     # --- measurements --------------------------------------------------------------
 
@@ -441,12 +460,13 @@ class Renderer:
         ``block_frames``, ``output_latency_s`` (the stream's, audio only); ``compute_us_p50/p99/max``
         (time in the callback, over the recent blocks); ``callback_load_p99`` (that p99 as a
         fraction of a block's duration); ``blocks``,
-        ``voltage_saturated``, ``power_saturated`` (blocks), ``power_mean_w``,
+        ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (blocks), ``power_mean_w``,
         ``power_peak_w``, ``power_budget_w``, ``power_avg_w`` (from telemetry);
         ``latency_ms_p50/p99``: from a push to the DAC time of the first block that
         read it, over the recent blocks; ``dac_delay_ms``: the part of it the host
         reports from a callback to the DAC (median over the recent blocks; 0 on paced
-        outputs).
+        outputs); ``faults``, ``fault_steps``, ``fault_samples``, ``fault_causes``: the kernel's fault
+        guard (docs/kernel.md "Faults"), since the renderer was made.
         """
         if self._table is not None:
             self._drain(self._table)
@@ -472,10 +492,11 @@ class Renderer:
             totals = dict(self._totals)
         cfg = self._pipeline.arrays.cfg
         result.update(blocks=totals["blocks"], voltage_saturated=totals["voltage_saturated"],
-                      power_saturated=totals["power_saturated"],
+                      power_saturated=totals["power_saturated"], fault_blocks=totals["fault_blocks"],
                       power_mean_w=totals["energy_w"] / totals["blocks"] if totals["blocks"] else math.nan,
                       power_peak_w=totals["peak_w"], power_budget_w=float(cfg[CFG_POWER_CAP_W]),
                       power_avg_w=float(cfg[CFG_POWER_AVG_W]))
+        result.update(self._pipeline.faults())
         return result
 
     def _latencies_ms(self, blocks: np.ndarray) -> np.ndarray:
@@ -517,7 +538,9 @@ class Renderer:
 
     def record(self, path: str | Path) -> None:
         """Record the drive and telemetry from now on; :meth:`stop` writes them to ``path`` (.npz, the
-        format of ``tpad-rt render``). Raises ConfigError unless ``path`` ends in ``.npz``."""
+        format of ``tpad-rt render``). Raises ConfigError unless ``path`` ends in ``.npz``. A recording
+        keeps at most ``tpad_rt.limits.MAX_RECORDING_SAMPLES`` drive samples in memory: past that the
+        run ends with a TpadError (re-raised by :meth:`check`, :meth:`join`, :meth:`stop`)."""
         path = Path(path)
         if path.suffix.lower() != ".npz":
             raise ConfigError(f"record: the path must end in .npz, got '{path}'")
