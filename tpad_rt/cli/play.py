@@ -287,6 +287,10 @@ class Session:
             f"power: mean {stats['power_mean_w']:.3f} W, peak {stats['power_peak_w']:.3f} W "
             f"(cap {stats['power_budget_w']:g} W, average budget {stats['power_avg_w']:g} W)",
         ]
+        if stats["faults"]:
+            lines.append(f"faults: {stats['faults']} ({stats['fault_steps']} control steps, "
+                         f"{stats['fault_blocks']} blocks; {', '.join(stats['fault_causes'])}): the drive ramped to 0 "
+                         "each time and came back with the next valid data (docs/kernel.md \"Faults\")")
         period_ms = 1e3 * stats["block_frames"] / stats["rate_hz"]
         device = self.renderer.audio_device
         if device is not None and "JACK" in device.host_api and stats["dac_delay_ms"] > 1.5 * period_ms:

@@ -29,7 +29,9 @@ from tpad_rt import __version__
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.inputs import open_input
-from tpad_rt.kernel.layout import CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
+from tpad_rt.kernel.layout import (
+    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG,
+)
 from tpad_rt.offline import OfflineRender, RenderResult, input_span_s, texture_under_finger
 from tpad_rt.outputs import open_output
 from tpad_rt.outputs.wav import WavOutput
@@ -222,6 +224,10 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
         f"saturated: {_percent(saturated)} of blocks (voltage {_percent((flags & FLAG_VOLTAGE) != 0)}, "
         f"power {_percent((flags & FLAG_POWER) != 0)}); finger touching in {_percent(touching)}",
     ]
+    faults = (flags & FLAG_FAULT) != 0
+    if faults.any():
+        lines.append(f"faults: {_percent(faults)} of blocks ({np.count_nonzero(faults)}): the drive ramped to 0 there "
+                     "(docs/kernel.md \"Faults\")")
     if "achieved_mu" in blocks:
         felt_target, known = texture_under_finger(result, texture)
         options = metadata["render_options"]
