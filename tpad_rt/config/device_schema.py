@@ -18,6 +18,8 @@ from tpad_rt.limits import MAX_FORCE_N
 #: Forces closer than this (N) are not told apart: far finer than a finger-force calibration resolves,
 #: and it keeps the kernel's force grid from collapsing to a zero step.
 MIN_FORCE_STEP_N = 0.001
+#: Slack (N) for decimal forces' rounding: 1.001 - 1.0 is 0.000999999999999889 in binary.
+_FORCE_SLACK_N = 1e-9
 #: The motional branch's quality factor sqrt(L / C) / R must lie in (MIN_Q, MAX_Q] at every force:
 #: above 0.5 the plate rings (an underdamped resonator, which sim:// models); a MAX_Q plate takes
 #: seconds to ring up, far beyond any TPaD.
@@ -83,7 +85,7 @@ class _ForceTables(StrictModel):
     def _consistent(self) -> _ForceTables:
         for index in range(1, len(self.force_n)):
             previous, force = self.force_n[index - 1], self.force_n[index]
-            if force - previous < MIN_FORCE_STEP_N:
+            if force - previous < MIN_FORCE_STEP_N - _FORCE_SLACK_N:
                 message = (f"must be >= {previous + MIN_FORCE_STEP_N:g} (forces must increase by at least "
                            f"{MIN_FORCE_STEP_N:g} N), got {force:g}")
                 raise rule_error(message, "force_n", index)
@@ -165,7 +167,7 @@ class DeviceFile(StrictModel):
         for index, force in enumerate(self.circuit.force_n):
             at = bisect.bisect_left(known, force)
             nearest = min(known[max(at - 1, 0):at + 1], key=lambda candidate: abs(candidate - force))
-            if 0.0 < abs(nearest - force) < MIN_FORCE_STEP_N:
+            if 0.0 < abs(nearest - force) < MIN_FORCE_STEP_N - _FORCE_SLACK_N:
                 raise rule_error(
                     f"must equal calibration.force_n's {nearest:g} or differ from it by at least "
                     f"{MIN_FORCE_STEP_N:g} N, got {force:g}",
