@@ -3,7 +3,7 @@
 API map
 -------
 Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_frames=64,
-         options=RenderOptions())
+         options=RenderOptions(), stall_timeout_s=0.5)
     context manager; ``start()``, ``stop()``, ``set_texture(texture_or_path)``,
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
     ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``iter_telemetry(period_s)``, ``record(path)``,
@@ -29,7 +29,8 @@ Example::
 docs/realtime.md is the design: the audio callback is the native
 ``tpad_rt.kernel.callback.render_callback``; every state array is shared with it
 through a :class:`tpad_rt.realtime.CallbackTable`; a watcher thread drains
-telemetry and the drive for recordings and polls the stream. With a non-audio output
+telemetry and the drive for recordings and polls the stream (lost: inactive; stalled: no
+callback for ``stall_timeout_s``). With a non-audio output
 (``sim://``, ``null://``, ``wav://...``) a paced Python thread calls the same callback
 and hands each block to the output (GIL-bound: a simulator, not a real-time path).
 """
@@ -74,6 +75,13 @@ MAX_PENDING_ROWS = 2**18
 PACED_MAX_BEHIND_S = 0.1
 #: The stop waits at most this many times the ramp's duration (plus a second) for the drive to reach 0.
 STOP_TIMEOUT_FACTOR = 20
+#: The longest ``stall_timeout_s`` accepted (s).
+MAX_STALL_TIMEOUT_S = 60.0
+#: An audio stream counts as stalled after no fewer blocks' time than this without a callback (large blocks).
+STALL_MIN_BLOCKS = 4
+#: Stopping and closing an audio stream may take the stall limit plus this long (s; it takes tens of ms)
+#: before the stream counts as stalled and is abandoned.
+CLOSE_GRACE_S = 1.0
 
 #: Friction 1 everywhere: the drive stays silent (the texture before any is set).
 NO_TEXTURE = CompiledTexture(np.array([[OP_PUSH_ONE] + [0] * (TEX_PROG_COLS - 1)]), np.zeros(0), np.zeros(0), 1,
@@ -97,15 +105,20 @@ class Renderer:
     ``rate_hz`` and ``block_frames``), or ``sim://``, ``null://``, ``wav://...`` run by a
     paced thread; ``texture`` a compiled texture, a texture file, or None (silent until
     :meth:`set_texture`); ``rate_hz`` the sample rate (Hz), ``block_frames`` the frames
-    per callback; ``options`` the render settings (power budget, ramps, watchdog...).
+    per callback; ``options`` the render settings (power budget, ramps, watchdog...);
+    ``stall_timeout_s`` how long (s) an audio stream may go without a callback before
+    it counts as stalled (at least STALL_MIN_BLOCKS blocks' time).
 
-    Raises ConfigError for a bad URL, texture or option, or a carrier above 0.45 x the
+    Raises ConfigError for a bad URL, texture or option (``stall_timeout_s`` not in
+    ``(0, MAX_STALL_TIMEOUT_S]``), or a carrier above 0.45 x the
     rate (naming the rate needed); BackendError (at :meth:`start`) when the audio
     device cannot run the stream. Errors met later by the stream or the engine's
     thread are re-raised by :meth:`stop`, :meth:`check` and on leaving a ``with`` block.
     A lost audio device (a stream that stopped by itself, e.g. a JACK server that died)
-    is a BackendError; its stream is abandoned, not closed (docs/realtime.md), and audio
-    stays unusable in this process: restart it.
+    is a BackendError; so is a stalled one (a hung device or a stopped JACK server: no
+    callback for ``stall_timeout_s``). Either stream is abandoned, not stopped or closed
+    (docs/realtime.md), so :meth:`stop` returns promptly, and audio stays unusable in
+    this process: restart it.
 
     Finger samples may come from several threads (:meth:`push_finger` and :meth:`lift` take a
     lock; the callback never does) and are validated at the call (SampleError);
@@ -115,7 +128,7 @@ class Renderer:
 
     def __init__(self, device: Device | None = None, output: str = "audio://", *,
                  texture: CompiledTexture | str | Path | None = None, rate_hz: int = 192000,
-                 block_frames: int = 64, options: RenderOptions = RenderOptions()):
+                 block_frames: int = 64, options: RenderOptions = RenderOptions(), stall_timeout_s: float = 0.5):
         self.device = device if device is not None else Device.default()
         self.output_url = output
         url = parse_url(output, "output", {**output_forms(), "audio": audio.FORMS})
@@ -125,6 +138,11 @@ class Renderer:
             block_frames = self._audio.block_frames if "block" in self._audio.given else block_frames
         if not (isinstance(block_frames, int) and 1 <= block_frames <= 65536):
             raise ConfigError(f"block_frames: must be a whole number in [1, 65536], got {block_frames!r}")
+        if not (isinstance(stall_timeout_s, (int, float)) and not isinstance(stall_timeout_s, bool)
+                and 0 < stall_timeout_s <= MAX_STALL_TIMEOUT_S):
+            raise ConfigError(f"stall_timeout_s: must be a number of seconds in (0, {MAX_STALL_TIMEOUT_S:g}], "
+                              f"got {stall_timeout_s!r}")
+        self.stall_timeout_s = float(stall_timeout_s)
         self.rate_hz = rate_hz
         self.block_frames = block_frames
         self.options = options
@@ -138,6 +156,7 @@ class Renderer:
         self._halt = threading.Event()
         self._ended = threading.Event()  # set by stop() and by an error in the engine's threads
         self._error: BaseException | None = None
+        self._stalled = False  # set by the watcher when the audio stream stopped calling back
         self._telemetry_lock = threading.Lock()
         self._pending: deque[dict[str, np.ndarray]] = deque()
         self._pending_rows = 0
@@ -181,6 +200,7 @@ class Renderer:
         if self.running:
             raise RuntimeError("Renderer.start: already running")
         self._error = None
+        self._stalled = False
         self._halt.clear()
         self._ended.clear()
         channels, channel = 1, 0
@@ -224,8 +244,10 @@ class Renderer:
 
         Waits (bounded) until the callback has rendered the samples of the ramp, one
         control interval and one block past the stop: the kernel's gain is 0 from
-        there on. Re-raises an error the stream or the engine's threads met, and
-        writes the recording :meth:`record` asked for.
+        there on. A lost or stalled stream is abandoned instead (returns promptly:
+        within ``stall_timeout_s`` plus a second of a stall). Re-raises an error the
+        stream or the engine's threads met, and writes the recording :meth:`record`
+        asked for.
         """
         table = self._table
         if table is None:
@@ -234,8 +256,9 @@ class Renderer:
         self._pipeline.stop()
         ramp_samples = max(1, round(self.options.ramp_ms * 1e-3 * self.rate_hz))
         target = table.next_sample + self.options.control_interval + ramp_samples + self.block_frames
-        deadline = time.monotonic() + STOP_TIMEOUT_FACTOR * (target - table.next_sample) / self.rate_hz + 1.0
-        while table.next_sample < target and self._error is None and time.monotonic() < deadline:
+        deadline = (time.monotonic() + STOP_TIMEOUT_FACTOR * (target - table.next_sample) / self.rate_hz + 1.0
+                    + self._stall_limit_s())  # a stall that begins now is reported (the watcher) before that
+        while table.next_sample < target and not self._ended.is_set() and time.monotonic() < deadline:
             time.sleep(0.001)
         self._halt.set()
         for thread in (self._paced, self._watcher):
@@ -256,17 +279,42 @@ class Renderer:
         self.check()
 
     def _close_stream(self) -> None:
-        """Stop and close the audio stream; abandon it instead if its device or server went away."""
+        """Stop and close the audio stream; abandon it instead if it stalled or its device or server went away.
+
+        The stop and close run in a helper thread (PortAudio's JACK host API blocks in them for minutes
+        when the server stops answering): if they take longer than the stall limit plus CLOSE_GRACE_S,
+        the stream is abandoned and a BackendError (stalled) raised; so is a stop or close failing.
+        """
         stream, self._stream = self._stream, None
         if stream is None:
             return
-        if stream.lost():
+        if self._stalled or stream.lost():
             stream.abandon()
             return
-        try:
-            stream.stop()
-        finally:
-            stream.close()
+        errors: list[BaseException] = []
+
+        def shut() -> None:
+            try:
+                try:
+                    stream.stop()
+                finally:
+                    stream.close()
+            except BaseException as error:  # noqa: BLE001 - re-raised by the waiting thread
+                errors.append(error)
+
+        closer = threading.Thread(target=shut, name="tpad-rt stream close", daemon=True)
+        closer.start()
+        bound_s = self._stall_limit_s() + CLOSE_GRACE_S
+        closer.join(bound_s)
+        if closer.is_alive():
+            stream.abandon()
+            raise _stall_error(stream.device, f"stopping it took over {bound_s:.2f} s")
+        if errors:
+            raise errors[0]
+
+    def _stall_limit_s(self) -> float:
+        """Seconds without a callback after which the audio stream counts as stalled."""
+        return max(self.stall_timeout_s, STALL_MIN_BLOCKS * self.block_frames / self.rate_hz)
 
     def join(self, timeout_s: float | None = None) -> None:
         """Wait (at most ``timeout_s`` s; None: no limit) until another thread stops the renderer or an
@@ -328,14 +376,27 @@ class Renderer:
                 time.sleep(min(0.005, self.block_frames / self.rate_hz))
 
     def _watch(self) -> None:
-        """Until halted: drain telemetry (and the drive when recording), and fail if the stream stopped."""
+        """Until halted: drain telemetry (and the drive when recording), and fail if the audio stream stopped
+        or stalled (its callback count did not advance for the stall limit, clocked with time.monotonic)."""
         table = self._table
         assert table is not None
+        seen, seen_at, limit_s = -1, time.monotonic(), self._stall_limit_s()
         while not self._halt.wait(WATCH_PERIOD_S):
             self._drain(table)
-            if self._stream is not None and not self._halt.is_set() and not self._stream.active():
-                raise BackendError(f"audio: the stream on device {self._stream.device} stopped "
-                                   "(device lost or server gone)")
+            stream = self._stream
+            if stream is None or self._halt.is_set():
+                continue
+            if not stream.active():
+                raise BackendError(f"audio: the stream on device {stream.device} stopped (device lost or server gone)")
+            # The clock is read before the count, and after it on an advance: the gap measured never exceeds
+            # the time without a callback, however late this thread runs (GIL, load).
+            now = time.monotonic()
+            count = int(table.stats[cb.STAT_CALLBACKS])
+            if count != seen:
+                seen, seen_at = count, time.monotonic()
+            elif now - seen_at >= limit_s:
+                self._stalled = True
+                raise _stall_error(stream.device, f"no callback for {now - seen_at:.2f} s")
 
     def _drain(self, table: CallbackTable) -> None:
         """Move new telemetry rows (and drive samples, when recording) out of the shared rings."""
@@ -563,6 +624,12 @@ class Renderer:
         }
         drive = np.concatenate(self._drive_chunks) if self._drive_chunks else np.zeros(0, dtype=np.float32)
         write_recording(path, Recording(self.rate_hz, drive, _joined(self._recorded), metadata))
+
+
+def _stall_error(device: audio.AudioDevice, what: str) -> BackendError:
+    """The error of a stream on ``device`` that stalled (``what`` says how it showed)."""
+    return BackendError(f"audio: the stream on device {device} stalled: {what} (device hung or server stopped); "
+                        "the stream is abandoned, not closed: restart the program to use audio again")
 
 
 def _joined(chunks: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:

@@ -11,8 +11,8 @@ volts, power, underflows, callback load, time)
 refreshes :data:`STATUS_HZ` times a second on a terminal (nothing on a pipe). Play
 ends at ``--duration``, when a finite input ends, or on Ctrl-C (exit status 0): the
 drive ramps to 0 (``Renderer.stop``), a summary follows, and ``--record`` writes the
-recording (the ``tpad-rt render`` format). An error (bad file or URL, missing or lost
-audio device, an input failing) ends with the output ramped and closed (a lost
+recording (the ``tpad-rt render`` format). An error (bad file or URL, missing, lost or
+stalled audio device, an input failing) ends with the output ramped and closed (a lost
 device's stream is abandoned: docs/realtime.md), one line on stderr and exit status 1
 (``tpad_rt.cli.main``).
 """
@@ -34,7 +34,7 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from tpad_rt.cli.render import add_session_arguments
+from tpad_rt.cli.render import _number, add_session_arguments
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError, ConfigError
@@ -79,6 +79,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     _redefault(parser, "--output", "auto", "output URL (audio://[device]?..., sim://, null://), or auto: an audio "
                "device that accepts --rate (JACK first), else sim://")
     parser.add_argument("--record", metavar="FILE.npz", help="also write a recording (the format of render)")
+    parser.add_argument("--stall-timeout", metavar="S", type=_number(0, False), default=0.5,
+                        help="an audio stream without a callback for S seconds has stalled (a hung device or a "
+                        "stopped JACK server): play ends with an error (default 0.5)")
     parser.set_defaults(func=run)
 
 
@@ -126,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
     options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
                             **({} if args.force is None else {"default_force_n": args.force}))
     renderer = Renderer(device, output.url, texture=args.texture, rate_hz=args.rate, block_frames=args.block,
-                        options=options)
+                        options=options, stall_timeout_s=args.stall_timeout)
     with open_input(finger.url, device=device) as source, _sigint_event() as interrupted:
         console.print(f"output {output}, input {finger}; "
                       + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
