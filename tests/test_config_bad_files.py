@@ -83,7 +83,9 @@ def test_missing_file(tmp_path: Path) -> None:
 
 
 def test_directory(tmp_path: Path) -> None:
-    assert check_file(tmp_path) == [f"{tmp_path}: cannot read: is a directory"]
+    assert check_file(tmp_path) == [
+        f"{tmp_path}: not a regular file (a directory); tpad-rt reads texture and device files from regular files only"
+    ]
 
 
 def test_empty_file(tmp_path: Path) -> None:

@@ -6,6 +6,8 @@ Every error a user can cause (a bad file, URL, flag or missing component) is a
 
 from __future__ import annotations
 
+import unicodedata
+
 
 class TpadError(Exception):
     """Base class of every user-facing tpad-rt error; its message is complete."""
@@ -35,3 +37,8 @@ class SampleError(TpadError, ValueError):
     the argument, the accepted range and the value (``x_mm: must be a finite number in
     [-130, 260] mm, got nan``).
     """
+
+
+def printable(text: str) -> str:
+    """``text`` with control characters (NUL, newline, escape...) written as ``\\xNN``, for one-line messages."""
+    return "".join(f"\\x{ord(char):02x}" if unicodedata.category(char) == "Cc" else char for char in text)

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.files import check_writable_target, ensure_regular
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
 from tpad_rt.recording import Recording, read_recording
 
@@ -42,10 +43,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Plot the recording; 0 on success. ConfigError for a bad recording or image name."""
+    """Plot the recording; 0 on success. ConfigError for a bad, missing or non-regular recording, or an
+    image name that is not a figure or names an existing non-regular file."""
     out = Path(args.out)
     if out.suffix.lower() not in _FORMATS:
         raise ConfigError(f"--out: must end in {', '.join(_FORMATS)}, got '{args.out}'")
+    check_writable_target(out, "figures")
+    ensure_regular(args.recording, "recordings")
     figure = plot_recording(read_recording(args.recording), along=args.along, start_s=args.start, end_s=args.end)
     try:
         figure.savefig(out, dpi=150)

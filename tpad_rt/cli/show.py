@@ -28,6 +28,7 @@ from rich.console import Console
 
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.files import check_writable_target
 from tpad_rt.physics.friction import amplitude_for
 from tpad_rt.texture import CompiledTexture, load_compiled
 
@@ -101,8 +102,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Write the figure and print a one-line summary; 0 on success.
 
-    Raises ConfigError for a bad texture or device file or a bad option value,
-    BackendError when the figure cannot be written.
+    Raises ConfigError for a bad texture or device file, a bad option value or an
+    ``--out`` that exists and is not a regular file, BackendError when the figure
+    cannot be written.
     """
     finger = Finger(
         speed_mm_s=_checked("--speed-mm-s", args.speed_mm_s, minimum=0.0),
@@ -114,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in _FORMATS:
         raise ConfigError(f"--out: must end in {', '.join(_FORMATS)}, got '{args.out}'")
+    check_writable_target(out, "figures")
     device = Device.from_file(args.device) if args.device else Device.default()
     texture = load_compiled(args.texture)
     maps = plate_maps(texture, device, finger, t_s, resolution_mm)

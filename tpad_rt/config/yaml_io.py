@@ -20,6 +20,7 @@ from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from tpad_rt.config.breadcrumb import Location, breadcrumb, show_value
 from tpad_rt.errors import ConfigError
+from tpad_rt.files import read_regular
 
 MAX_FILE_BYTES = 4 * 1024 * 1024
 MAX_DEPTH = 32
@@ -56,12 +57,13 @@ def load_yaml(path: Path, source: str) -> YamlDocument:
     """Read ``path`` as plain YAML whose top level is a mapping.
 
     Raises ConfigError (lines prefixed with ``source``) when the file cannot be
-    read or exceeds 4 MiB, is not valid YAML, nests deeper than 32 levels, has a
+    read, is not a regular file (a FIFO, a device, a directory: refused before
+    reading, :func:`tpad_rt.files.open_regular`) or exceeds 4 MiB, is not valid YAML, nests deeper than 32 levels, has a
     list longer than 100,000 items or more than 1,000,000 values once aliases
     are expanded, uses a tag other than plain data, repeats a key, or its top
     level is not a mapping.
     """
-    text = _read(path, source)
+    text = read_regular(path, "texture and device files", MAX_FILE_BYTES, source)
     try:
         return _compose_and_construct(text, source)
     except _LimitExceeded as err:
@@ -91,17 +93,6 @@ def _compose_and_construct(text: bytes, source: str) -> YamlDocument:
         loader.dispose()
 
 
-def _read(path: Path, source: str) -> bytes:
-    """The file's bytes; raises ConfigError if unreadable or larger than MAX_FILE_BYTES."""
-    try:
-        with open(path, "rb") as stream:
-            text = stream.read(MAX_FILE_BYTES + 1)
-    except OSError as err:
-        reason = err.strerror or str(err)
-        raise ConfigError(breadcrumb(source, (), f"cannot read: {reason[:1].lower()}{reason[1:]}")) from None
-    if len(text) > MAX_FILE_BYTES:
-        raise ConfigError(breadcrumb(source, (), "file is larger than 4 MiB"))
-    return text
 
 
 class _LimitExceeded(Exception):

@@ -23,6 +23,7 @@ import numpy.typing as npt
 from tpad_rt.device import Device
 from tpad_rt.drive_guard import bad_sample_message, first_bad_sample
 from tpad_rt.errors import BackendError
+from tpad_rt.files import check_writable_target
 from tpad_rt.outputs.base import Output
 from tpad_rt.urls import Url, UrlForm
 
@@ -53,12 +54,17 @@ def _header(fs_hz: int, data_bytes: int) -> bytes:
 
 
 class WavOutput(Output):
-    """Streams blocks into a 32-bit float mono WAV file at ``path``, sample rate ``fs_hz`` (Hz)."""
+    """Streams blocks into a 32-bit float mono WAV file at ``path``, sample rate ``fs_hz`` (Hz).
+
+    Raises ConfigError when ``path`` exists and is not a regular file (a FIFO, a
+    device, a directory), BackendError when it cannot be opened for writing.
+    """
 
     def __init__(self, path: str | Path, fs_hz: int):
         super().__init__(fs_hz)
         self.path = Path(path)
         self.data_bytes = 0
+        check_writable_target(self.path, "WAV files")
         try:
             self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
             self._file.write(_header(fs_hz, 0))
