@@ -10,7 +10,7 @@ error message ends with.
 API map
 -------
 parse_url(text, direction, schemes) -> Url
-    split ``text``; ConfigError for a malformed URL or an unknown scheme
+    split ``text``; ConfigError for a malformed, over-long or control-character URL or an unknown scheme
 Url.fail(problem, forms) -> ConfigError
     the one-line error for a problem with this URL
 UrlForm(scheme, target, options).read(url) -> dict of option values
@@ -22,12 +22,18 @@ from __future__ import annotations
 
 import difflib
 import math
+import unicodedata
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import parse_qsl, unquote
 
-from tpad_rt.errors import ConfigError
+from tpad_rt.errors import ConfigError, printable
+
+#: Longest URL accepted (characters).
+MAX_URL_CHARS = 4096
+#: Characters of a URL shown in a message at most.
+_SHOWN_CHARS = 200
 
 #: A value parser: URL text in, checked value out; ValueError says what was expected.
 Parser = Callable[[str], Any]
@@ -57,18 +63,28 @@ class Url:
 
 def _error(direction: str, text: str, problem: str, forms: Sequence[UrlForm | str]) -> ConfigError:
     expected = " or ".join(str(form) for form in forms)
-    return ConfigError(f"{direction} URL '{text}': {problem}; expected {expected}")
+    shown = printable(text if len(text) <= _SHOWN_CHARS else text[:_SHOWN_CHARS] + "...")
+    return ConfigError(f"{direction} URL '{shown}': {problem}; expected {expected}")
+
+
+def _control_character(texts: Sequence[str]) -> str | None:
+    """The first control character (NUL, newline, escape...) in ``texts``, or None."""
+    return next((char for text in texts for char in text if unicodedata.category(char) == "Cc"), None)
 
 
 def parse_url(text: str, direction: str, schemes: Mapping[str, Sequence[UrlForm | str]]) -> Url:
     """Split ``text`` (an ``input`` or ``output`` URL, as ``direction`` says).
 
     ``schemes`` maps each known scheme to the forms it accepts (for the messages).
-    Raises ConfigError when ``text`` has no ``scheme://``, names an unknown scheme
-    (with a did-you-mean hint and every valid form), or has a malformed query, an
-    option without a value or an option given twice.
+    Raises ConfigError when ``text`` is longer than MAX_URL_CHARS, has no ``scheme://``,
+    names an unknown scheme (with a did-you-mean hint and every valid form), has a
+    malformed query, an option without a value or an option given twice, or holds a
+    control character (a NUL byte, a newline; also written ``%00``) anywhere.
     """
     every_form = [form for forms in schemes.values() for form in forms]
+    if len(text) > MAX_URL_CHARS:
+        raise _error(direction, text, f"{len(text):,} characters long, more than the {MAX_URL_CHARS:,} a URL may have",
+                     every_form)
     scheme, separator, rest = text.partition("://")
     if not separator or not scheme:
         raise _error(direction, text, "not a URL (no 'scheme://')", every_form)
@@ -89,7 +105,12 @@ def parse_url(text: str, direction: str, schemes: Mapping[str, Sequence[UrlForm 
         if not value:
             raise _error(direction, text, f"option '{name}' has no value", schemes[scheme])
         options[name] = value
-    return Url(text=text, direction=direction, scheme=scheme, target=unquote(target), options=options)
+    target = unquote(target)
+    bad = _control_character([text, target, *options, *options.values()])
+    if bad is not None:
+        raise _error(direction, text, f"holds the control character {printable(bad)} (after unquoting); "
+                     "URLs, paths and option values must be printable text", schemes[scheme])
+    return Url(text=text, direction=direction, scheme=scheme, target=target, options=options)
 
 
 @dataclass(frozen=True)
@@ -160,7 +181,7 @@ def number(low: float = -math.inf, *, low_closed: bool = True, high: float = mat
            allow_inf: bool = False) -> Parser:
     """A parser of a finite number in ``[low, high]`` (``(low, high]`` unless ``low_closed``).
 
-    With ``allow_inf``, ``inf`` is accepted too (and ``high`` is ignored).
+    With ``allow_inf``, ``inf`` is accepted too (besides the finite numbers up to ``high``).
     """
     bound = f"{'>=' if low_closed else '>'} {low:g}" if low > -math.inf else ""
     if high < math.inf:
@@ -182,16 +203,17 @@ def number(low: float = -math.inf, *, low_closed: bool = True, high: float = mat
     return parse
 
 
-def count(low: int = 0) -> Parser:
-    """A parser of a whole number ``>= low``."""
+def count(low: int = 0, high: int | None = None) -> Parser:
+    """A parser of a whole number ``>= low`` (and ``<= high`` when given)."""
+    expected = f"a whole number >= {low}" if high is None else f"a whole number in [{low}, {high}]"
 
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
-            raise ValueError(f"must be a whole number >= {low}") from None
-        if value < low:
-            raise ValueError(f"must be a whole number >= {low}")
+            raise ValueError(f"must be {expected}") from None
+        if value < low or (high is not None and value > high):
+            raise ValueError(f"must be {expected}")
         return value
 
     return parse
