@@ -46,15 +46,18 @@ def test_relative_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
-        ("t,x_mm,y_mm\n0,1,2\n0.1,abc,2\n", "traj.csv:3: column x_mm: must be a number, got 'abc'"),
-        ("t,x_mm,y_mm\n0,1,2\n0.1,1,inf\n", "traj.csv:3: column y_mm: must be a number, got 'inf'"),
+        ("t,x_mm,y_mm\n0,1,2\n0.1,abc,2\n",
+         "traj.csv:3: column x_mm: must be a finite number in [-130, 260] mm, got 'abc'"),
+        ("t,x_mm,y_mm\n0,1,2\n0.1,1,inf\n",
+         "traj.csv:3: column y_mm: must be a finite number in [-60, 120] mm, got 'inf'"),
         ("t,x_mm,y_mm\n0,1,2\n# c\n0,1,2\n", "traj.csv:4: column t: must be greater than the previous line's 0, got 0"),
         ("t,x_mm,y_mm\n0.2,1,2\n0.1,1,2\n",
          "traj.csv:3: column t: must be greater than the previous line's 0.2, got 0.1"),
-        ("t,x_mm,y_mm\n-1,1,2\n", "traj.csv:2: column t: must be a number >= 0, got '-1'"),
+        ("t,x_mm,y_mm\n-1,1,2\n", "traj.csv:2: column t: must be a finite number in [0, 86400] s, got '-1'"),
         ("t,x_mm,y_mm\n0,1\n", "traj.csv:2: 2 fields, expected 3 (t,x_mm,y_mm)"),
         ("t,x_mm,y_mm,down\n0,1,2,yes\n", "traj.csv:2: column down: must be 0 or 1, got 'yes'"),
-        ("t,x_mm,y_mm,force_n\n0,1,2,-0.5\n", "traj.csv:2: column force_n: must be a number >= 0, got '-0.5'"),
+        ("t,x_mm,y_mm,force_n\n0,1,2,-0.5\n",
+         "traj.csv:2: column force_n: must be a finite number in [0, 50] N, got '-0.5'"),
         ("t,x_mm,y_mm,forse_n\n", "traj.csv:1: header: unknown column 'forse_n'; did you mean 'force_n'?"),
         ("# c\nt,x,y_mm\n", "traj.csv:2: header: unknown column 'x'"),
         ("t,x_mm,t\n", "traj.csv:1: header: column 't' appears twice"),
@@ -71,12 +74,12 @@ def test_errors_name_the_file_and_line(tmp_path: Path, text: str, expected: str)
 
 
 def test_unreadable_files(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match=r"missing\.csv: no such file"):
+    with pytest.raises(ConfigError, match=r"missing\.csv: cannot read: no such file or directory"):
         open_input(f"file://{tmp_path}/missing.csv")
     (tmp_path / "latin1.csv").write_bytes(b"t,x_mm,y_mm\n0,1,2\xe9\n")
     with pytest.raises(ConfigError, match=r"latin1\.csv:2: not UTF-8 text"):
         open_input(f"file://{tmp_path}/latin1.csv")
-    with pytest.raises(ConfigError, match="cannot read"):
+    with pytest.raises(ConfigError, match=r"not a regular file \(a directory\); tpad-rt reads trajectories"):
         open_input(f"file://{tmp_path}")
 
 

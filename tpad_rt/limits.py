@@ -7,8 +7,10 @@ defends itself again with its own (looser) bounds in :mod:`tpad_rt.kernel.layout
 API map
 -------
 MAX_RATE_HZ, MAX_BLOCK_FRAMES, MAX_RENDER_S, MAX_INPUT_S, MAX_RECORDING_SAMPLES,
-MAX_FORCE_N, FINGER_TIME_WINDOW_S, MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_ROWS
+MAX_RENDER_BLOCKS, MAX_FORCE_N, FINGER_TIME_WINDOW_S, MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_ROWS
     the limits (units in the names)
+DEFAULT_PLATE_MM
+    the plate (length, width) assumed without a device file
 position_range_mm(plate_length_mm, plate_width_mm) -> ((x_low, x_high), (y_low, y_high))
     the finger positions accepted for a plate: one plate length (width) beyond each edge
 """
@@ -25,6 +27,9 @@ MAX_RENDER_S = 3600.0
 MAX_INPUT_S = 86_400.0
 #: Most drive samples a recording keeps in memory (float32: 256 MiB; 349 s at 192 kHz).
 MAX_RECORDING_SAMPLES = 2**26
+#: Most blocks an offline render keeps a telemetry row for (about 170 bytes each; 5825 s at 192 kHz
+#: in blocks of 64): bounds a long render to .wav, or one in tiny blocks.
+MAX_RENDER_BLOCKS = 2**24
 #: Largest contact force (N) a finger sample may carry (a pressing finger stays under 10 N).
 MAX_FORCE_N = 50.0
 #: A finger sample's time may differ from the stream clock by at most this much (s), either way.
@@ -32,6 +37,8 @@ FINGER_TIME_WINDOW_S = 10.0
 #: Largest trajectory CSV (bytes) and most samples in one (an hour at 500 Hz).
 MAX_TRAJECTORY_BYTES = 64 * 2**20
 MAX_TRAJECTORY_ROWS = 2_000_000
+#: Plate size (mm, length x width) of the default device, used where no device is given.
+DEFAULT_PLATE_MM = (130.0, 60.0)
 
 
 def position_range_mm(plate_length_mm: float, plate_width_mm: float) -> tuple[tuple[float, float], tuple[float, float]]:

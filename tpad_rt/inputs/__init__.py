@@ -4,7 +4,8 @@ API map
 -------
 open_input(url, device=None) -> Input
     the backend for ``url``'s scheme; ConfigError (showing the expected forms) for an
-    unknown scheme, option or value, a missing part, or a bad trajectory file;
+    unknown scheme, option or value, a value beyond tpad_rt.limits (positions off the
+    device's plate range), a missing part, or a bad trajectory file;
     BackendError when a live input's device (the X display) is unusable
 Input
     base class: ``live``, ``duration_s``, ``samples_between(t0_s, t1_s)``, ``close()``
@@ -31,14 +32,13 @@ from tpad_rt.urls import UrlForm, parse_url
 if TYPE_CHECKING:
     from tpad_rt.device import Device
 
-#: Scheme -> module; each module has ``FORMS`` (its UrlForms) and ``open_url(url) -> Input``.
+#: Scheme -> module; each module has ``FORMS`` (its UrlForms) and ``open_url(url, *, device) -> Input``
+#: (the device's plate bounds the positions an input may report; the mouse maps the screen onto it).
 _SCHEMES = {
     "scripted": "tpad_rt.inputs.scripted",
     "file": "tpad_rt.inputs.file",
     "mouse": "tpad_rt.inputs.mouse",
 }
-#: Schemes whose ``open_url`` also takes the device (the mouse maps the screen onto its plate).
-_TAKE_DEVICE = {"mouse"}
 
 
 def input_forms() -> dict[str, tuple[UrlForm, ...]]:
@@ -49,13 +49,13 @@ def input_forms() -> dict[str, tuple[UrlForm, ...]]:
 def open_input(url: str, device: Device | None = None) -> Input:
     """Open the input ``url`` names (see the module docstring), for ``device`` when given.
 
-    Raises ConfigError for a bad URL or file, BackendError for an unusable X display.
+    Positions are checked against :func:`tpad_rt.limits.position_range_mm` of the
+    device's plate (of DEFAULT_PLATE_MM without a device). Raises ConfigError for a bad
+    URL, file or value (one beyond the limits of :mod:`tpad_rt.limits` included),
+    BackendError for an unusable X display.
     """
     parsed = parse_url(url, "input", input_forms())
-    module = importlib.import_module(_SCHEMES[parsed.scheme])
-    if parsed.scheme in _TAKE_DEVICE:
-        return module.open_url(parsed, device=device)
-    return module.open_url(parsed)
+    return importlib.import_module(_SCHEMES[parsed.scheme]).open_url(parsed, device=device)
 
 
 __all__ = ["FINGER_DTYPE", "Input", "LiveInput", "input_forms", "open_input"]

@@ -20,15 +20,31 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from types import TracebackType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tpad_rt.errors import BackendError
+from tpad_rt.limits import DEFAULT_PLATE_MM, position_range_mm
+
+if TYPE_CHECKING:
+    from tpad_rt.device import Device
 
 #: One finger sample per row.
 FINGER_DTYPE = np.dtype(
     [("t_s", "<f8"), ("x_mm", "<f8"), ("y_mm", "<f8"), ("force_n", "<f8"), ("down", "?")]
 )
+
+
+def plate_size_mm(device: Device | None) -> tuple[float, float]:
+    """``(length, width)`` (mm) of ``device``'s plate, or DEFAULT_PLATE_MM without a device."""
+    return DEFAULT_PLATE_MM if device is None else (device.plate.length_m * 1e3, device.plate.width_m * 1e3)
+
+
+def position_range(device: Device | None) -> tuple[tuple[float, float], tuple[float, float]]:
+    """``((x_low, x_high), (y_low, y_high))`` (mm): the finger positions an input may report on
+    ``device``'s plate (:func:`tpad_rt.limits.position_range_mm`; the default plate without a device)."""
+    return position_range_mm(*plate_size_mm(device))
 
 
 class Input(ABC):

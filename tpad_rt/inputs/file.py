@@ -1,25 +1,40 @@
-"""``file://`` input: a finger trajectory from a CSV file, loaded whole when opened.
+"""``file://`` input: a finger trajectory from a CSV file, read whole when opened.
 
 ``file:///abs/path.csv`` or ``file://relative/path.csv``. The file is UTF-8 text; lines
 starting with ``#`` and blank lines are skipped; the first other line is the header.
-Columns (any order): ``t`` (s, >= 0, strictly increasing), ``x_mm``, ``y_mm``, and
-optionally ``force_n`` (N, >= 0; without it the renderer's default force applies) and
-``down`` (1 touching, 0 lifted; without it every sample touches). Values are plain
-numbers; nothing in the file is evaluated. Errors name the file and line:
-``traj.csv:7: column x_mm: must be a number, got 'abc'``.
+Columns (any order): ``t`` (s, in [0, MAX_INPUT_S], strictly increasing), ``x_mm``,
+``y_mm`` (within :func:`tpad_rt.limits.position_range_mm` of the device's plate, or of
+the default 130 x 60 mm plate without a device: [-130, 260] x [-60, 120] mm), and
+optionally ``force_n`` (N, in [0, MAX_FORCE_N]; without it the renderer's default force
+applies) and ``down`` (1 touching, 0 lifted; without it every sample touches). Values
+are plain numbers; nothing in the file is evaluated. Errors name the file and line:
+``traj.csv:7: column x_mm: must be a finite number in [-130, 260] mm, got 'nan'``.
+
+Bounded memory: the file must be a regular file of at most MAX_TRAJECTORY_BYTES
+(64 MiB, refused before a byte is read) with at most MAX_TRAJECTORY_ROWS samples
+(2,000,000, refused at the line past them). It is parsed line by line into chunks of
+FINGER_DTYPE rows (33 bytes each), so at most 66 MB of samples are held, about twice
+that while the chunks are joined, never the whole text.
 """
 
 from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
-from tpad_rt.errors import ConfigError
-from tpad_rt.inputs.base import FINGER_DTYPE, Input
+from tpad_rt.errors import ConfigError, printable
+from tpad_rt.files import open_regular
+from tpad_rt.inputs.base import FINGER_DTYPE, Input, position_range
+from tpad_rt.limits import MAX_FORCE_N, MAX_INPUT_S, MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_ROWS
 from tpad_rt.urls import Url, UrlForm, did_you_mean
+
+if TYPE_CHECKING:
+    from tpad_rt.device import Device
 
 #: The accepted URL.
 FORMS = (UrlForm("file", "/path/trajectory.csv"),)
@@ -27,8 +42,8 @@ FORMS = (UrlForm("file", "/path/trajectory.csv"),)
 _REQUIRED = ("t", "x_mm", "y_mm")
 _OPTIONAL = ("force_n", "down")
 _HEADER = "t,x_mm,y_mm[,force_n][,down]"
-#: Larger files are refused (a 1 kHz trajectory of an hour is about 150 MB less than this).
-MAX_FILE_BYTES = 256 * 1024 * 1024
+#: Samples parsed into one array before it is kept (about 2 MB).
+_CHUNK_ROWS = 65_536
 
 
 class FileInput(Input):
@@ -49,84 +64,105 @@ class FileInput(Input):
         return self.samples[np.searchsorted(times, t0_s, "right"):np.searchsorted(times, t1_s, "right")]
 
 
-def open_url(url: Url) -> FileInput:
-    """Load the trajectory ``url`` names; ConfigError for a missing path or option, or a bad file."""
+def open_url(url: Url, *, device: Device | None = None) -> FileInput:
+    """Load the trajectory ``url`` names, its positions checked against ``device``'s plate.
+
+    Raises ConfigError for a missing path, an option, or a bad file (:func:`load_trajectory`).
+    """
     FORMS[0].read(url)
     if not url.target:
         raise url.fail("missing the file path", FORMS)
-    return load_trajectory(url.target)
+    return load_trajectory(url.target, device)
 
 
-def load_trajectory(path: str | Path) -> FileInput:
-    """Read the trajectory CSV at ``path`` (module docstring).
+def load_trajectory(path: str | Path, device: Device | None = None) -> FileInput:
+    """Read the trajectory CSV at ``path`` (module docstring), positions on ``device``'s plate.
 
-    Raises ConfigError ``path:line: problem`` for an unreadable or oversized file, a
-    bad header (missing, unknown or repeated column), a row with the wrong number of
-    fields, a value that is not a finite number in range, a time not after the one
-    before, or a file without data rows.
+    Raises ConfigError ``path:line: problem`` for a missing, unreadable, non-regular or
+    oversized file, text that is not UTF-8, a bad header (missing, unknown or repeated
+    column), a row with the wrong number of fields, a value that is not a finite number
+    in its range, a time not after the one before, more than MAX_TRAJECTORY_ROWS
+    samples, or a file without data rows.
     """
-    path = Path(path)
+    name = printable(str(path))
+    with open_regular(path, "trajectories", MAX_TRAJECTORY_BYTES) as stream:
+        return FileInput(_parse(name, _data_lines(name, stream), _Ranges.of(device)))
+
+
+def _data_lines(path: str, stream: BinaryIO) -> Iterator[tuple[int, list[str]]]:
+    """``(line number, fields)`` of every line that is neither blank nor a comment, as read."""
     try:
-        if path.stat().st_size > MAX_FILE_BYTES:
-            raise ConfigError(f"{path}: larger than {MAX_FILE_BYTES // 2**20} MiB")
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such file") from None
+        for number, raw in enumerate(stream, start=1):
+            try:
+                line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
+            except UnicodeDecodeError:
+                raise ConfigError(f"{path}:{number}: not UTF-8 text") from None
+            stripped = line.strip()
+            if stripped and not stripped.startswith("#"):
+                yield number, [field.strip() for field in next(csv.reader([line.rstrip("\r\n")]), [])]
     except OSError as error:
-        raise ConfigError(f"{path}: cannot read ({error.strerror})") from None
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as error:
-        line = data[:error.start].count(b"\n") + 1
-        raise ConfigError(f"{path}:{line}: not UTF-8 text") from None
-    return FileInput(_parse(path, text))
+        raise ConfigError(f"{path}: cannot read: {error.strerror}") from None
 
 
-def _data_lines(text: str) -> list[tuple[int, list[str]]]:
-    """``(line number, fields)`` of every line that is neither blank nor a comment."""
-    numbered = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
-                if line.strip() and not line.lstrip().startswith("#")]
-    rows = csv.reader(line for _, line in numbered)
-    return [(number, [field.strip() for field in row]) for (number, _), row in zip(numbered, rows)]
+class _Ranges:
+    """The accepted value of each numeric column: ``(low, high, unit)``."""
+
+    def __init__(self, x_mm: tuple[float, float], y_mm: tuple[float, float]):
+        self.bounds = {"t": (0.0, MAX_INPUT_S, "s"), "x_mm": (*x_mm, "mm"), "y_mm": (*y_mm, "mm"),
+                       "force_n": (0.0, MAX_FORCE_N, "N")}
+
+    @classmethod
+    def of(cls, device: Device | None) -> _Ranges:
+        """The ranges on ``device``'s plate (the default plate without one)."""
+        return cls(*position_range(device))
 
 
-def _parse(path: Path, text: str) -> np.ndarray:
-    lines = _data_lines(text)
-    if not lines:
+def _parse(path: str, lines: Iterator[tuple[int, list[str]]], ranges: _Ranges) -> np.ndarray:
+    first = next(lines, None)
+    if first is None:
         raise ConfigError(f"{path}: empty; expected a header line {_HEADER} then one sample per line")
-    header_line, header = lines[0]
+    header_line, header = first
     columns = _columns(path, header_line, header)
-    samples = np.zeros(len(lines) - 1, dtype=FINGER_DTYPE)
-    samples["force_n"] = math.nan
-    samples["down"] = True
+    places = [_FIELD_ORDER.index(name) for name in columns]
+    chunks: list[np.ndarray] = []
+    rows: list[tuple[float, float, float, float, bool]] = []
     previous_t_s = -math.inf
-    for index, (line, fields) in enumerate(lines[1:]):
+    for line, fields in lines:
         where = f"{path}:{line}"
+        if len(chunks) * _CHUNK_ROWS + len(rows) == MAX_TRAJECTORY_ROWS:
+            raise ConfigError(f"{where}: more than {MAX_TRAJECTORY_ROWS:,} samples, the most a trajectory may hold")
         if len(fields) != len(columns):
             raise ConfigError(f"{where}: {len(fields)} fields, expected {len(columns)} ({','.join(columns)})")
-        for name, field in zip(columns, fields):
-            samples[index][_FIELD[name]] = _value(where, name, field)
-        t_s = float(samples[index]["t_s"])
+        row: list[float | bool] = [math.nan, math.nan, math.nan, math.nan, True]
+        for place, name, field in zip(places, columns, fields):
+            row[place] = _value(where, name, field, ranges)
+        t_s = row[0]
         if t_s <= previous_t_s:
             raise ConfigError(
                 f"{where}: column t: must be greater than the previous line's {previous_t_s:g}, got {t_s:g}"
             )
         previous_t_s = t_s
+        rows.append(tuple(row))  # type: ignore[arg-type]
+        if len(rows) == _CHUNK_ROWS:
+            chunks.append(np.array(rows, dtype=FINGER_DTYPE))
+            rows.clear()
+    chunks.append(np.array(rows, dtype=FINGER_DTYPE))
+    samples = np.concatenate(chunks) if len(chunks) > 1 else chunks[0]
     if not len(samples):
         raise ConfigError(f"{path}: no samples after the header")
     return samples
 
 
-#: The FINGER_DTYPE field each column fills.
-_FIELD = {"t": "t_s", "x_mm": "x_mm", "y_mm": "y_mm", "force_n": "force_n", "down": "down"}
+#: Columns in the order of FINGER_DTYPE's fields (``t`` fills ``t_s``).
+_FIELD_ORDER = ("t", "x_mm", "y_mm", "force_n", "down")
 
 
-def _columns(path: Path, line: int, header: list[str]) -> list[str]:
+def _columns(path: str, line: int, header: list[str]) -> list[str]:
     known = _REQUIRED + _OPTIONAL
     for name in header:
         if name not in known:
             hint = did_you_mean(name, list(known)) or f" (columns: {', '.join(known)})"
-            raise ConfigError(f"{path}:{line}: header: unknown column '{name}'{hint}; expected {_HEADER}")
+            raise ConfigError(f"{path}:{line}: header: unknown column '{printable(name)}'{hint}; expected {_HEADER}")
         if header.count(name) > 1:
             raise ConfigError(f"{path}:{line}: header: column '{name}' appears twice; expected {_HEADER}")
     missing = [name for name in _REQUIRED if name not in header]
@@ -135,17 +171,18 @@ def _columns(path: Path, line: int, header: list[str]) -> list[str]:
     return header
 
 
-def _value(where: str, column: str, text: str) -> float | bool:
+def _value(where: str, column: str, text: str, ranges: _Ranges) -> float | bool:
+    """The value of ``column`` written ``text``; ConfigError naming the range unless it is in it."""
     if column == "down":
         if text not in ("0", "1"):
-            raise ConfigError(f"{where}: column down: must be 0 or 1, got '{text}'")
+            raise ConfigError(f"{where}: column down: must be 0 or 1, got '{printable(text)}'")
         return text == "1"
     try:
         value = float(text)
     except ValueError:
         value = math.nan
-    low = -math.inf if column in ("x_mm", "y_mm") else 0.0
-    if not (math.isfinite(value) and value >= low):
-        expected = "a number" if low == -math.inf else "a number >= 0"
-        raise ConfigError(f"{where}: column {column}: must be {expected}, got '{text}'")
+    low, high, unit = ranges.bounds[column]
+    if not low <= value <= high:  # False for NaN; the bounds are finite
+        raise ConfigError(f"{where}: column {column}: must be a finite number in [{low:g}, {high:g}] {unit}, "
+                          f"got '{printable(text)}'")
     return value

@@ -6,7 +6,9 @@
   ``screen`` (default): the whole screen of the X display.
 - ``plate_mm``: ``width,height`` (mm) of the plate the rectangle spans; ``device``
   (default): the device's plate length and width when opened with a device, else 130,60.
-- ``force_n``: the force (N) of every sample.
+  At most twice the plate's length and width (:func:`tpad_rt.limits.position_range_mm`),
+  so that every sample lies in the positions a finger may have.
+- ``force_n``: the force (N) of every sample, at most MAX_FORCE_N.
 - ``button``: ``left``, ``right``, ``middle`` or ``any``: the finger touches while it
   is held.
 - ``hover=1``: the finger touches whenever the pointer is inside the rectangle, no
@@ -36,14 +38,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from tpad_rt.errors import BackendError
-from tpad_rt.inputs.base import LiveInput, SampleSink
+from tpad_rt.inputs.base import LiveInput, SampleSink, plate_size_mm, position_range
+from tpad_rt.limits import MAX_FORCE_N
 from tpad_rt.urls import Option, Url, UrlForm, flag, number, point
 
 if TYPE_CHECKING:
     from tpad_rt.device import Device
 
-#: Plate size (mm) when neither ``plate_mm`` nor a device gives one.
-DEFAULT_PLATE_MM = (130.0, 60.0)
 BUTTONS = ("left", "right", "middle", "any")
 _HINT = "set DISPLAY or use --input scripted://swipe"
 
@@ -272,7 +273,7 @@ def _button(text: str) -> str:
 FORMS = (UrlForm("mouse", "", (
     Option("rect", "screen", _rect),
     Option("plate_mm", "device", _plate),
-    Option("force_n", 0.5, number(0.0)),
+    Option("force_n", 0.5, number(0.0, high=MAX_FORCE_N)),
     Option("button", "left", _button),
     Option("hover", False, flag),
 )),)
@@ -281,13 +282,19 @@ FORMS = (UrlForm("mouse", "", (
 def open_url(url: Url, *, device: Device | None = None) -> MouseInput:
     """The mouse ``url`` describes, its plate from ``device`` unless ``plate_mm`` is given.
 
-    Raises ConfigError for a target after ``mouse://``, an unknown option, a bad value
-    or a rectangle that does not fit the screen; BackendError when there is no usable
+    Raises ConfigError for a target after ``mouse://``, an unknown option, a bad value,
+    a plate larger than the device's position range allows or a rectangle that does
+    not fit the screen; BackendError when there is no usable
     X display (see :func:`screen_size_px`).
     """
     values = FORMS[0].read(url)
     if url.target:
         raise url.fail(f"unexpected '{url.target}' after mouse:// (options only)", FORMS)
+    plate_mm = plate_size_mm(device) if values["plate_mm"] == "device" else values["plate_mm"]
+    (_, x_high_mm), (_, y_high_mm) = position_range(device)
+    if plate_mm[0] > x_high_mm or plate_mm[1] > y_high_mm:
+        raise url.fail(f"option plate_mm: must be at most {x_high_mm:g},{y_high_mm:g} mm (samples must stay within "
+                       f"one plate size of the plate), got {plate_mm[0]:g},{plate_mm[1]:g}", FORMS)
     width_px, height_px = screen_size_px()
     rect = values["rect"]
     if rect == "screen":
@@ -295,8 +302,5 @@ def open_url(url: Url, *, device: Device | None = None) -> MouseInput:
     elif rect[0] + rect[2] > width_px or rect[1] + rect[3] > height_px:
         raise url.fail(f"option rect: {','.join(map(str, rect))} does not fit the {width_px}x{height_px} screen",
                        FORMS)
-    plate_mm = values["plate_mm"]
-    if plate_mm == "device":
-        plate_mm = DEFAULT_PLATE_MM if device is None else (device.plate.length_m * 1e3, device.plate.width_m * 1e3)
     return MouseInput(ScreenMap(rect, plate_mm), force_n=values["force_n"], button=values["button"],
                       hover=values["hover"])

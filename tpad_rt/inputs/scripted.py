@@ -17,6 +17,15 @@ the end is the last one and has ``down = False``.
   then ``up_s`` lifted.
 
 Every pattern presses with ``force_n`` newtons.
+
+Limits (:mod:`tpad_rt.limits`), checked when a URL is opened, each error naming the
+option: ``speed_mm_s`` in [0.01, 10000] mm/s; ``force_n`` in [0, MAX_FORCE_N];
+``rate_hz`` in (0, 100000]; ``lift_s``, ``down_s``, ``up_s``, ``duration_s`` at most
+MAX_INPUT_S (a day); ``repeat``, ``count`` at most 10^9; every position the pattern
+reaches (``from_mm``, ``to_mm``, ``y_mm``, ``x_mm``, ``center_mm`` +- ``radius_mm``)
+within :func:`tpad_rt.limits.position_range_mm` of the device's plate (of
+DEFAULT_PLATE_MM without a device); and a pattern with an end must end within
+MAX_INPUT_S.
 """
 
 from __future__ import annotations
@@ -24,19 +33,29 @@ from __future__ import annotations
 import math
 from abc import abstractmethod
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
-from tpad_rt.inputs.base import FINGER_DTYPE, Input
+from tpad_rt.inputs.base import FINGER_DTYPE, Input, position_range
+from tpad_rt.limits import MAX_FORCE_N, MAX_INPUT_S
 from tpad_rt.urls import Option, Url, UrlForm, count, did_you_mean, flag, number, point
+
+if TYPE_CHECKING:
+    from tpad_rt.device import Device
 
 _Times = npt.NDArray[np.float64]
 _Pose = tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.bool_]]
+#: ``(what, position in mm, axis)``: a position a pattern reaches, named by its option(s).
+_Reach = list[tuple[str, float, str]]
 
 #: The most samples per second a scripted touch sensor may produce.
-MAX_RATE_HZ = 100_000.0
+MAX_SENSOR_RATE_HZ = 100_000.0
+#: Finger speeds (mm/s) a pattern may move at: a crawl to ten metres a second.
+SPEED_RANGE_MM_S = (0.01, 10_000.0)
+#: Most passes (``repeat``) or taps (``count``) of a pattern.
+MAX_REPEATS = 10**9
 
 
 class _Scripted(Input):
@@ -53,6 +72,23 @@ class _Scripted(Input):
     @abstractmethod
     def pose(self, t_s: _Times) -> _Pose:
         """Position ``(x_mm, y_mm)`` and touching flag at times ``t_s`` (>= 0, before the end)."""
+
+    @abstractmethod
+    def reach(self) -> _Reach:
+        """The extreme positions (mm) the pattern reaches, each with the option(s) setting it and its axis."""
+
+    def check_limits(self, x_range_mm: tuple[float, float], y_range_mm: tuple[float, float]) -> None:
+        """Raise ValueError (naming the option) when the pattern leaves the position ranges (mm)
+        or ends later than MAX_INPUT_S (s)."""
+        for what, position_mm, axis in self.reach():
+            low, high = x_range_mm if axis == "x" else y_range_mm
+            if not low <= position_mm <= high:
+                raise ValueError(f"option {what}: must be in [{low:g}, {high:g}] mm ({axis} on the plate, up to one "
+                                 f"plate size beyond each edge), got {position_mm:g}")
+        end_s = self.touch_end_s
+        if end_s is not None and not end_s <= MAX_INPUT_S:
+            shown = f"{end_s:,.0f}" if end_s < 1e12 else f"{end_s:.3g}"
+            raise ValueError(f"ends after {shown} s, longer than the {MAX_INPUT_S:g} s an input may last")
 
     @property
     def duration_s(self) -> float | None:
@@ -131,6 +167,9 @@ class Swipe(_Scripted):
         x_mm = np.where(backwards, self.to_mm - direction * travelled_mm, self.from_mm + direction * travelled_mm)
         return x_mm, np.full_like(t_s, self.y_mm), into_s < self.pass_s
 
+    def reach(self) -> _Reach:
+        return [("from_mm", self.from_mm, "x"), ("to_mm", self.to_mm, "x"), ("y_mm", self.y_mm, "y")]
+
 
 @dataclass(frozen=True)
 class Circle(_Scripted):
@@ -154,6 +193,11 @@ class Circle(_Scripted):
         y_mm = center_y_mm - self.radius_mm * np.sin(angle_rad)
         return x_mm, y_mm, np.ones(len(t_s), dtype=bool)
 
+    def reach(self) -> _Reach:
+        (x_mm, y_mm), r_mm = self.center_mm, self.radius_mm
+        return [("center_mm x - radius_mm", x_mm - r_mm, "x"), ("center_mm x + radius_mm", x_mm + r_mm, "x"),
+                ("center_mm y - radius_mm", y_mm - r_mm, "y"), ("center_mm y + radius_mm", y_mm + r_mm, "y")]
+
 
 @dataclass(frozen=True)
 class Still(_Scripted):
@@ -171,6 +215,9 @@ class Still(_Scripted):
 
     def pose(self, t_s: _Times) -> _Pose:
         return np.full_like(t_s, self.x_mm), np.full_like(t_s, self.y_mm), np.ones(len(t_s), dtype=bool)
+
+    def reach(self) -> _Reach:
+        return [("x_mm", self.x_mm, "x"), ("y_mm", self.y_mm, "y")]
 
 
 @dataclass(frozen=True)
@@ -193,28 +240,31 @@ class Tap(_Scripted):
         into_s = np.mod(t_s, self.down_s + self.up_s)
         return np.full_like(t_s, self.x_mm), np.full_like(t_s, self.y_mm), into_s < self.down_s
 
+    def reach(self) -> _Reach:
+        return [("x_mm", self.x_mm, "x"), ("y_mm", self.y_mm, "y")]
 
-_POSITIVE = number(0.0, low_closed=False)
-_POSITION = number()
+
+_SPAN_S = number(0.0, low_closed=False, high=MAX_INPUT_S)
+_POSITION = number()  # the plate's range is checked once the device is known (_Scripted.check_limits)
 #: One parser per option name: a name means the same in every pattern.
 _PARSERS = {
-    "speed_mm_s": _POSITIVE,
+    "speed_mm_s": number(SPEED_RANGE_MM_S[0], high=SPEED_RANGE_MM_S[1]),
     "from_mm": _POSITION,
     "to_mm": _POSITION,
     "x_mm": _POSITION,
     "y_mm": _POSITION,
     "center_mm": point,
-    "radius_mm": _POSITIVE,
-    "force_n": number(0.0),
-    "rate_hz": number(0.0, low_closed=False, high=MAX_RATE_HZ),
-    "repeat": count(0),
-    "count": count(0),
+    "radius_mm": number(0.0, low_closed=False),
+    "force_n": number(0.0, high=MAX_FORCE_N),
+    "rate_hz": number(0.0, low_closed=False, high=MAX_SENSOR_RATE_HZ),
+    "repeat": count(0, high=MAX_REPEATS),
+    "count": count(0, high=MAX_REPEATS),
     "turns": number(0.0),
     "back_and_forth": flag,
-    "lift_s": _POSITIVE,
-    "down_s": _POSITIVE,
-    "up_s": _POSITIVE,
-    "duration_s": number(0.0, low_closed=False, allow_inf=True),
+    "lift_s": _SPAN_S,
+    "down_s": _SPAN_S,
+    "up_s": _SPAN_S,
+    "duration_s": number(0.0, low_closed=False, high=MAX_INPUT_S, allow_inf=True),
 }
 
 _KINDS: dict[str, type[_Scripted]] = {"swipe": Swipe, "circle": Circle, "still": Still, "tap": Tap}
@@ -239,8 +289,12 @@ def _form(kind: str) -> UrlForm:
 FORMS = tuple(_form(kind) for kind in _KINDS)
 
 
-def open_url(url: Url) -> _Scripted:
-    """The pattern ``url`` names; ConfigError for an unknown pattern, option or value."""
+def open_url(url: Url, *, device: Device | None = None) -> _Scripted:
+    """The pattern ``url`` names, on ``device``'s plate (the default plate without one).
+
+    Raises ConfigError for an unknown pattern or option, a value out of its range, a
+    position off the plate's range or an end later than MAX_INPUT_S (module docstring).
+    """
     if url.target not in _KINDS:
         hint = did_you_mean(url.target, list(_KINDS))
         raise url.fail(f"unknown pattern '{url.target}'{hint} (patterns: {', '.join(_KINDS)})", FORMS)
@@ -249,6 +303,8 @@ def open_url(url: Url) -> _Scripted:
     cls = _KINDS[url.target]
     arguments = {item.name: values[_url_name(item.name)] for item in fields(cls)}
     try:
-        return cls(**arguments)
+        pattern = cls(**arguments)
+        pattern.check_limits(*position_range(device))
     except ValueError as error:
         raise url.fail(str(error), [form]) from None
+    return pattern
