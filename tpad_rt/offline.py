@@ -21,7 +21,11 @@ RenderResult
 texture_under_finger(result, texture) -> (mu, valid)
     the texture's friction where the finger really was at each block's middle
 input_span_s(source, duration_s) -> float
-    how long to follow the input; ConfigError for an endless input without a duration
+    how long to follow the input; ConfigError for an endless input without a duration,
+    or one longer than MAX_RENDER_S
+check_render_size(input_s, tail_s, fs_hz, block_frames, keep_drive)
+    ConfigError when a render would keep more than MAX_RENDER_BLOCKS telemetry rows or
+    MAX_RECORDING_SAMPLES drive samples; call it before anything is allocated
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ from tpad_rt.inputs import Input
 from tpad_rt.felt import texture_at_finger
 from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel.layout import TEL_NAMES
+from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_RENDER_BLOCKS, MAX_RENDER_S
 from tpad_rt.outputs import Output
 from tpad_rt.pipeline import Pipeline
 from tpad_rt.texture import CompiledTexture
@@ -67,14 +72,40 @@ def input_span_s(source: Input, duration_s: float | None) -> float:
     """``duration_s`` if given, else the input's natural duration (s).
 
     Raises ConfigError when the input is endless and no duration is given, or the
-    duration is not a finite number > 0.
+    duration is not a number in (0, MAX_RENDER_S].
     """
     span_s = source.duration_s if duration_s is None else duration_s
     if span_s is None:
         raise ConfigError("the input never ends (an endless pattern); give a duration (--duration SECONDS)")
-    if not (math.isfinite(span_s) and span_s > 0):
-        raise ConfigError(f"duration: must be a number > 0, got {span_s:g}")
+    if not 0 < span_s <= MAX_RENDER_S:
+        given = "ends after" if duration_s is None else "duration:"
+        raise ConfigError(f"{given} {span_s:g} s, but a render must last more than 0 s and at most {MAX_RENDER_S:g} s; "
+                          "render part of the input with --duration SECONDS")
     return span_s
+
+
+def _blocks(seconds: float, fs_hz: float, block_frames: int) -> int:
+    """Blocks of ``block_frames`` samples at ``fs_hz`` (Hz) that cover ``seconds`` (s, finite)."""
+    return math.ceil(seconds * fs_hz / block_frames)
+
+
+def check_render_size(input_s: float, tail_s: float, fs_hz: int, block_frames: int, keep_drive: bool) -> None:
+    """Refuse a render too large to hold, before anything is allocated.
+
+    An :class:`OfflineRender` of ``input_s`` + ``tail_s`` (s) at ``fs_hz`` (Hz) in
+    blocks of ``block_frames`` keeps one telemetry row per block and, with
+    ``keep_drive``, every drive sample. Raises ConfigError when that is more than
+    MAX_RENDER_BLOCKS rows or MAX_RECORDING_SAMPLES samples.
+    """
+    blocks = _blocks(input_s, fs_hz, block_frames) + _blocks(tail_s, fs_hz, block_frames)
+    if blocks > MAX_RENDER_BLOCKS:
+        raise ConfigError(f"{input_s:g} s at {fs_hz} Hz in blocks of {block_frames} is {blocks:,} blocks, more than "
+                          f"the {MAX_RENDER_BLOCKS:,} a render keeps telemetry for; render less (--duration) or in "
+                          "longer blocks (--block)")
+    if keep_drive and blocks * block_frames > MAX_RECORDING_SAMPLES:
+        raise ConfigError(f"a recording of {input_s:g} s at {fs_hz} Hz holds {blocks * block_frames:,} drive samples, "
+                          f"more than the {MAX_RECORDING_SAMPLES:,} a recording keeps in memory "
+                          f"({MAX_RECORDING_SAMPLES // fs_hz} s at this rate); render less (--duration) or to .wav")
 
 
 class OfflineRender:
@@ -104,8 +135,8 @@ class OfflineRender:
         self.block_frames = block_frames
         self.force_n = force_n
         fs_hz = pipeline.fs_hz
-        self.input_blocks: float = math.ceil(input_s * fs_hz / block_frames) if math.isfinite(input_s) else math.inf
-        self.tail_blocks = math.ceil(tail_s * fs_hz / block_frames)
+        self.input_blocks: float = _blocks(input_s, fs_hz, block_frames) if math.isfinite(input_s) else math.inf
+        self.tail_blocks = _blocks(tail_s, fs_hz, block_frames)
         self.blocks_done = 0
         self._block = np.zeros(block_frames, dtype=np.float32)
         self._drive: list[np.ndarray] | None = [] if keep_drive else None

@@ -15,6 +15,11 @@ recording (the ``tpad-rt render`` format). An error (bad file or URL, missing, l
 stalled audio device, an input failing) ends with the output ramped and closed (a lost
 device's stream is abandoned: docs/realtime.md), one line on stderr and exit status 1
 (``tpad_rt.cli.main``).
+
+Limits (:mod:`tpad_rt.limits`): ``--duration`` at most MAX_INPUT_S, ``--rate`` and
+``--block`` as for ``render``; ``--record`` keeps at most MAX_RECORDING_SAMPLES drive
+samples in memory (349 s at 192 kHz: a longer play ends with one clear error) and
+must name a regular file if it exists.
 """
 
 from __future__ import annotations
@@ -38,11 +43,13 @@ from tpad_rt.cli.render import _number, add_session_arguments
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.files import check_writable_target
 from tpad_rt.felt import texture_at_finger
 from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import screen_size_px
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
+from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES
 from tpad_rt.outputs import audio
 from tpad_rt.outputs.sim import SimOutput
 from tpad_rt.pipeline import RenderOptions
@@ -74,11 +81,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Render TEXTURE in real time for the finger of --input on --output, with a live status "
         "panel; Ctrl-C stops with a ramp and prints a summary.",
     )
-    add_session_arguments(parser, input_default="auto")
+    add_session_arguments(parser, input_default="auto", max_duration_s=MAX_INPUT_S)
     _redefault(parser, "--input", "auto", f"finger input URL, or auto: mouse:// with an X display, else {AUTO_SWIPE}")
     _redefault(parser, "--output", "auto", "output URL (audio://[device]?..., sim://, null://), or auto: an audio "
                "device that accepts --rate (JACK first), else sim://")
-    parser.add_argument("--record", metavar="FILE.npz", help="also write a recording (the format of render)")
+    parser.add_argument("--record", metavar="FILE.npz",
+                        help="also write a recording (the format of render); it keeps at most "
+                        f"{MAX_RECORDING_SAMPLES:,} drive samples ({MAX_RECORDING_SAMPLES // 192000} s at 192 kHz), "
+                        "a longer play ends with an error")
     parser.add_argument("--stall-timeout", metavar="S", type=_number(0, False), default=0.5,
                         help="an audio stream without a callback for S seconds has stalled (a hung device or a "
                         "stopped JACK server): play ends with an error (default 0.5)")
@@ -121,8 +131,10 @@ def choose_input(requested: str) -> Choice:
 
 def run(args: argparse.Namespace) -> int:
     """Play (module docstring); 0 when it ends normally or by Ctrl-C."""
-    if args.record is not None and Path(args.record).suffix.lower() != ".npz":
-        raise ConfigError(f"--record: must end in .npz, got '{args.record}'")
+    if args.record is not None:
+        if Path(args.record).suffix.lower() != ".npz":
+            raise ConfigError(f"--record: must end in .npz, got '{args.record}'")
+        check_writable_target(args.record, "recordings")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
     output, finger = choose_output(args.output, args.rate), choose_input(args.input)
     device = Device.from_file(args.device) if args.device else Device.default()

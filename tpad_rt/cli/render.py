@@ -9,6 +9,12 @@ progress bar shows on a terminal; a summary follows.
 
 The session helpers here (:func:`add_session_arguments`, :func:`open_session`,
 :func:`summary_lines`) are the offline session's; ``tpad-rt play`` reuses the arguments.
+
+Limits (:mod:`tpad_rt.limits`), refused in one line before anything is allocated:
+``--rate`` at most MAX_RATE_HZ, ``--block`` 1 to MAX_BLOCK_FRAMES, ``--duration`` (or
+the input's own end) at most MAX_RENDER_S, at most MAX_RENDER_BLOCKS blocks, and for
+``.npz`` at most MAX_RECORDING_SAMPLES drive samples (checked before the outputs open
+and the kernel warms up). ``--out`` must be a regular file if it exists.
 """
 
 from __future__ import annotations
@@ -28,11 +34,13 @@ from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, T
 from tpad_rt import __version__
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
+from tpad_rt.files import check_writable_target
 from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG,
 )
-from tpad_rt.offline import OfflineRender, RenderResult, input_span_s, texture_under_finger
+from tpad_rt.limits import MAX_BLOCK_FRAMES, MAX_RATE_HZ, MAX_RECORDING_SAMPLES, MAX_RENDER_S
+from tpad_rt.offline import OfflineRender, RenderResult, check_render_size, input_span_s, texture_under_finger
 from tpad_rt.outputs import open_output
 from tpad_rt.outputs.wav import WavOutput
 from tpad_rt.pipeline import Pipeline, RenderOptions
@@ -42,31 +50,45 @@ from tpad_rt.texture import CompiledTexture, load_compiled
 DEFAULT_OUTPUT = "sim://"
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a whole number > 0, got '{text}'")
-    return value
-
-
-def _number(low: float, low_closed: bool) -> Any:
-    def parse(text: str) -> float:
+def _whole(high: int, what: str) -> Any:
+    """An argparse type: a whole number in [1, ``high``] (``what`` says what the bound is)."""
+    def parse(text: str) -> int:
         try:
-            value = float(text)
+            value = int(text)
         except ValueError:
-            value = math.nan
-        if not (math.isfinite(value) and (value >= low if low_closed else value > low)):
-            raise argparse.ArgumentTypeError(f"must be a number {'>=' if low_closed else '>'} {low:g}, got '{text}'")
+            value = 0
+        if not 1 <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be a whole number in [1, {high}] ({what}), got '{text}'")
         return value
 
     return parse
 
 
-def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str | None) -> None:
-    """The arguments ``render`` and ``play`` share (``--input`` required when ``input_default`` is None)."""
+def _number(low: float, low_closed: bool, high: float = math.inf, what: str = "") -> Any:
+    """An argparse type: a finite number above ``low`` (or equal, when ``low_closed``), at most ``high``."""
+    expected = f"{'>=' if low_closed else '>'} {low:g}"
+    if high < math.inf:
+        expected = f"in {'[' if low_closed else '('}{low:g}, {high:g}]" + (f" ({what})" if what else "")
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and (value >= low if low_closed else value > low) and value <= high):
+            raise argparse.ArgumentTypeError(f"must be a number {expected}, got '{text}'")
+        return value
+
+    return parse
+
+
+def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str | None,
+                          max_duration_s: float = MAX_RENDER_S) -> None:
+    """The arguments ``render`` and ``play`` share (``--input`` required when ``input_default`` is None).
+
+    ``--duration`` is bounded by ``max_duration_s`` (s); ``--rate`` and ``--block`` by
+    MAX_RATE_HZ and MAX_BLOCK_FRAMES.
+    """
     parser.add_argument("texture", metavar="TEXTURE", help="texture file (YAML)")
     parser.add_argument("--device", metavar="FILE", help="device file (default: calibration/default.yaml)")
     parser.add_argument("--input", metavar="URL", required=input_default is None, default=input_default,
@@ -74,10 +96,12 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
                         + (f" (default {input_default})" if input_default else ""))
     parser.add_argument("--output", metavar="URL", default=DEFAULT_OUTPUT,
                         help=f"output: sim://, wav:///path/out.wav or null:// (default {DEFAULT_OUTPUT})")
-    parser.add_argument("--rate", metavar="HZ", type=_positive_int, default=192000, help="sample rate (default 192000)")
-    parser.add_argument("--block", metavar="N", type=_positive_int, default=64, help="samples per block (default 64)")
-    parser.add_argument("--duration", metavar="S", type=_number(0, False),
-                        help="seconds of input to render (default: the input's own duration)")
+    parser.add_argument("--rate", metavar="HZ", type=_whole(MAX_RATE_HZ, "Hz, the highest rate tpad-rt runs at"),
+                        default=192000, help=f"sample rate, at most {MAX_RATE_HZ} Hz (default 192000)")
+    parser.add_argument("--block", metavar="N", type=_whole(MAX_BLOCK_FRAMES, "frames"), default=64,
+                        help=f"samples per block, 1 to {MAX_BLOCK_FRAMES} (default 64)")
+    parser.add_argument("--duration", metavar="S", type=_number(0, False, max_duration_s, "s"),
+                        help=f"seconds of input, at most {max_duration_s:g} (default: the input's own duration)")
     parser.add_argument("--power-budget", metavar="W", type=_number(0, False),
                         help="instantaneous power cap (default: the device's power_budget_w)")
     parser.add_argument("--power-avg", metavar="W", type=_number(0, False),
@@ -95,7 +119,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         "(.npz: recording with telemetry and the simulated plate; .wav: the drive).",
     )
     add_session_arguments(parser, input_default=None)
-    parser.add_argument("--out", metavar="FILE", required=True, help="FILE.npz (recording) or FILE.wav (drive)")
+    parser.add_argument("--out", metavar="FILE", required=True,
+                        help=f"FILE.npz (recording, at most {MAX_RECORDING_SAMPLES:,} drive samples: "
+                        f"{MAX_RECORDING_SAMPLES // 192000} s at 192 kHz) or FILE.wav (drive)")
     parser.set_defaults(func=run)
 
 
@@ -108,31 +134,31 @@ class Session:
 
 
 def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_drive: bool,
-                 wav_path: Path | None = None, endless_ok: bool = False) -> Session:
+                 wav_path: Path | None = None) -> Session:
     """Load, open and wire everything ``args`` name; resources close with ``stack``.
 
-    An endless input without ``--duration`` is followed until stopped when
-    ``endless_ok``, else it is an error. Raises ConfigError for a bad file, URL or
-    value, BackendError when an output cannot open.
+    Raises ConfigError for a bad file, URL or value, an endless input without
+    ``--duration``, or a render beyond the limits (module docstring; checked before
+    the outputs open and the kernel warms up); BackendError when an output cannot open.
     """
     device = Device.from_file(args.device) if args.device else Device.default()
     texture = load_compiled(args.texture)
-    source = stack.enter_context(open_input(args.input))
+    source = stack.enter_context(open_input(args.input, device=device))
     if source.live:
         raise ConfigError(f"input {args.input}: follows a live finger, which cannot be rendered offline; "
                           "use tpad-rt play, or a scripted:// or file:// input")
-    endless = endless_ok and args.duration is None and source.duration_s is None
-    input_s = math.inf if endless else input_span_s(source, args.duration)
+    input_s = input_span_s(source, args.duration)
     options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
                             **({} if args.force is None else {"default_force_n": args.force}))
+    # The ramp down starts at the first control step after the stop and lasts ramp_ms:
+    # one control interval plus the ramp, and a whole block more, end in silence.
+    tail_s = options.ramp_ms * 1e-3 + (options.control_interval + args.block) / args.rate
+    check_render_size(input_s, tail_s, args.rate, args.block, keep_drive)
     pipeline = Pipeline(device, texture, fs_hz=args.rate, options=options)
     outputs = [stack.enter_context(open_output(args.output, device=device, fs_hz=args.rate))]
     if wav_path is not None:
         outputs.append(stack.enter_context(WavOutput(wav_path, args.rate)))
     pipeline.warm_up()
-    # The ramp down starts at the first control step after the stop and lasts ramp_ms:
-    # one control interval plus the ramp, and a whole block more, end in silence.
-    tail_s = options.ramp_ms * 1e-3 + (options.control_interval + args.block) / args.rate
     render = OfflineRender(pipeline, source, outputs, block_frames=args.block, input_s=input_s,
                            tail_s=tail_s, force_n=args.force, keep_drive=keep_drive)
     cfg = pipeline.arrays.cfg  # the limits the kernel applies, defaults resolved
@@ -160,6 +186,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".npz", ".wav"):
         raise ConfigError(f"--out: must end in .npz (recording) or .wav (drive), got '{args.out}'")
+    check_writable_target(out, "recordings and WAV files")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
     with contextlib.ExitStack() as stack:
         session = open_session(args, stack, keep_drive=out.suffix.lower() == ".npz",
