@@ -276,9 +276,9 @@ def _ring_sum(power_ring: np.ndarray) -> float:
 
 @_inline
 def _repaired_ring_sum(power_ring: np.ndarray, cap_w: float) -> float:
-    """Sum of the power ring (W) after entering every slot that is not a finite power >= 0 as ``cap_w``."""
+    """Sum of the power ring (W) after entering every slot outside ``[0, cap_w]`` (NaN too) as ``cap_w``."""
     for slot in range(power_ring.shape[0]):
-        if not 0.0 <= power_ring[slot] < math.inf:
+        if not 0.0 <= power_ring[slot] <= cap_w:
             power_ring[slot] = cap_w
     return _ring_sum(power_ring)
 
@@ -325,7 +325,8 @@ def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> N
     step, else the same sum recomputed), whatever the blocks were. The ring's
     running sum is recomputed from scratch each time the last slot is written, so its
     rounding error never accumulates beyond one window. A step whose power is not a
-    finite number >= 0 is entered as ``power_cap_w``.
+    number in ``[0, power_cap_w]`` (the limits keep every step's power in it; only a
+    corrupt ``p1`` or envelope gets out) is entered as ``power_cap_w``.
     """
     if state[STATE_STEP_OPEN] == 0.0 or not 0.0 < state[STATE_STEP_SAMPLES] <= MAX_CONTROL_INTERVAL:
         return
@@ -336,7 +337,7 @@ def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> N
     if state[STATE_FIRST_SEGMENT_SAMPLES] != samples:  # rendered in pieces: sum them in the same order
         energy_v2 = _envelope_sums(state, 0, samples)[1]
     power_w = state[STATE_POWER_PER_V2] * energy_v2 / samples
-    if not 0.0 <= power_w < math.inf:  # counted as the whole cap: the budget errs on the safe side
+    if not 0.0 <= power_w <= cfg[CFG_POWER_CAP_W]:  # only a bad p1 or envelope: counted as the whole cap
         power_w = cfg[CFG_POWER_CAP_W]
     slot = int(state[STATE_RING_SLOT])
     state[STATE_WINDOW_SUM_W] += power_w - power_ring[slot]
@@ -516,12 +517,15 @@ def _cap_volts(
     ``min(max_voltage_v, sqrt(power_cap_w / p1), sqrt(allowance / p1))``, each limit
     times ``1 - SAFETY_MARGIN``; ``allowance = M * power_avg_w`` less the previous
     ``M - 1`` steps' powers (the ring without ``slot``, which this step will overwrite).
-    A running sum or ring slot that is not finite is rebuilt (FAULT_STATE); a power
+    A running sum outside ``[0, M * power_cap_w]`` (to rounding) or a ring slot outside
+    ``[0, power_cap_w]`` has the ring repaired and summed again (FAULT_STATE); a power
     bound that is not a finite number >= 0 gives a cap of 0 (FAULT_POWER).
     """
     keep = 1.0 - SAFETY_MARGIN
     fault = 0
-    if not (abs(state[STATE_WINDOW_SUM_W]) < math.inf and abs(power_ring[slot]) < math.inf):
+    most_w = power_ring.shape[0] * cfg[CFG_POWER_CAP_W] * (1.0 + SAFETY_MARGIN)  # every slot <= the cap
+    if not (-most_w * SAFETY_MARGIN <= state[STATE_WINDOW_SUM_W] <= most_w
+            and 0.0 <= power_ring[slot] <= cfg[CFG_POWER_CAP_W]):
         state[STATE_WINDOW_SUM_W] = _repaired_ring_sum(power_ring, cfg[CFG_POWER_CAP_W])
         fault = FAULT_STATE
     previous_w = state[STATE_WINDOW_SUM_W] - power_ring[slot]
@@ -557,12 +561,14 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
 
 
 @_inline
-def _note_fault(state: np.ndarray, causes: int) -> None:
-    """Count a control step that met the faults ``causes`` (FAULT_* bits); a new fault if the last step had none."""
-    if state[STATE_FAULT_PREVIOUS] == 0.0:
-        state[STATE_FAULT_EVENTS] += 1.0
-    state[STATE_FAULT_PREVIOUS] = 1.0
-    state[STATE_FAULT_STEPS] += 1.0
+def _note_fault(state: np.ndarray, causes: int, new_step: bool) -> None:
+    """Record the faults ``causes`` (FAULT_* bits); a ``new_step`` is counted as a fault step, and as a
+    new fault if the last step had none."""
+    if new_step:
+        if state[STATE_FAULT_PREVIOUS] == 0.0:
+            state[STATE_FAULT_EVENTS] += 1.0
+        state[STATE_FAULT_PREVIOUS] = 1.0
+        state[STATE_FAULT_STEPS] += 1.0
     known = state[STATE_FAULT_CAUSES]
     state[STATE_FAULT_CAUSES] = float((int(known) if 0.0 <= known < 2**31 else 0) | causes)
 
@@ -627,7 +633,7 @@ def _control_step(
         command_v = 0.0
         preemphasis_gain = 0.0
         flags |= FLAG_FAULT
-        _note_fault(state, fault)
+        _note_fault(state, fault, True)
     else:
         state[STATE_FAULT_PREVIOUS] = 0.0
     state[STATE_COMMAND_V] = command_v
@@ -649,13 +655,14 @@ def _control_step(
 
 @_inline
 def _render_samples(
-    out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float
+    out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float, max_v: float
 ) -> int:
     """Render ``out[first:stop]``, all inside the open step, and store their envelope in ``state``.
 
-    The output guard: a sample whose magnitude is not within ``limit`` (full scale;
-    NaN included) is written as 0 with envelope 0. Returns how many were. No value is
-    carried from one sample to the next, so the loop vectorises.
+    The output guard: a sample whose magnitude is not within ``limit`` (full scale), or
+    whose envelope is not within ``max_v`` (volts; NaN fails both), is written as 0 with
+    envelope 0. Returns how many were. No value is carried from one sample to the next,
+    so the loop vectorises.
     """
     command_v = state[STATE_COMMAND_V]
     cap_v = state[STATE_CAP_V]
@@ -679,7 +686,7 @@ def _render_samples(
         ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
         e_v = ramp * per_ramp_sample * drive_v
         sample = e_v * (sin0 * cos_jw[k] + cos0 * sin_jw[k])
-        inside = abs(sample) <= limit
+        inside = abs(sample) <= limit and e_v <= max_v
         samples[k] = sample if inside else 0.0
         envelope[k] = e_v if inside else 0.0
         rejected += 0 if inside else 1
@@ -699,8 +706,7 @@ def _output_fault(state: np.ndarray, rejected: int) -> None:
     """The output guard zeroed ``rejected`` samples of the open step: count them, close the gate, and
     restart the smoothing and ramp from 0 with tables rebuilt at the next step (state out of range)."""
     state[STATE_FAULT_SAMPLES] += rejected
-    if _step_flags(state) & FLAG_FAULT == 0:
-        _note_fault(state, FAULT_OUTPUT)
+    _note_fault(state, FAULT_OUTPUT, _step_flags(state) & FLAG_FAULT == 0)
     state[STATE_STEP_FLAGS] = float(_step_flags(state) | FLAG_FAULT)
     state[STATE_COMMAND_V] = 0.0
     state[STATE_SMOOTH_START_V] = 0.0
@@ -775,7 +781,7 @@ def render_block(
             _control_step(start_index + i, cfg, dev, state, power_ring, finger, finger_count, prog, params, img, stack)
         j0 = int(state[STATE_STEP_SAMPLES])
         stop = min(total, i + interval - phase, i + interval - j0)
-        rejected = _render_samples(out, i, stop, state, out_per_v, limit)
+        rejected = _render_samples(out, i, stop, state, out_per_v, limit, cfg[CFG_MAX_VOLTAGE_V])
         if rejected:
             _output_fault(state, rejected)
         segment_peak_v, segment_v2 = _envelope_sums(state, j0, j0 + stop - i)

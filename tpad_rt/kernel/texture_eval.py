@@ -90,6 +90,8 @@ from tpad_rt.kernel.layout import (
 )
 
 _TWO_PI = 2.0 * math.pi
+#: Pixel positions are turned into int64 indices only below this (exact in a float64).
+_MAX_PIXEL_INDEX = 2.0**52
 
 #: Helpers and ``eval_texture`` are inlined at numba IR level into their callers: a call with
 #: array arguments costs more than a grating (argument passing and reference counting),
@@ -120,7 +122,10 @@ def waveform(code: int, phase: float, duty: float) -> float:
 
 @_inline
 def _frac(cycles: float) -> float:
-    """The fractional part of ``cycles``, in [0, 1] (1 only by rounding of a tiny negative)."""
+    """The fractional part of ``cycles``, in [0, 1] (1 only by rounding of a tiny negative); NaN when
+    ``cycles`` is not finite (the render kernel counts a texture fault)."""
+    if not abs(cycles) < math.inf:
+        return math.nan
     return cycles - math.floor(cycles)
 
 
@@ -160,10 +165,13 @@ def _image_cell(
 
     Returns ``(v00, v10, v01, v11, tx, ty)``: the four pixel values (``v10`` one pixel
     to the right of ``v00``, ``v01`` one below) and the point's fractions across the
-    cell. Pixel ``i`` has its centre at ``ox + (i + 0.5) / px_per_mm``.
+    cell. Pixel ``i`` has its centre at ``ox + (i + 0.5) / px_per_mm``. A pixel position
+    that is not finite or beyond 2**52 gives NaN values (no index is made from it).
     """
     fx = (x_mm - params[o]) * params[o + 2] - 0.5
     fy = (y_mm - params[o + 1]) * params[o + 3] - 0.5
+    if not (abs(fx) < _MAX_PIXEL_INDEX and abs(fy) < _MAX_PIXEL_INDEX):  # NaN too: never an index from it
+        return math.nan, math.nan, math.nan, math.nan, 0.0, 0.0
     width = int(params[o + 4])
     ix = math.floor(fx)
     iy = math.floor(fy)
