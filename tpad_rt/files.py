@@ -59,6 +59,18 @@ def _reason(error: OSError) -> str:
     return reason[:1].lower() + reason[1:]
 
 
+def _mode(path: PathLike) -> int | None:
+    """``st_mode`` of ``path``, or None when it cannot be stat'ed."""
+    try:
+        return os.stat(path).st_mode
+    except OSError:
+        return None
+
+
+def _not_regular(name: str, mode: int, what: str) -> str:
+    return f"{name}: not a regular file ({_kind(mode)}); tpad-rt reads {what} from regular files only"
+
+
 def open_regular(path: PathLike, what: str, limit_bytes: int | None = None, name: str | None = None) -> BinaryIO:
     """``path`` opened for reading in binary, once checked to be a regular file of at most ``limit_bytes``.
 
@@ -72,13 +84,15 @@ def open_regular(path: PathLike, what: str, limit_bytes: int | None = None, name
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except ValueError:  # an embedded NUL byte
         raise ConfigError(f"{name}: the path contains a NUL byte") from None
-    except OSError as error:
+    except OSError as error:  # a socket cannot be opened at all: say what it is
+        mode = _mode(path)
+        if mode is not None and not stat.S_ISREG(mode):
+            raise ConfigError(_not_regular(name, mode, what)) from None
         raise ConfigError(f"{name}: cannot read: {_reason(error)}") from None
     try:
         status = os.fstat(fd)
         if not stat.S_ISREG(status.st_mode):
-            raise ConfigError(f"{name}: not a regular file ({_kind(status.st_mode)}); "
-                              f"tpad-rt reads {what} from regular files only")
+            raise ConfigError(_not_regular(name, status.st_mode, what))
         if limit_bytes is not None and status.st_size > limit_bytes:
             raise ConfigError(f"{name}: file is larger than {_size(limit_bytes)}")
         os.set_blocking(fd, True)
