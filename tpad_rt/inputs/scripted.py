@@ -87,7 +87,7 @@ class _Scripted(Input):
                                  f"plate size beyond each edge), got {position_mm:g}")
         end_s = self.touch_end_s
         if end_s is not None and not end_s <= MAX_INPUT_S:
-            shown = f"{end_s:,.0f}" if end_s < 1e12 else f"{end_s:.3g}"
+            shown = f"{end_s:,.1f}".removesuffix(".0") if end_s < 1e12 else f"{end_s:.3g}"
             raise ValueError(f"ends after {shown} s, longer than the {MAX_INPUT_S:g} s an input may last")
 
     @property
