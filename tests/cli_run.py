@@ -1,0 +1,55 @@
+"""Run ``tpad-rt`` in a fresh interpreter and measure it: exit status, output and peak memory.
+
+The peak resident memory is the child's own (``os.wait4`` on its pid), so an earlier
+child or the test process cannot hide or inflate it.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class Run:
+    """A finished ``tpad-rt`` process."""
+
+    returncode: int
+    stdout: str
+    stderr: str
+    peak_mb: float
+
+    def assert_one_line_error(self, expected: str) -> None:
+        """Exit status 1, exactly one line on stderr containing ``expected``, no traceback."""
+        assert self.returncode == 1, (self.returncode, self.stderr)
+        assert "Traceback" not in self.stderr and "Warning" not in self.stderr, self.stderr
+        assert self.stderr.count("\n") == 1 and self.stderr.endswith("\n"), self.stderr
+        assert expected in self.stderr, self.stderr
+
+
+def tpad_rt(*args: str, timeout_s: float = 120.0) -> Run:
+    """Run ``python -m tpad_rt ARGS`` (stdin closed, no terminal) from the repository root.
+
+    ``timeout_s`` is only a safety net: a process still running then is killed, and
+    its return code is -9.
+    """
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        process = subprocess.Popen([sys.executable, "-m", "tpad_rt", *args], stdin=subprocess.DEVNULL,
+                                   stdout=out, stderr=err, cwd=REPO)
+        timer = threading.Timer(timeout_s, process.kill)
+        timer.start()
+        try:
+            _, status, usage = os.wait4(process.pid, 0)
+        finally:
+            timer.cancel()
+        process.returncode = os.waitstatus_to_exitcode(status)
+        out.seek(0)
+        err.seek(0)
+        return Run(process.returncode, out.read().decode(), err.read().decode(), usage.ru_maxrss / 1024)
