@@ -71,7 +71,7 @@ def test_render_refuses_absurd_sizes(tmp_path: Path, args: list[str], expected: 
 def test_blocks_are_bounded_for_a_wav_render(tmp_path: Path) -> None:
     done = tpad_rt(*_render(tmp_path, "--input", "scripted://swipe?repeat=0", "--duration", "3000", "--block", "1",
                             out="x.wav"))
-    done.assert_one_line_error("3000 s at 192000 Hz in blocks of 1 is 576,000,993 blocks, more than the 16,777,216 a "
+    done.assert_one_line_error("3000 s at 192000 Hz in blocks of 1 is 576,000,993 blocks, more than the 4,194,304 a "
                                "render keeps telemetry for")
     assert done.peak_mb < PEAK_MB
     assert not (tmp_path / "x.wav").exists()  # refused before the output opened

@@ -27,9 +27,9 @@ MAX_RENDER_S = 3600.0
 MAX_INPUT_S = 86_400.0
 #: Most drive samples a recording keeps in memory (float32: 256 MiB; 349 s at 192 kHz).
 MAX_RECORDING_SAMPLES = 2**26
-#: Most blocks an offline render keeps a telemetry row for (about 170 bytes each; 5825 s at 192 kHz
-#: in blocks of 64): bounds a long render to .wav, or one in tiny blocks.
-MAX_RENDER_BLOCKS = 2**24
+#: Most blocks an offline render keeps a telemetry row for: a render peaks at about 440 bytes per block
+#: (measured: 60 s against 5 s in blocks of 16 to .wav), so about 1.8 GB; 1398 s at 192 kHz in blocks of 64.
+MAX_RENDER_BLOCKS = 2**22
 #: Largest contact force (N) a finger sample may carry (a pressing finger stays under 10 N).
 MAX_FORCE_N = 50.0
 #: A finger sample's time may differ from the stream clock by at most this much (s), either way.
