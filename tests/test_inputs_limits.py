@@ -108,6 +108,13 @@ def test_trajectory_values_out_of_range(tmp_path: Path, rows: str, expected: str
     assert _error(f"file://{path}") == f"{tmp_path}/{expected}"
 
 
+def test_a_trajectory_line_is_at_most_4096_bytes(tmp_path: Path) -> None:
+    path = _csv(tmp_path, "t,x_mm,y_mm\n" + "1," * 3000 + "\n")
+    assert _error(f"file://{path}") == f"{path}:2: line longer than 4,096 bytes"
+    path = _csv(tmp_path, "t,x_mm,y_mm\n0,1,1" + " " * (4096 - 6) + "\n")  # 4096 bytes with the newline
+    assert open_input(f"file://{path}").duration_s == 0.0
+
+
 def test_trajectory_positions_follow_the_device_given(tmp_path: Path) -> None:
     path = _csv(tmp_path, "t,x_mm,y_mm\n0,-130,-60\n1,260,120\n")
     assert open_input(f"file://{path}").duration_s == 1.0

@@ -12,7 +12,8 @@ are plain numbers; nothing in the file is evaluated. Errors name the file and li
 
 Bounded memory: the file must be a regular file of at most MAX_TRAJECTORY_BYTES
 (64 MiB, refused before a byte is read) with at most MAX_TRAJECTORY_ROWS samples
-(2,000,000, refused at the line past them). It is parsed line by line into chunks of
+(2,000,000, refused at the line past them) and lines of at most 4096 bytes. It is
+parsed line by line into chunks of
 FINGER_DTYPE rows (33 bytes each), so at most 66 MB of samples are held, about twice
 that while the chunks are joined, never the whole text.
 """
@@ -44,6 +45,8 @@ _OPTIONAL = ("force_n", "down")
 _HEADER = "t,x_mm,y_mm[,force_n][,down]"
 #: Samples parsed into one array before it is kept (about 2 MB).
 _CHUNK_ROWS = 65_536
+#: Longest line (bytes, with its newline): a sample is five short numbers; this bounds one line's fields.
+_MAX_LINE_BYTES = 4096
 
 
 class FileInput(Input):
@@ -82,7 +85,7 @@ def load_trajectory(path: str | Path, device: Device | None = None) -> FileInput
     oversized file, text that is not UTF-8, a bad header (missing, unknown or repeated
     column), a row with the wrong number of fields, a value that is not a finite number
     in its range, a time not after the one before, more than MAX_TRAJECTORY_ROWS
-    samples, or a file without data rows.
+    samples, a line longer than 4096 bytes, or a file without data rows.
     """
     name = printable(str(path))
     with open_regular(path, "trajectories", MAX_TRAJECTORY_BYTES) as stream:
@@ -90,9 +93,14 @@ def load_trajectory(path: str | Path, device: Device | None = None) -> FileInput
 
 
 def _data_lines(path: str, stream: BinaryIO) -> Iterator[tuple[int, list[str]]]:
-    """``(line number, fields)`` of every line that is neither blank nor a comment, as read."""
+    """``(line number, fields)`` of every line that is neither blank nor a comment, as read.
+
+    Raises ConfigError for a line longer than _MAX_LINE_BYTES or not UTF-8.
+    """
     try:
-        for number, raw in enumerate(stream, start=1):
+        for number, raw in enumerate(iter(lambda: stream.readline(_MAX_LINE_BYTES + 1), b""), start=1):
+            if len(raw) > _MAX_LINE_BYTES:
+                raise ConfigError(f"{path}:{number}: line longer than {_MAX_LINE_BYTES:,} bytes")
             try:
                 line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
             except UnicodeDecodeError:
