@@ -13,9 +13,8 @@ are plain numbers; nothing in the file is evaluated. Errors name the file and li
 Bounded memory: the file must be a regular file of at most MAX_TRAJECTORY_BYTES
 (64 MiB, refused before a byte is read) with at most MAX_TRAJECTORY_ROWS samples
 (2,000,000, refused at the line past them) and lines of at most 4096 bytes. It is
-parsed line by line into chunks of
-FINGER_DTYPE rows (33 bytes each), so at most 66 MB of samples are held, about twice
-that while the chunks are joined, never the whole text.
+parsed line by line into chunks of FINGER_DTYPE rows (33 bytes each), so at most 66 MB
+of samples are held, about twice that while the chunks are joined, never the whole text.
 """
 
 from __future__ import annotations
