@@ -9,6 +9,7 @@ from pathlib import Path
 
 from tpad_rt.config.json_schema import SCHEMA_KINDS, schema_json
 from tpad_rt.errors import TpadError
+from tpad_rt.files import check_writable_target
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -24,11 +25,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print or write the schema; raises TpadError if FILE cannot be written."""
+    """Print or write the schema; raises TpadError if FILE cannot be written, or exists and is not a regular
+    file (a FIFO would block the write until something read it)."""
     text = json.dumps(schema_json(args.kind), indent=2) + "\n"
     if args.out is None:
         sys.stdout.write(text)
         return 0
+    check_writable_target(args.out, "schemas")
     try:
         Path(args.out).write_text(text, encoding="utf-8")
     except OSError as err:
