@@ -260,7 +260,7 @@ def test_file_input(tmp_path: Path) -> None:
         (["--input", "scripted://swipe?sped_mm_s=100"], "unknown option 'sped_mm_s'; did you mean 'speed_mm_s'?"),
         (["--input", "scripted://circle?turns=0"], "tpad-rt render: the input never ends (an endless pattern); "
                                                    "give a duration (--duration SECONDS)"),
-        (["--output", "sim://?q=-1"], "output URL 'sim://?q=-1': option q: must be device or a number > 0.5"),
+        (["--output", "sim://?q=-1"], "output URL 'sim://?q=-1': option q: must be device or a number in (0.5, 1e+06]"),
         (["--output", "audio://"], "unknown scheme 'audio' (known: sim://, wav://, null://)"),
         (["--rate", "48000"], "fs_hz: device SLG_0.56's carrier (31360 Hz) needs a sample rate of at least 69689 Hz"),
         (["--device", "nowhere.yaml"], "nowhere.yaml"),
