@@ -153,7 +153,8 @@ def test_a_single_knot_circuit_is_checked_at_its_force(tmp_path: Path) -> None:
     single = {("circuit", "force_n"): [0.5], ("circuit", "motional_l_h"): [1e-6], ("circuit", "motional_c_pf"): [1e6],
               ("circuit", "motional_r_ohm"): [4.0]}
     path = _write(tmp_path, _with(single))
-    message = "the quality factor sqrt(L / C) / R must stay above 0.5 at every force; it can reach 0.25 at its one force"
+    message = ("the quality factor sqrt(L / C) / R must stay above 0.5 at every force; "
+               "it can reach 0.25 at its one force")
     assert re.fullmatch(_breadcrumb(path, "circuit.motional_r_ohm[0]", message), check_file(path)[0])
 
 
@@ -191,7 +192,8 @@ def test_a_nan_power_estimate_refuses_the_device() -> None:
 
 def test_an_infinite_time_constant_and_a_zero_amplitude_refuse_the_device() -> None:
     spec = _bypassing_the_schema(motional_l_h=[1e300] * 3, motional_c_pf=[1e-300] * 3)
-    spec = spec.model_copy(update={"calibration": spec.calibration.model_copy(update={"amplitude_um_per_v": [0.0] * 4})})
+    calibration = spec.calibration.model_copy(update={"amplitude_um_per_v": [0.0] * 4})
+    spec = spec.model_copy(update={"calibration": calibration})
     with pytest.raises(ConfigError) as caught:
         Device.from_spec(spec)
     assert [error.split(" must be")[0] for error in caught.value.errors] == [

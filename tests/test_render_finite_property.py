@@ -193,7 +193,8 @@ def _device(draw: st.DrawFn) -> dict[str, Any]:
     return {
         "label": "random", "description": "a random device across the accepted ranges",
         "plate": {"material": "glass", **material, "length_mm": draw(_number(1.0, 1000.0)),
-                  "width_mm": draw(_number(1.0, 1000.0)), "mode": [draw(st.integers(1, 1000)), draw(st.integers(0, 1000))]},
+                  "width_mm": draw(_number(1.0, 1000.0)),
+                  "mode": [draw(st.integers(1, 1000)), draw(st.integers(0, 1000))]},
         "actuator": material,
         "resonance_hz": draw(_number(1000.0, 200_000.0)),
         "amplifier": {"volts_per_full_scale": full_scale_v,
@@ -202,7 +203,8 @@ def _device(draw: st.DrawFn) -> dict[str, Any]:
                         "amplitude_um_per_v": [draw(_number(1e-6, 100.0, log=True)) for _ in calibration]},
         "circuit": draw(_circuit(circuit_forces)),
         "friction_model": {"mu0": draw(_number(0.01, 10.0, log=True)),
-                           "poisson": draw(st.sampled_from([0.0, 0.5 - 2**-53]) | st.floats(0.0, 0.5, exclude_max=True)),
+                           "poisson": draw(st.sampled_from([0.0, 0.5 - 2**-53])
+                                           | st.floats(0.0, 0.5, exclude_max=True)),
                            "psi_star": draw(_number(0.01, 1000.0, log=True))},
         "speed_floor_mm_s": draw(_number(0.1, 1000.0, log=True)),
         "power_budget_w": draw(_number(0.001, 1000.0, log=True)),

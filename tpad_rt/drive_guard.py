@@ -11,7 +11,7 @@ import numpy.typing as npt
 
 
 def first_bad_sample(samples: npt.NDArray[np.floating]) -> int | None:
-    """Index of the first sample of 1-D ``samples`` that is NaN, infinite or beyond full scale (|x| > 1); None if none."""
+    """Index of the first sample of 1-D ``samples`` that is NaN, infinite or beyond full scale (|x| > 1), else None."""
     within = np.abs(samples) <= 1.0  # False for NaN
     return None if within.all() else int(np.argmin(within))
 

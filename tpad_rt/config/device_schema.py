@@ -128,10 +128,8 @@ class Circuit(_ForceTables):
             limit, value = (f"above {MIN_Q:g}", lowest) if lowest <= MIN_Q else (f"at most {MAX_Q:g}", highest)
             forces = self.force_n[pair]
             where = f"between force_n {forces[0]:g} and {forces[-1]:g} N" if len(forces) > 1 else "at its one force"
-            raise rule_error(
-                f"the quality factor sqrt(L / C) / R must stay {limit} at every force; it can reach {value:.3g} {where}",
-                "motional_r_ohm", index,
-            )
+            message = f"the quality factor sqrt(L / C) / R must stay {limit} at every force; it can reach {value:.3g}"
+            raise rule_error(f"{message} {where}", "motional_r_ohm", index)
         return self
 
 
