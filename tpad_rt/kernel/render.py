@@ -655,14 +655,13 @@ def _control_step(
 
 @_inline
 def _render_samples(
-    out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float, max_v: float
-) -> int:
+    out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float
+) -> bool:
     """Render ``out[first:stop]``, all inside the open step, and store their envelope in ``state``.
 
-    The output guard: a sample whose magnitude is not within ``limit`` (full scale), or
-    whose envelope is not within ``max_v`` (volts; NaN fails both), is written as 0 with
-    envelope 0. Returns how many were. No value is carried from one sample to the next,
-    so the loop vectorises.
+    Returns True if every sample's magnitude is within ``limit`` (full scale; NaN is not):
+    the output guard's first check (render_block then checks the envelope). No value is
+    carried from one sample to the next, so the loop vectorises.
     """
     command_v = state[STATE_COMMAND_V]
     cap_v = state[STATE_CAP_V]
@@ -680,17 +679,30 @@ def _render_samples(
     sin_jw = state[STATE_SIN_TABLE + j0 : STATE_SIN_TABLE + j0 + count]
     envelope = state[STATE_ENVELOPE + j0 : STATE_ENVELOPE + j0 + count]
     samples = out[first:stop]
-    rejected = 0
     for k in range(count):
         drive_v = min(max(command_v + offset_v * decay[k], 0.0), cap_v)
         ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
         e_v = ramp * per_ramp_sample * drive_v
         sample = e_v * (sin0 * cos_jw[k] + cos0 * sin_jw[k])
-        inside = abs(sample) <= limit and e_v <= max_v
-        samples[k] = sample if inside else 0.0
-        envelope[k] = e_v if inside else 0.0
-        rejected += 0 if inside else 1
+        samples[k] = sample
+        envelope[k] = e_v
     state[STATE_STEP_SAMPLES] = j0 + count
+    within = 0
+    for k in range(count):  # a loop of its own: the one above vectorises as it did before the guard
+        within += 1 if abs(samples[k]) <= limit else 0
+    return within == count
+
+
+@_inline
+def _zero_outside(samples: np.ndarray, envelope: np.ndarray, limit: float, max_v: float) -> int:
+    """Zero every sample (and its envelope) outside ``limit`` (full scale) or with envelope outside
+    ``max_v`` (volts), NaN included; how many were."""
+    rejected = 0
+    for k in range(samples.shape[0]):
+        if not (abs(samples[k]) <= limit and envelope[k] <= max_v):
+            samples[k] = 0.0
+            envelope[k] = 0.0
+            rejected += 1
     return rejected
 
 
@@ -703,8 +715,8 @@ def _step_flags(state: np.ndarray) -> int:
 
 @_inline
 def _output_fault(state: np.ndarray, rejected: int) -> None:
-    """The output guard zeroed ``rejected`` samples of the open step: count them, close the gate, and
-    restart the smoothing and ramp from 0 with tables rebuilt at the next step (state out of range)."""
+    """The output guard zeroed ``rejected`` samples (>= 1) of the open step: count them, close the gate,
+    and restart the smoothing and ramp from 0 with tables rebuilt at the next step (state out of range)."""
     state[STATE_FAULT_SAMPLES] += rejected
     _note_fault(state, FAULT_OUTPUT, _step_flags(state) & FLAG_FAULT == 0)
     state[STATE_STEP_FLAGS] = float(_step_flags(state) | FLAG_FAULT)
@@ -764,7 +776,8 @@ def render_block(
     """
     interval = min(max(int(cfg[CFG_CONTROL_INTERVAL]), 1), MAX_CONTROL_INTERVAL)
     out_per_v = 1.0 / cfg[CFG_VOLTS_PER_FS]
-    limit = cfg[CFG_MAX_VOLTAGE_V] * out_per_v  # the output guard's bound, in full scale (<= 1)
+    max_v = cfg[CFG_MAX_VOLTAGE_V]
+    limit = max_v * out_per_v  # the output guard's bound, in full scale (<= 1)
     if not limit <= 1.0:
         limit = 1.0 if limit > 1.0 else 0.0
     total = out.shape[0]
@@ -781,10 +794,12 @@ def render_block(
             _control_step(start_index + i, cfg, dev, state, power_ring, finger, finger_count, prog, params, img, stack)
         j0 = int(state[STATE_STEP_SAMPLES])
         stop = min(total, i + interval - phase, i + interval - j0)
-        rejected = _render_samples(out, i, stop, state, out_per_v, limit, cfg[CFG_MAX_VOLTAGE_V])
-        if rejected:
-            _output_fault(state, rejected)
+        inside = _render_samples(out, i, stop, state, out_per_v, limit)
         segment_peak_v, segment_v2 = _envelope_sums(state, j0, j0 + stop - i)
+        if not (inside and segment_peak_v <= max_v and segment_v2 <= (stop - i) * max_v * max_v):  # NaN fails
+            envelope = state[STATE_ENVELOPE + j0 : STATE_ENVELOPE + j0 + stop - i]
+            _output_fault(state, _zero_outside(out[i:stop], envelope, limit, max_v))
+            segment_peak_v, segment_v2 = _envelope_sums(state, j0, j0 + stop - i)
         if j0 == 0:
             state[STATE_FIRST_SEGMENT_V2] = segment_v2
             state[STATE_FIRST_SEGMENT_SAMPLES] = stop - i
