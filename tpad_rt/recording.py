@@ -30,6 +30,7 @@ import numpy.typing as npt
 from tpad_rt.drive_guard import bad_sample_message, first_bad_sample
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.kernel.layout import TEL_NAMES
+from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_RENDER_BLOCKS
 
 FORMAT = "tpad-rt recording"
 FORMAT_VERSION = 1
@@ -40,6 +41,15 @@ REQUIRED_METADATA = (
     "texture_path", "texture_description", "device_label", "carrier_hz", "volts_per_full_scale",
     "max_voltage_v", "power_budget_w", "power_avg_w", "power_window_s", "block_frames", "tpad_rt_version",
 )
+#: Metadata keys whose values are numbers (finite, >= 0; ``block_frames`` > 0).
+_NUMERIC_METADATA = (
+    "carrier_hz", "volts_per_full_scale", "max_voltage_v", "power_budget_w", "power_avg_w", "power_window_s",
+    "block_frames",
+)
+#: Largest entry (bytes, uncompressed) a recording may hold: the drive at MAX_RECORDING_SAMPLES, plus headers.
+MAX_ENTRY_BYTES = 4 * MAX_RECORDING_SAMPLES + 2**16
+#: Largest recording (bytes, uncompressed): the drive and every per-block column at MAX_RENDER_BLOCKS.
+MAX_RECORDING_BYTES = MAX_ENTRY_BYTES + (len(TEL_NAMES) + len(SIM_NAMES) + 8) * (8 * MAX_RENDER_BLOCKS + 2**16)
 
 
 @dataclass(frozen=True)
@@ -93,6 +103,7 @@ def read_recording(path: str | Path) -> Recording:
     archive, holds pickled objects, or is not a valid recording of this format version
     (each problem found is one line).
     """
+    _check_sizes(path)
     try:
         loaded = np.load(path, allow_pickle=False)
         if isinstance(loaded, np.ndarray):
@@ -104,6 +115,9 @@ def read_recording(path: str | Path) -> Recording:
     except (zipfile.BadZipFile, EOFError, OSError, ValueError) as error:
         reason = "holds pickled objects" if "Object arrays" in str(error) else "not an .npz archive"
         raise ConfigError(f"{path}: not a tpad-rt recording ({reason})") from None
+    except MemoryError:  # an entry's header claiming more elements than the machine can address
+        raise ConfigError(f"{path}: not a tpad-rt recording (an entry's header claims an array too large to "
+                          "allocate)") from None
     _check(str(path), entries)
     blocks = {name: entries[name] for name in (*TEL_NAMES, *SIM_NAMES) if name in entries}
     return Recording(
@@ -112,6 +126,29 @@ def read_recording(path: str | Path) -> Recording:
         blocks=blocks,
         metadata=json.loads(str(entries["metadata_json"])),
     )
+
+
+def _check_sizes(path: str | Path) -> None:
+    """ConfigError when the archive at ``path`` would unpack to more than a recording can hold.
+
+    Judged from the archive's directory before anything is decompressed (a few MB of
+    deflated zeros can stand for gigabytes). Anything that is not a readable zip
+    archive is left to ``np.load`` to report.
+    """
+    try:
+        with zipfile.ZipFile(path) as archive:
+            infos = archive.infolist()
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError):
+        return
+    for info in infos:
+        if info.file_size > MAX_ENTRY_BYTES:
+            raise ConfigError(f"{path}: entry '{info.filename}' unpacks to {info.file_size:,} bytes, more than the "
+                              f"{MAX_ENTRY_BYTES:,} a recording's entry may (a drive of {MAX_RECORDING_SAMPLES:,} "
+                              "samples)")
+    total = sum(info.file_size for info in infos)
+    if total > MAX_RECORDING_BYTES:
+        raise ConfigError(f"{path}: unpacks to {total:,} bytes, more than the {MAX_RECORDING_BYTES:,} a recording "
+                          "may")
 
 
 def _check(where: str, entries: dict[str, np.ndarray]) -> None:
@@ -176,4 +213,13 @@ def _check_metadata(entries: dict[str, np.ndarray]) -> list[str]:
         value = metadata.get(key)
         if isinstance(value, float) and not math.isfinite(value):
             problems.append(f"metadata_json: {key}: must be finite, got {value}")
+    for key in _NUMERIC_METADATA:
+        value = metadata.get(key)
+        if key not in metadata or (isinstance(value, float) and not math.isfinite(value)):
+            continue  # said above
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if key == "block_frames" and not (number and value > 0):
+            problems.append(f"metadata_json: {key}: must be a number > 0, got {json.dumps(value)[:40]}")
+        elif not (number and value >= 0):
+            problems.append(f"metadata_json: {key}: must be a number >= 0, got {json.dumps(value)[:40]}")
     return problems
