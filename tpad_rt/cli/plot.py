@@ -72,6 +72,11 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
     from matplotlib.patches import Patch
 
     meta = recording.metadata
+    if not len(recording.blocks["t"]):
+        raise ConfigError("the recording holds no blocks: nothing to plot")
+    for name, values in recording.blocks.items():
+        if not np.isfinite(values).all():
+            raise ConfigError(f"{name}: the recording holds NaN or infinite values; cannot plot them")
     inside = (recording.blocks["t"] >= start_s) & (recording.blocks["t"] <= end_s)
     if not inside.any():
         raise ConfigError(f"--start/--end: no block between {start_s:g} s and {end_s:g} s "
@@ -132,7 +137,7 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
 
 def _trailing_mean(values: np.ndarray, window_blocks: float) -> np.ndarray:
     """Mean of each block and the ones before it over ``window_blocks`` (fewer at the start)."""
-    width = max(int(round(window_blocks)), 1)
+    width = max(int(round(min(window_blocks, len(values)))), 1)  # a window past the end: every block
     sums = np.cumsum(np.concatenate([[0.0], values]))
     index = np.arange(1, len(values) + 1)
     start = np.maximum(index - width, 0)
