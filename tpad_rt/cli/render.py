@@ -48,6 +48,8 @@ from tpad_rt.recording import Recording, write_recording
 from tpad_rt.texture import CompiledTexture, load_compiled
 
 DEFAULT_OUTPUT = "sim://"
+#: Highest --power-budget and --power-avg (W): the highest power_budget_w a device file may give.
+MAX_POWER_W = 1000.0
 
 
 def _whole(high: int, what: str) -> Any:
@@ -102,10 +104,11 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
                         help=f"samples per block, 1 to {MAX_BLOCK_FRAMES} (default 64)")
     parser.add_argument("--duration", metavar="S", type=_number(0, False, max_duration_s, "s"),
                         help=f"seconds of input, at most {max_duration_s:g} (default: the input's own duration)")
-    parser.add_argument("--power-budget", metavar="W", type=_number(0, False),
-                        help="instantaneous power cap (default: the device's power_budget_w)")
-    parser.add_argument("--power-avg", metavar="W", type=_number(0, False),
-                        help="average power budget over the window (default: the cap)")
+    parser.add_argument("--power-budget", metavar="W", type=_number(0, False, MAX_POWER_W, "W"),
+                        help=f"instantaneous power cap, at most {MAX_POWER_W:g} W "
+                        "(default: the device's power_budget_w)")
+    parser.add_argument("--power-avg", metavar="W", type=_number(0, False, MAX_POWER_W, "W"),
+                        help=f"average power budget over the window, at most {MAX_POWER_W:g} W (default: the cap)")
     parser.add_argument("--force", metavar="N", type=_number(0, True),
                         help="contact force (N) for every finger sample, overriding the input's")
 
