@@ -146,10 +146,12 @@ def plate_maps(
     Raises ConfigError if the grid would have more than MAX_POINTS points.
     """
     length_mm, width_mm = device.plate.length_m * 1e3, device.plate.width_m * 1e3
-    columns, rows = math.ceil(length_mm / resolution_mm), math.ceil(width_mm / resolution_mm)
-    if columns * rows > MAX_POINTS:
+    spans = (length_mm / resolution_mm, width_mm / resolution_mm)  # inf for a subnormal step
+    if spans[0] * spans[1] > 4 * MAX_POINTS or math.ceil(spans[0]) * math.ceil(spans[1]) > MAX_POINTS:
         finest = math.sqrt(length_mm * width_mm / MAX_POINTS)
-        raise ConfigError(f"--resolution-mm: {resolution_mm:g} gives {columns} x {rows} points; use >= {finest:.3g}")
+        shown = " x ".join(str(math.ceil(n)) if n < 1e12 else f"{n:.3g}" for n in spans)  # not 300 digits
+        raise ConfigError(f"--resolution-mm: {resolution_mm:g} gives {shown} points; use >= {finest:.3g}")
+    columns, rows = math.ceil(spans[0]), math.ceil(spans[1])
     x_mm = (np.arange(columns) + 0.5) * (length_mm / columns)
     y_mm = (np.arange(rows) + 0.5) * (width_mm / rows)
     ux, uy = finger.unit_direction
