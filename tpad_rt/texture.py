@@ -112,7 +112,8 @@ class CompiledTexture:
         time (s) since the texture was set. Returns float64 of the broadcast shape.
         """
         arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (x_mm, y_mm, ux, uy, t_s)))
-        flat = [np.ascontiguousarray(a).ravel() for a in arrays]
+        # copies: a size-1 broadcast view passes as contiguous, and numba reading its flags warns (FutureWarning)
+        flat = [np.array(a, dtype=np.float64).ravel() for a in arrays]
         out = np.empty(flat[0].size, dtype=np.float64)
         stack = np.empty(self.stack_depth, dtype=np.float64)
         eval_texture_points(self.prog, self.params, self.img, stack, *flat, out)
