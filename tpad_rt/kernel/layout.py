@@ -38,7 +38,7 @@ DEV_POWER_W_PER_V2 = 1        # exact-circuit real power (W) at 1 V peak, at the
 DEV_TAU_S = 2                 # plate envelope time constant Q / (pi f0)
 DEV_ROWS = 3
 
-# --- finger: float64[R, FINGER_COLS], single producer (Python) ---------------
+# --- finger: float64[R, FINGER_COLS], one writer at a time (Python, under a lock) ---
 FINGER_T_S = 0
 FINGER_X_MM = 1
 FINGER_Y_MM = 2
