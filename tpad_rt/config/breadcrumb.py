@@ -6,6 +6,8 @@ import re
 from collections.abc import Sequence
 from typing import Any
 
+from tpad_rt.errors import printable
+
 Location = tuple[str | int, ...]
 
 _KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -26,9 +28,12 @@ def format_path(loc: Sequence[Any]) -> str:
 
 
 def breadcrumb(source: str | None, loc: Sequence[Any], message: str, line: int | None = None) -> str:
-    """One error line; ``source`` (the file) and an empty ``loc`` are left out."""
+    """One error line; ``source`` (the file) and an empty ``loc`` are left out.
+
+    Control characters (a newline in a file name) are escaped, so the line stays one line.
+    """
     parts = [part for part in (source, format_path(loc)) if part]
-    text = ": ".join([*parts, message])
+    text = printable(": ".join([*parts, message]))
     return f"{text} (line {line})" if line is not None else text
 
 
