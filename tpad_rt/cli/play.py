@@ -137,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable_target(args.record, "recordings")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
     output, finger = choose_output(args.output, args.rate), choose_input(args.input)
-    device = Device.from_file(args.device) if args.device else Device.default()
+    device = Device.default() if args.device is None else Device.from_file(args.device)
     options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
                             **({} if args.force is None else {"default_force_n": args.force}))
     renderer = Renderer(device, output.url, texture=args.texture, rate_hz=args.rate, block_frames=args.block,

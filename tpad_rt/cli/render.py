@@ -144,7 +144,7 @@ def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_
     ``--duration``, or a render beyond the limits (module docstring; checked before
     the outputs open and the kernel warms up); BackendError when an output cannot open.
     """
-    device = Device.from_file(args.device) if args.device else Device.default()
+    device = Device.default() if args.device is None else Device.from_file(args.device)
     texture = load_compiled(args.texture)
     source = stack.enter_context(open_input(args.input, device=device))
     if source.live:

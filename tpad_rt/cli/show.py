@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in _FORMATS:
         raise ConfigError(f"--out: must end in {', '.join(_FORMATS)}, got '{args.out}'")
     check_writable_target(out, "figures")
-    device = Device.from_file(args.device) if args.device else Device.default()
+    device = Device.default() if args.device is None else Device.from_file(args.device)
     texture = load_compiled(args.texture)
     maps = plate_maps(texture, device, finger, t_s, resolution_mm)
     figure = draw(maps, texture, device, finger, t_s, source=Path(args.texture).name)

@@ -63,6 +63,8 @@ def load_yaml(path: Path, source: str) -> YamlDocument:
     are expanded, uses a tag other than plain data, repeats a key, or its top
     level is not a mapping.
     """
+    if source == "":  # Path("") is the current folder: say what was given instead
+        raise ConfigError("'': the file name is empty; give the path of a texture or device file")
     text = read_regular(path, "texture and device files", MAX_FILE_BYTES, source)
     try:
         return _compose_and_construct(text, source)
