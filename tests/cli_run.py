@@ -47,15 +47,16 @@ def warm_numba_cache() -> None:
     assert done.returncode == 0, done.stderr
 
 
-def tpad_rt(*args: str, timeout_s: float = 300.0) -> Run:
-    """Run ``python -m tpad_rt ARGS`` (stdin closed, no terminal) from the repository root.
+def tpad_rt(*args: str, timeout_s: float = 300.0, env: dict[str, str] | None = None) -> Run:
+    """Run ``python -m tpad_rt ARGS`` (stdin closed, no terminal) from the repository root, with
+    ``env`` added to the environment.
 
     ``timeout_s`` is only a safety net (long enough for a cold numba cache): a process
     still running then is killed, and its return code is -9.
     """
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         process = subprocess.Popen([sys.executable, "-m", "tpad_rt", *args], stdin=subprocess.DEVNULL,
-                                   stdout=out, stderr=err, cwd=REPO)
+                                   stdout=out, stderr=err, cwd=REPO, env={**os.environ, **(env or {})})
         timer = threading.Timer(timeout_s, process.kill)
         timer.start()
         try:

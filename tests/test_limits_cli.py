@@ -129,3 +129,17 @@ def test_a_trajectory_with_too_many_rows_is_refused_within_bounded_memory(tmp_pa
     done = tpad_rt(*_render(tmp_path, "--input", f"file://{path}", "--duration", "0.05"))
     done.assert_one_line_error(f"{path}:{rows + 1}: more than 2,000,000 samples, the most a trajectory may hold")
     assert done.peak_mb < PEAK_MB
+
+
+@pytest.mark.parametrize("command", [
+    ["render", GRATING, "--input", "scripted://tap?count=1000000000", "--out", "x.npz"],
+    ["play", GRATING, "--input", "scripted://tap?count=1000000000", "--output", "null://"],
+    ["play", GRATING, "--input", "file:///dev/zero", "--output", "null://"],
+])
+def test_a_refusal_compiles_nothing_even_with_a_cold_numba_cache(tmp_path: Path, command: list[str]) -> None:
+    """An empty numba cache: a refusal must not pay for compiling the kernels (about 1 GB and a minute)."""
+    done = tpad_rt(*command, env={"NUMBA_CACHE_DIR": str(tmp_path / "cold-cache")})
+    done.assert_one_line_error("")
+    assert done.peak_mb < 300, done.peak_mb
+    compiled = [path.name for path in (tmp_path / "cold-cache").rglob("*.nbi")]
+    assert not [name for name in compiled if name.startswith(("render.", "callback."))], compiled  # no kernel

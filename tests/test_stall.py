@@ -20,7 +20,8 @@ from pathlib import Path
 import pytest
 from jack_server import jack_server, server_process, wait_until_playing
 
-from tpad_rt.engine import MAX_STALL_TIMEOUT_S, Renderer
+from tpad_rt.engine import Renderer
+from tpad_rt.limits import MAX_STALL_TIMEOUT_S
 from tpad_rt.errors import ConfigError
 from tpad_rt.jackd import RunningServer, stop_process
 

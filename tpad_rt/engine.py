@@ -53,7 +53,7 @@ from tpad_rt import __version__
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, TpadError
 from tpad_rt.inputs.base import FINGER_DTYPE
-from tpad_rt.limits import MAX_RECORDING_SAMPLES
+from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
 from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, FLAG_FAULT,
@@ -75,8 +75,6 @@ MAX_PENDING_ROWS = 2**18
 PACED_MAX_BEHIND_S = 0.1
 #: The stop waits at most this many times the ramp's duration (plus a second) for the drive to reach 0.
 STOP_TIMEOUT_FACTOR = 20
-#: The longest ``stall_timeout_s`` accepted (s).
-MAX_STALL_TIMEOUT_S = 60.0
 #: An audio stream counts as stalled after no fewer blocks' time than this without a callback (large blocks).
 STALL_MIN_BLOCKS = 4
 #: Stopping and closing an audio stream may take the stall limit plus this long (s; it takes tens of ms)

@@ -7,7 +7,7 @@ defends itself again with its own (looser) bounds in :mod:`tpad_rt.kernel.layout
 API map
 -------
 MAX_RATE_HZ, MAX_BLOCK_FRAMES, MAX_RENDER_S, MAX_INPUT_S, MAX_RECORDING_SAMPLES,
-MAX_RENDER_BLOCKS, MAX_FORCE_N, FINGER_TIME_WINDOW_S, MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_ROWS
+MAX_RENDER_BLOCKS, MAX_STALL_TIMEOUT_S, MAX_FORCE_N, FINGER_TIME_WINDOW_S, MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_ROWS
     the limits (units in the names)
 DEFAULT_PLATE_MM
     the plate (length, width) assumed without a device file
@@ -30,6 +30,8 @@ MAX_RECORDING_SAMPLES = 2**26
 #: Most blocks an offline render keeps a telemetry row for: a render peaks at about 440 bytes per block
 #: (measured: 60 s against 5 s in blocks of 16 to .wav), so about 1.8 GB; 1398 s at 192 kHz in blocks of 64.
 MAX_RENDER_BLOCKS = 2**22
+#: The longest ``Renderer(stall_timeout_s=...)`` / ``play --stall-timeout`` accepted (s).
+MAX_STALL_TIMEOUT_S = 60.0
 #: Largest contact force (N) a finger sample may carry (a pressing finger stays under 10 N).
 MAX_FORCE_N = 50.0
 #: A finger sample's time may differ from the stream clock by at most this much (s), either way.

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import Iterator
 from types import FrameType
+from typing import TYPE_CHECKING
 
 import numpy as np
 from rich.console import Console
@@ -41,7 +42,6 @@ from rich.table import Table
 
 from tpad_rt.cli.render import _number, add_session_arguments
 from tpad_rt.device import Device
-from tpad_rt.engine import MAX_STALL_TIMEOUT_S, Renderer
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
 from tpad_rt.felt import texture_at_finger
@@ -49,10 +49,13 @@ from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import screen_size_px
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
-from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES
+from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
 from tpad_rt.outputs import audio
 from tpad_rt.outputs.sim import SimOutput
 from tpad_rt.pipeline import RenderOptions
+
+if TYPE_CHECKING:
+    from tpad_rt.engine import Renderer
 
 #: The input ``--input auto`` uses without a display: endless back-and-forth swipes at 100 mm/s.
 AUTO_SWIPE = "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1"
@@ -140,9 +143,11 @@ def run(args: argparse.Namespace) -> int:
     device = Device.default() if args.device is None else Device.from_file(args.device)
     options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
                             **({} if args.force is None else {"default_force_n": args.force}))
-    renderer = Renderer(device, output.url, texture=args.texture, rate_hz=args.rate, block_frames=args.block,
-                        options=options, stall_timeout_s=args.stall_timeout)
     with open_input(finger.url, device=device) as source, _sigint_event() as interrupted:
+        from tpad_rt.engine import Renderer  # compiles the audio callback: only once the input is known good
+
+        renderer = Renderer(device, output.url, texture=args.texture, rate_hz=args.rate,
+                            block_frames=args.block, options=options, stall_timeout_s=args.stall_timeout)
         console.print(f"output {output}, input {finger}; "
                       + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
         if args.record is not None:
