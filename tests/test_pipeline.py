@@ -41,15 +41,25 @@ def test_bad_options_are_one_config_error_naming_every_field() -> None:
         RenderOptions(smoothing_ms=-1.0, control_interval=300, power_avg_w=math.nan, mu_floor=1.5,
                       finger_ring=1, telemetry_ring=2.5, preemphasis="yes", horizon_ms=-2.0)  # type: ignore[arg-type]
     assert caught.value.errors == [
-        "RenderOptions.smoothing_ms: must be > 0, got -1",
-        "RenderOptions.power_avg_w: must be a finite number > 0, got nan",
-        "RenderOptions.horizon_ms: must be >= 0, got -2",
-        "RenderOptions.mu_floor: must be in (0, 1], got 1.5",
+        "RenderOptions.power_avg_w: must be a finite number in [0.001, 1000], got nan",
+        "RenderOptions.smoothing_ms: must be in [0.01, 1000], got -1",
+        "RenderOptions.horizon_ms: must be in [0, 1000], got -2",
+        "RenderOptions.mu_floor: must be in [1e-06, 1], got 1.5",
         "RenderOptions.control_interval: must be in [1, 256], got 300",
-        "RenderOptions.finger_ring: must be >= 2, got 1",
-        "RenderOptions.telemetry_ring: must be a whole number >= 1, got 2.5",
+        "RenderOptions.finger_ring: must be in [2, 1048576], got 1",
+        "RenderOptions.telemetry_ring: must be a whole number in [1, 4194304], got 2.5",
         "RenderOptions.preemphasis: must be true, false or None, got 'yes'",
     ]
+
+
+@pytest.mark.parametrize(("option", "value"), [
+    ("power_window_s", 1e9), ("power_window_s", 60.5), ("finger_ring", 10**12), ("telemetry_ring", 2**23),
+    ("smoothing_ms", 1e-300), ("watchdog_ms", 1e300), ("ramp_ms", 5e-324), ("velocity_window_ms", math.inf),
+    ("default_force_n", 1e308), ("power_budget_w", 1e308), ("horizon_ms", 1e308),
+])
+def test_options_that_would_allocate_without_bound_or_overflow_are_refused(option: str, value: float) -> None:
+    with pytest.raises(ConfigError, match=f"^RenderOptions.{option}: must be"):
+        RenderOptions(**{option: value})
 
 
 @pytest.mark.parametrize("name", [f.name for f in fields(RenderOptions) if f.name not in ("preemphasis",)])

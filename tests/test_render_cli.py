@@ -280,7 +280,7 @@ def test_user_errors_are_one_line_with_exit_1(args: list[str], expected: str, tm
     [
         (["--out", "x.mp3"], "tpad-rt render: --out: must end in .npz (recording) or .wav (drive), got 'x.mp3'"),
         (["--out", "x.npz", "--rate", "0"], "argument --rate: must be a whole number in [1, 768000] (Hz, "),
-        (["--out", "x.npz", "--force", "-1"], "argument --force: must be a number >= 0, got '-1'"),
+        (["--out", "x.npz", "--force", "-1"], "argument --force: must be a number in [0, 50] (N), got '-1'"),
         (["--out", "x.npz", "--texture-typo"], "unrecognized arguments: --texture-typo"),
     ],
 )

@@ -57,6 +57,25 @@ MIN_GRID_INTERVALS = 1024
 _KNOT_TOLERANCE = 1e-9
 
 
+#: Most finger samples and telemetry rows the rings may hold (allocated up front: 40 MiB and 320 MiB).
+MAX_FINGER_RING = 2**20
+MAX_TELEMETRY_RING = 2**22
+#: The accepted range of each number in RenderOptions (closed; units in the names). The budgets go up to the
+#: device files' own limit on ``power_budget_w``; the window to a minute (its ring: 360,000 steps at 192 kHz).
+_OPTION_RANGES = {
+    "power_budget_w": (1e-3, 1000.0),
+    "power_avg_w": (1e-3, 1000.0),
+    "power_window_s": (1e-3, 60.0),
+    "smoothing_ms": (0.01, 1000.0),
+    "horizon_ms": (0.0, 1000.0),
+    "velocity_window_ms": (0.01, 1000.0),
+    "watchdog_ms": (0.01, 10_000.0),
+    "ramp_ms": (0.01, 10_000.0),
+    "default_force_n": (0.0, MAX_FORCE_N),
+    "mu_floor": (1e-6, 1.0),
+}
+
+
 @dataclass(frozen=True)
 class RenderOptions:
     """Settings of the renderer (units in the names). ``None`` means "the device's value".
@@ -89,7 +108,10 @@ class RenderOptions:
     - ``finger_ring``: finger samples the ring holds (the newest ``finger_ring - 1`` are read).
     - ``telemetry_ring``: telemetry rows (one per rendered block) kept between drains.
 
-    Raises ConfigError, one line per bad field, for a value out of its range.
+    Raises ConfigError, one line per bad field, for a value out of its range: the
+    numbers' ranges are _OPTION_RANGES (wide enough for any rig, narrow enough that every
+    array the kernel gets stays small and every value finite), the rings' sizes at most
+    MAX_FINGER_RING and MAX_TELEMETRY_RING.
     """
 
     power_budget_w: float | None = None
@@ -113,17 +135,16 @@ class RenderOptions:
             raise ConfigError(problems)
 
     def _problems(self) -> list[tuple[str, str]]:
-        """``(field, what is wrong)`` for every field out of its range."""
-        positive = ["power_window_s", "smoothing_ms", "velocity_window_ms", "watchdog_ms", "ramp_ms"]
-        positive += [name for name in ("power_budget_w", "power_avg_w") if getattr(self, name) is not None]
-        found = [(name, _number_problem(getattr(self, name), "> 0", lambda v: v > 0)) for name in positive]
+        """``(field, what is wrong)`` for every field out of its range (_OPTION_RANGES)."""
+        found = []
+        for name, (low, high) in _OPTION_RANGES.items():
+            value = getattr(self, name)
+            if value is not None:
+                found.append((name, _number_problem(value, f"in [{low:g}, {high:g}]", lambda v: low <= v <= high)))
         found += [
-            ("horizon_ms", _number_problem(self.horizon_ms, ">= 0", lambda v: v >= 0)),
-            ("default_force_n", _number_problem(self.default_force_n, ">= 0", lambda v: v >= 0)),
-            ("mu_floor", _number_problem(self.mu_floor, "in (0, 1]", lambda v: 0 < v <= 1)),
             ("control_interval", _count_problem(self.control_interval, 1, layout.MAX_CONTROL_INTERVAL)),
-            ("finger_ring", _count_problem(self.finger_ring, 2, None)),
-            ("telemetry_ring", _count_problem(self.telemetry_ring, 1, None)),
+            ("finger_ring", _count_problem(self.finger_ring, 2, MAX_FINGER_RING)),
+            ("telemetry_ring", _count_problem(self.telemetry_ring, 1, MAX_TELEMETRY_RING)),
         ]
         if self.preemphasis is not None and not isinstance(self.preemphasis, bool):
             found.append(("preemphasis", f"must be true, false or None, got {self.preemphasis!r}"))

@@ -39,7 +39,7 @@ from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG,
 )
-from tpad_rt.limits import MAX_BLOCK_FRAMES, MAX_RATE_HZ, MAX_RECORDING_SAMPLES, MAX_RENDER_S
+from tpad_rt.limits import MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, MAX_RECORDING_SAMPLES, MAX_RENDER_S
 from tpad_rt.offline import OfflineRender, RenderResult, check_render_size, input_span_s, texture_under_finger
 from tpad_rt.outputs import open_output
 from tpad_rt.outputs.wav import WavOutput
@@ -109,8 +109,9 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
                         "(default: the device's power_budget_w)")
     parser.add_argument("--power-avg", metavar="W", type=_number(0, False, MAX_POWER_W, "W"),
                         help=f"average power budget over the window, at most {MAX_POWER_W:g} W (default: the cap)")
-    parser.add_argument("--force", metavar="N", type=_number(0, True),
-                        help="contact force (N) for every finger sample, overriding the input's")
+    parser.add_argument("--force", metavar="N", type=_number(0, True, MAX_FORCE_N, "N"),
+                        help=f"contact force (N, at most {MAX_FORCE_N:g}) for every finger sample, overriding the "
+                        "input's")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
