@@ -82,8 +82,11 @@ def test_a_sample_rate_too_low_for_the_carrier_names_the_rate_needed() -> None:
     with pytest.raises(ConfigError, match=r"needs a sample rate of at least 69689 Hz .* got 48000"):
         Pipeline(device(), compile_texture(texture("grating")), fs_hz=48000)
     Pipeline(device(), compile_texture(texture("grating")), fs_hz=69689)
-    with pytest.raises(ConfigError, match="fs_hz: must be a finite number > 0"):
-        Pipeline(device(), compile_texture(texture("grating")), fs_hz=math.inf)
+    for rate in (math.inf, 10**400):
+        with pytest.raises(ConfigError, match=r"fs_hz: must be a finite number in \(0, 768000\]"):
+            Pipeline(device(), compile_texture(texture("grating")), fs_hz=rate)
+    with pytest.raises(ConfigError, match=r"fs_hz: must be in \(0, 768000\], got 2e\+09"):
+        Pipeline(device(), compile_texture(texture("grating")), fs_hz=2_000_000_000)  # would allocate a 500 MB ring
 
 
 # --- device tables --------------------------------------------------------------

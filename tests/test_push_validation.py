@@ -33,6 +33,8 @@ BAD_SAMPLES = [
     ({"x_mm": "12"}, f"x_mm: must be a finite number {PLATE_X}, got '12'"),
     ({"x_mm": None}, f"x_mm: must be a finite number {PLATE_X}, got None"),
     ({"x_mm": True}, f"x_mm: must be a finite number {PLATE_X}, got True"),
+    ({"x_mm": 10**400}, f"x_mm: must be a finite number {PLATE_X}, got 1000000000000000000000000000000000000..."),
+    ({"x_mm": "x" * 10**6}, f"x_mm: must be a finite number {PLATE_X}, got 'xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx..."),
     ({"y_mm": math.nan}, f"y_mm: must be a finite number {PLATE_Y}, got nan"),
     ({"y_mm": -1e308}, f"y_mm: must be a finite number {PLATE_Y}, got -1e+308"),
     ({"y_mm": 121.0}, f"y_mm: must be a finite number {PLATE_Y}, got 121.0"),
@@ -49,7 +51,7 @@ GOOD_SAMPLES = [
     {"force_n": 0.0}, {"force_n": -0.0}, {"force_n": MAX_FORCE_N}, {"force_n": None}, {"x_mm": np.float32(3.5)},
     {"x_mm": np.int64(7)},
 ]
-BAD_TIMES = [math.nan, math.inf, -math.inf, 1e9, -1e9, FINGER_TIME_WINDOW_S + 0.5, "0", None, 1e308]
+BAD_TIMES = [math.nan, math.inf, -math.inf, 1e9, -1e9, FINGER_TIME_WINDOW_S + 0.5, 10**400, "0", None, 1e308]
 
 
 def pipeline() -> Pipeline:
@@ -166,3 +168,29 @@ def test_several_producer_threads_lose_and_tear_no_sample() -> None:
         mine = sequence[thread == k]
         assert np.all(np.diff(mine) == 1)  # in order, none lost between the ring's oldest and newest
     assert np.all(np.diff(fingers["t_s"]) >= 0)
+
+
+def test_a_lift_under_other_producers_is_where_the_last_sample_was() -> None:
+    """lift() reads the last position and writes its row under the producers' lock."""
+    renderer = Renderer(output="null://", texture=GRATING)
+
+    def produce() -> None:
+        for k in range(2000):
+            renderer.push_finger(10.0 + k * 0.01, 30.0, t=1e-6 * k)
+
+    pusher = threading.Thread(target=produce)
+    pusher.start()
+    for _ in range(300):
+        renderer.lift(t=0.0)
+    pusher.join()
+    fingers = renderer.recent_fingers()  # the newest ring - 2, oldest first
+    lifts = np.flatnonzero(~fingers["down"])
+    lifts = lifts[lifts > 0]
+    assert len(lifts) > 0 and np.array_equal(fingers["x_mm"][lifts], fingers["x_mm"][lifts - 1])
+
+
+def test_set_texture_refuses_a_start_time_far_from_the_stream_clock() -> None:
+    p = pipeline()
+    for t_s in (math.nan, math.inf, 1e300, 10**400, "x"):
+        with pytest.raises(SampleError, match="^t_s: must be a finite number in"):
+            p.set_texture(p.texture, t_s)  # type: ignore[arg-type]

@@ -38,6 +38,7 @@ and hands each block to the output (GIL-bound: a simulator, not a real-time path
 from __future__ import annotations
 
 import math
+import numbers
 import threading
 import time
 from collections import deque
@@ -53,14 +54,14 @@ from tpad_rt import __version__
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, TpadError
 from tpad_rt.inputs.base import FINGER_DTYPE
-from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
+from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
 from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, FLAG_FAULT,
     FLAG_POWER, FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEL_NAMES, TEX_PROG_COLS,
 )
 from tpad_rt.outputs import Output, audio, open_output, output_forms
-from tpad_rt.pipeline import Pipeline, RenderOptions
+from tpad_rt.pipeline import Pipeline, RenderOptions, shown
 from tpad_rt.realtime import CallbackTable, monotonic_ns
 from tpad_rt.recording import Recording, write_recording
 from tpad_rt.texture import CompiledTexture, load_compiled
@@ -134,8 +135,10 @@ class Renderer:
         if self._audio is not None:
             rate_hz = self._audio.rate_hz if "rate" in self._audio.given else rate_hz
             block_frames = self._audio.block_frames if "block" in self._audio.given else block_frames
-        if not (isinstance(block_frames, int) and 1 <= block_frames <= 65536):
-            raise ConfigError(f"block_frames: must be a whole number in [1, 65536], got {block_frames!r}")
+        if not (isinstance(block_frames, numbers.Integral) and 1 <= block_frames <= MAX_BLOCK_FRAMES):
+            raise ConfigError(f"block_frames: must be a whole number in [1, {MAX_BLOCK_FRAMES}], got "
+                              f"{shown(block_frames)}")
+        block_frames = int(block_frames)
         if not (isinstance(stall_timeout_s, (int, float)) and not isinstance(stall_timeout_s, bool)
                 and 0 < stall_timeout_s <= MAX_STALL_TIMEOUT_S):
             raise ConfigError(f"stall_timeout_s: must be a number of seconds in (0, {MAX_STALL_TIMEOUT_S:g}], "
@@ -494,16 +497,25 @@ class Renderer:
         edges, a force outside ``[0, tpad_rt.limits.MAX_FORCE_N]``, or a time further than
         ``tpad_rt.limits.FINGER_TIME_WINDOW_S`` from the stream clock; nothing is pushed then.
         """
-        self._push(x_mm, y_mm, force_n, t, down=True)
+        self._push((x_mm, y_mm), force_n, t, down=True)
 
     def lift(self, t: float | None = None) -> None:
         """The finger leaves the plate at stream time ``t`` (s; None: now): the drive ramps to 0.
         Raises SampleError for a bad ``t`` (as :meth:`push_finger`)."""
-        self._push(*self._pipeline.last_position_mm(), None, t, down=False)
+        self._push(None, None, t, down=False)
 
-    def _push(self, x_mm: float, y_mm: float, force_n: float | None, t: float | None, down: bool) -> None:
+    def _push(self, position_mm: tuple[float, float] | None, force_n: float | None, t: float | None,
+              down: bool) -> None:
+        """Push a sample at ``position_mm`` (None: where the last one was) at ``t`` (None: now, kept within
+        the pipeline's window around its stream position, which a stalled stream stops advancing)."""
         with self._producer:
-            t_s = max(self.now_s() if t is None else self._pipeline.check_time(t, "t"), self._last_t_s)
+            if t is None:
+                stream_s = self._pipeline.stream_time_s
+                t_s = min(max(self.now_s(), stream_s - FINGER_TIME_WINDOW_S), stream_s + FINGER_TIME_WINDOW_S)
+            else:
+                t_s = self._pipeline.check_time(t, "t")
+            t_s = max(t_s, self._last_t_s)
+            x_mm, y_mm = self._pipeline.last_position_mm() if position_mm is None else position_mm
             pushed_ns = monotonic_ns()
             index = int(self._pipeline.arrays.finger_count[0])
             self._pipeline.push_finger(t_s, x_mm, y_mm, force_n, down)

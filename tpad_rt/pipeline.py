@@ -42,13 +42,11 @@ from tpad_rt.errors import ConfigError, SampleError, TpadError
 from tpad_rt.kernel import layout
 from tpad_rt.kernel.atomics import publish
 from tpad_rt.kernel.render import render_block
-from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_FORCE_N, position_range_mm
+from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, position_range_mm
 from tpad_rt.texture import CompiledTexture
 
 #: Highest carrier frequency, as a fraction of the sample rate, the pipeline renders.
 MAX_CARRIER_FRACTION = 0.45
-#: Longest block ``render`` accepts (samples).
-MAX_BLOCK = 65536
 #: Force-grid intervals: at most this many (a grid holding every table knot is sought up
 #: to it) and at least this many (the power and tau tables are smooth between knots).
 MAX_GRID_INTERVALS = 4096
@@ -151,28 +149,45 @@ class RenderOptions:
         return [(name, problem) for name, problem in found if problem]
 
 
+def shown(value: object) -> str:
+    """``repr(value)`` for a message, cut to 40 characters."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _as_float(value: object) -> float:
+    """``value`` as a float if it is a real number (not a bool) a float can hold; NaN otherwise (10**400 too)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return math.nan
+    try:
+        return float(value)
+    except OverflowError:
+        return math.nan
+
+
 def _checked(name: str, value: object, low: float, high: float, unit: str) -> float:
     """``value`` as a float if it is a real number (not a bool) in ``[low, high]``; else SampleError
     ``name: must be a finite number in [low, high] unit, got value``."""
-    number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
+    number = _as_float(value)
     if not low <= number <= high:
-        raise SampleError(f"{name}: must be a finite number in [{low:g}, {high:g}] {unit}, got {value!r}")
+        raise SampleError(f"{name}: must be a finite number in [{low:g}, {high:g}] {unit}, got {shown(value)}")
     return number
 
 
 def _number_problem(value: object, rule: str, holds: Callable[[float], bool]) -> str:
     """'' if ``value`` is a finite real number satisfying ``holds``, else what is wrong."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
-        return f"must be a finite number {rule}, got {value!r}"
-    return "" if holds(float(value)) else f"must be {rule}, got {value:g}"
+    number = _as_float(value)
+    if not math.isfinite(number):
+        return f"must be a finite number {rule}, got {shown(value)}"
+    return "" if holds(number) else f"must be {rule}, got {number:g}"
 
 
 def _count_problem(value: object, low: int, high: int | None) -> str:
     """'' if ``value`` is a whole number in ``[low, high]`` (no upper bound when None), else what is wrong."""
     rule = f">= {low}" if high is None else f"in [{low}, {high}]"
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        return f"must be a whole number {rule}, got {value!r}"
-    return "" if low <= value and (high is None or value <= high) else f"must be {rule}, got {value}"
+        return f"must be a whole number {rule}, got {shown(value)}"
+    return "" if low <= value and (high is None or value <= high) else f"must be {rule}, got {shown(value)}"
 
 
 class KernelArrays(NamedTuple):
@@ -239,8 +254,8 @@ def device_tables(device: Device) -> tuple[np.ndarray, float, float]:
 
 
 def _check_rate(device: Device, fs_hz: float) -> None:
-    """ConfigError unless ``fs_hz`` is a finite rate > 0 at least ``resonance_hz / 0.45``."""
-    problem = _number_problem(fs_hz, "> 0", lambda v: v > 0)
+    """ConfigError unless ``fs_hz`` is a finite rate (Hz) of at least ``resonance_hz / 0.45`` and at most MAX_RATE_HZ."""
+    problem = _number_problem(fs_hz, f"in (0, {MAX_RATE_HZ}]", lambda v: 0 < v <= MAX_RATE_HZ)
     if problem:
         raise ConfigError(f"fs_hz: {problem}")
     needed_hz = device.resonance_hz / MAX_CARRIER_FRACTION
@@ -399,19 +414,25 @@ class Pipeline:
         """
         row = (*self._checked_sample(t_s, x_mm, y_mm, force_n), 1.0 if down else 0.0)
         with self._producer:
-            if row[0] < self._last_t_s:
-                raise SampleError(f"t_s: must be >= the previous sample's time {self._last_t_s:.6f} s "
-                                  f"(finger times never decrease), got {row[0]:.6f}")
-            self._last_t_s = row[0]
-            finger, count = self._arrays.finger, self._arrays.finger_count
-            finger[count[0] % finger.shape[0]] = row
-            publish(count, 0, int(count[0]) + 1)  # after the row: a release store
+            self._append(row)
 
     def lift(self, t_s: float) -> None:
         """The finger leaves the plate at stream time ``t_s`` (s), where it last was: the drive ramps to 0.
         Raises SampleError as :meth:`push_finger` for a bad time."""
-        x_mm, y_mm = self.last_position_mm()
-        self.push_finger(t_s, x_mm, y_mm, down=False)
+        time_s = self.check_time(t_s)
+        with self._producer:  # the position and the row under one lock: no other producer in between
+            self._append((time_s, *self.last_position_mm(), math.nan, 0.0))
+
+    def _append(self, row: tuple[float, float, float, float, float]) -> None:
+        """Write a checked ``row`` into the ring, then bump the count (release store); the producer lock held.
+        SampleError if its time is before the previous sample's."""
+        if row[0] < self._last_t_s:
+            raise SampleError(f"t_s: must be >= the previous sample's time {self._last_t_s:.6f} s "
+                              f"(finger times never decrease), got {row[0]:.6f}")
+        self._last_t_s = row[0]
+        finger, count = self._arrays.finger, self._arrays.finger_count
+        finger[count[0] % finger.shape[0]] = row
+        publish(count, 0, int(count[0]) + 1)  # after the row: a release store
 
     def last_position_mm(self) -> tuple[float, float]:
         """The plate position (mm) of the newest finger sample, ``(0, 0)`` before the first."""
@@ -423,20 +444,24 @@ class Pipeline:
         """The kernel's fault counters (docs/kernel.md "Faults"): ``faults`` (faults that began),
         ``fault_steps`` (control steps), ``fault_samples`` (samples the output guard zeroed) and
         ``fault_causes`` (names of every FAULT_* cause met, in layout.FAULT_NAMES order)."""
-        state = self._arrays.state
-        causes = int(state[layout.STATE_FAULT_CAUSES])
+        state = np.nan_to_num(self._arrays.state[[layout.STATE_FAULT_CAUSES, layout.STATE_FAULT_EVENTS,
+                                                  layout.STATE_FAULT_STEPS, layout.STATE_FAULT_SAMPLES]],
+                              nan=0.0, posinf=2**62, neginf=0.0).clip(0, 2**62).astype(np.int64)  # never raises
+        causes, events, steps, samples = (int(value) for value in state)
         return {
-            "faults": int(state[layout.STATE_FAULT_EVENTS]),
-            "fault_steps": int(state[layout.STATE_FAULT_STEPS]),
-            "fault_samples": int(state[layout.STATE_FAULT_SAMPLES]),
+            "faults": events,
+            "fault_steps": steps,
+            "fault_samples": samples,
             "fault_causes": [name for bit, name in enumerate(layout.FAULT_NAMES) if causes & (1 << bit)],
         }
 
     def set_texture(self, texture: CompiledTexture, t_s: float | None = None) -> None:
         """Render ``texture`` from the next block; temporal textures start at ``t_s`` (s; None: now).
 
-        The carrier is unaffected (its phase follows the sample index).
+        The carrier is unaffected (its phase follows the sample index). Raises SampleError for a
+        ``t_s`` as :meth:`check_time` refuses it.
         """
+        t0_s = self.stream_time_s if t_s is None else self.check_time(t_s)
         self._texture = texture
         self._arrays = self._arrays._replace(
             prog=_writable(texture.prog, np.int64),
@@ -444,7 +469,7 @@ class Pipeline:
             img=_writable(texture.img, np.float64),
             stack=np.zeros(max(texture.stack_depth, 1)),
         )
-        self._arrays.cfg[layout.CFG_TEXTURE_T0_S] = self.time_s if t_s is None else t_s
+        self._arrays.cfg[layout.CFG_TEXTURE_T0_S] = t0_s
 
     def render(self, out: np.ndarray) -> None:
         """Fill ``out`` with the next ``len(out)`` drive samples (float32, 1.0 = ``volts_per_full_scale``).
@@ -457,8 +482,8 @@ class Pipeline:
             and out.flags.c_contiguous and out.flags.writeable
         ):
             raise TypeError("out: must be a writable C-contiguous 1-D float32 NumPy array")
-        if not 1 <= out.size <= MAX_BLOCK:
-            raise ValueError(f"out: must hold 1 to {MAX_BLOCK} samples, got {out.size}")
+        if not 1 <= out.size <= MAX_BLOCK_FRAMES:
+            raise ValueError(f"out: must hold 1 to {MAX_BLOCK_FRAMES} samples, got {out.size}")
         render_block(out, self.sample_index, *self._arrays)
         self.sample_index += out.size
 

@@ -91,7 +91,7 @@ from tpad_rt.kernel.layout import (
 
 _TWO_PI = 2.0 * math.pi
 #: Pixel positions are turned into int64 indices only below this (exact in a float64).
-_MAX_PIXEL_INDEX = 2.0**52
+_MAX_PIXEL_INDEX = 2.0**52  # (and phases in cycles: floor() of one gives an int64)
 
 #: Helpers and ``eval_texture`` are inlined at numba IR level into their callers: a call with
 #: array arguments costs more than a grating (argument passing and reference counting),
@@ -123,15 +123,18 @@ def waveform(code: int, phase: float, duty: float) -> float:
 @_inline
 def _frac(cycles: float) -> float:
     """The fractional part of ``cycles``, in [0, 1] (1 only by rounding of a tiny negative); NaN when
-    ``cycles`` is not finite (the render kernel counts a texture fault)."""
-    if not abs(cycles) < math.inf:
+    ``cycles`` is not finite or beyond 2**52 (no fraction is left, and ``floor`` would not fit an int64)."""
+    if not abs(cycles) < _MAX_PIXEL_INDEX:
         return math.nan
     return cycles - math.floor(cycles)
 
 
 @_inline
 def _periodic_level(params: np.ndarray, o: int, code: int, phase: float) -> float:
-    """``low + span * waveform`` with ``duty, low, span`` at ``params[o:o + 3]``."""
+    """``low + span * waveform`` with ``duty, low, span`` at ``params[o:o + 3]``; NaN for a NaN ``phase``
+    (the render kernel counts a texture fault; a square wave's comparison alone would hide it)."""
+    if not phase >= 0.0:
+        return math.nan
     return params[o + 1] + params[o + 2] * waveform(code, phase, params[o])
 
 
@@ -166,11 +169,14 @@ def _image_cell(
     Returns ``(v00, v10, v01, v11, tx, ty)``: the four pixel values (``v10`` one pixel
     to the right of ``v00``, ``v01`` one below) and the point's fractions across the
     cell. Pixel ``i`` has its centre at ``ox + (i + 0.5) / px_per_mm``. A pixel position
-    that is not finite or beyond 2**52 gives NaN values (no index is made from it).
+    that is not finite or beyond 2**52, or an image that does not fit in ``img`` (a
+    corrupt record), gives NaN values: no index is made from them.
     """
     fx = (x_mm - params[o]) * params[o + 2] - 0.5
     fy = (y_mm - params[o + 1]) * params[o + 3] - 0.5
-    if not (abs(fx) < _MAX_PIXEL_INDEX and abs(fy) < _MAX_PIXEL_INDEX):  # NaN too: never an index from it
+    fits = 1.0 <= params[o + 4] <= img.shape[0] and 1.0 <= params[o + 5] <= img.shape[0]
+    if not (fits and abs(fx) < _MAX_PIXEL_INDEX and abs(fy) < _MAX_PIXEL_INDEX
+            and 0 <= img_offset <= img.shape[0] - int(params[o + 4]) * int(params[o + 5])):
         return math.nan, math.nan, math.nan, math.nan, 0.0, 0.0
     width = int(params[o + 4])
     ix = math.floor(fx)
