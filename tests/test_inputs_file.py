@@ -64,6 +64,7 @@ def test_relative_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
         ("t,x_mm\n0,1\n", "traj.csv:1: header: missing column y_mm; expected t,x_mm,y_mm[,force_n][,down]"),
         ("t,x_mm,y_mm\n", "traj.csv: no samples after the header"),
         ("# only a comment\n\n", "traj.csv: empty; expected a header line t,x_mm,y_mm[,force_n][,down]"),
+        ("t,x_mm,y_mm\r0,10,10\r0.1,20,10\r", "traj.csv:1: not a CSV line (new-line character seen in unquoted"),
     ],
 )
 def test_errors_name_the_file_and_line(tmp_path: Path, text: str, expected: str) -> None:

@@ -106,9 +106,19 @@ def _data_lines(path: str, stream: BinaryIO) -> Iterator[tuple[int, list[str]]]:
                 raise ConfigError(f"{path}:{number}: not UTF-8 text") from None
             stripped = line.strip()
             if stripped and not stripped.startswith("#"):
-                yield number, [field.strip() for field in next(csv.reader([line.rstrip("\r\n")]), [])]
+                yield number, _fields(path, number, line.rstrip("\r\n"))
     except OSError as error:
         raise ConfigError(f"{path}: cannot read: {error.strerror}") from None
+
+
+def _fields(path: str, number: int, line: str) -> list[str]:
+    """The comma-separated fields of ``line``, stripped; ConfigError for a line the csv module refuses
+    (a carriage return inside it: a file whose lines end in CR alone reads as one line)."""
+    try:
+        return [field.strip() for field in next(csv.reader([line]), [])]
+    except csv.Error as error:
+        hint = "; lines must end in LF or CR LF" if "\r" in line else ""
+        raise ConfigError(f"{path}:{number}: not a CSV line ({error}){hint}") from None
 
 
 class _Ranges:
