@@ -13,7 +13,9 @@ from pathlib import Path
 import pytest
 
 from cli_run import tpad_rt, warm_numba_cache
+from tpad_rt.errors import ConfigError
 from tpad_rt.limits import MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_ROWS
+from tpad_rt.offline import check_render_size
 
 PEAK_MB = 500
 GRATING = "textures/grating.yaml"
@@ -84,6 +86,14 @@ def test_blocks_are_bounded_for_a_wav_render(tmp_path: Path) -> None:
     assert not (tmp_path / "x.wav").exists()  # refused before the output opened
 
 
+def test_a_wav_past_4_gib_is_refused_before_rendering(tmp_path: Path) -> None:
+    done = tpad_rt("render", GRATING, "--input", "scripted://still?duration_s=inf", "--duration", "1500",
+                   "--rate", "768000", "--block", "65536", "--out", str(tmp_path / "big.wav"))
+    done.assert_one_line_error("bytes of WAV samples, more than the 4,294,967,245 a WAV file holds (4 GiB)")
+    assert done.peak_mb < PEAK_MB
+    assert not list(tmp_path.glob("*.wav"))  # refused before the output opened
+
+
 @pytest.mark.parametrize(
     ("args", "expected"),
     [
@@ -143,3 +153,9 @@ def test_a_refusal_compiles_nothing_even_with_a_cold_numba_cache(tmp_path: Path,
     assert done.peak_mb < 300, done.peak_mb
     compiled = [path.name for path in (tmp_path / "cold-cache").rglob("*.nbi")]
     assert not [name for name in compiled if name.startswith(("render.", "callback."))], compiled  # no kernel
+
+
+def test_a_wav_output_url_counts_for_the_wav_size_limit() -> None:
+    check_render_size(1500.0, 0.0, 768000, 65536, keep_drive=False)  # no WAV: within the other limits
+    with pytest.raises(ConfigError, match="more than the 4,294,967,245 a WAV file holds"):
+        check_render_size(1500.0, 0.0, 768000, 65536, keep_drive=False, writes_wav=True)

@@ -44,6 +44,8 @@ from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel.layout import TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_RENDER_BLOCKS, MAX_RENDER_S
 from tpad_rt.outputs import Output
+from tpad_rt.outputs.wav import BYTES_PER_SAMPLE as WAV_BYTES_PER_SAMPLE
+from tpad_rt.outputs.wav import MAX_DATA_BYTES as WAV_MAX_DATA_BYTES
 from tpad_rt.pipeline import Pipeline
 from tpad_rt.texture import CompiledTexture
 
@@ -89,13 +91,15 @@ def _blocks(seconds: float, fs_hz: float, block_frames: int) -> int:
     return math.ceil(seconds * fs_hz / block_frames)
 
 
-def check_render_size(input_s: float, tail_s: float, fs_hz: int, block_frames: int, keep_drive: bool) -> None:
+def check_render_size(input_s: float, tail_s: float, fs_hz: int, block_frames: int, keep_drive: bool,
+                      writes_wav: bool = False) -> None:
     """Refuse a render too large to hold, before anything is allocated.
 
     An :class:`OfflineRender` of ``input_s`` + ``tail_s`` (s) at ``fs_hz`` (Hz) in
     blocks of ``block_frames`` keeps one telemetry row per block and, with
-    ``keep_drive``, every drive sample. Raises ConfigError when that is more than
-    MAX_RENDER_BLOCKS rows or MAX_RECORDING_SAMPLES samples.
+    ``keep_drive``, every drive sample; ``writes_wav``: it also writes them to a WAV
+    file. Raises ConfigError when that is more than MAX_RENDER_BLOCKS rows,
+    MAX_RECORDING_SAMPLES samples kept, or a WAV past its 4 GiB size limit.
     """
     blocks = _blocks(input_s, fs_hz, block_frames) + _blocks(tail_s, fs_hz, block_frames)
     if blocks > MAX_RENDER_BLOCKS:
@@ -106,6 +110,10 @@ def check_render_size(input_s: float, tail_s: float, fs_hz: int, block_frames: i
         raise ConfigError(f"a recording of {input_s:g} s at {fs_hz} Hz holds {blocks * block_frames:,} drive samples, "
                           f"more than the {MAX_RECORDING_SAMPLES:,} a recording keeps in memory "
                           f"({MAX_RECORDING_SAMPLES // fs_hz} s at this rate); render less (--duration) or to .wav")
+    wav_bytes = blocks * block_frames * WAV_BYTES_PER_SAMPLE
+    if writes_wav and wav_bytes > WAV_MAX_DATA_BYTES:
+        raise ConfigError(f"{input_s:g} s at {fs_hz} Hz is {wav_bytes:,} bytes of WAV samples, more than the "
+                          f"{WAV_MAX_DATA_BYTES:,} a WAV file holds (4 GiB); render less (--duration)")
 
 
 class OfflineRender:

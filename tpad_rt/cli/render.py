@@ -157,7 +157,8 @@ def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_
     # The ramp down starts at the first control step after the stop and lasts ramp_ms:
     # one control interval plus the ramp, and a whole block more, end in silence.
     tail_s = options.ramp_ms * 1e-3 + (options.control_interval + args.block) / args.rate
-    check_render_size(input_s, tail_s, args.rate, args.block, keep_drive)
+    check_render_size(input_s, tail_s, args.rate, args.block, keep_drive,
+                      writes_wav=wav_path is not None or args.output.startswith("wav:"))
     pipeline = Pipeline(device, texture, fs_hz=args.rate, options=options)
     outputs = [stack.enter_context(open_output(args.output, device=device, fs_hz=args.rate))]
     if wav_path is not None:

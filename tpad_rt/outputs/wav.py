@@ -31,7 +31,7 @@ from tpad_rt.urls import Url, UrlForm
 FORMS = (UrlForm("wav", "/path/out.wav"),)
 
 _FORMAT_IEEE_FLOAT = 3
-_BYTES_PER_SAMPLE = 4
+BYTES_PER_SAMPLE = 4
 # Byte offsets of the sizes patched on close (header: RIFF 12 + fmt 26 + fact 12 + data 8).
 _RIFF_SIZE_AT = 4
 _FACT_FRAMES_AT = 46
@@ -42,9 +42,9 @@ MAX_DATA_BYTES = 2**32 - 1 - (_HEADER_BYTES - 8)
 
 
 def _header(fs_hz: int, data_bytes: int) -> bytes:
-    frames = data_bytes // _BYTES_PER_SAMPLE
-    fmt = struct.pack("<HHIIHHH", _FORMAT_IEEE_FLOAT, 1, fs_hz, fs_hz * _BYTES_PER_SAMPLE,
-                      _BYTES_PER_SAMPLE, 8 * _BYTES_PER_SAMPLE, 0)
+    frames = data_bytes // BYTES_PER_SAMPLE
+    fmt = struct.pack("<HHIIHHH", _FORMAT_IEEE_FLOAT, 1, fs_hz, fs_hz * BYTES_PER_SAMPLE,
+                      BYTES_PER_SAMPLE, 8 * BYTES_PER_SAMPLE, 0)
     return b"".join([
         b"RIFF", struct.pack("<I", _HEADER_BYTES - 8 + data_bytes), b"WAVE",
         b"fmt ", struct.pack("<I", len(fmt)), fmt,
@@ -79,7 +79,7 @@ class WavOutput(Output):
         values = np.asarray(samples, dtype="<f4")
         bad = first_bad_sample(values)
         if bad is not None:
-            written = self.data_bytes // _BYTES_PER_SAMPLE
+            written = self.data_bytes // BYTES_PER_SAMPLE
             self.close()
             raise BackendError(
                 f"wav: {self.path}: {bad_sample_message(written + bad, float(values[bad]))}; the file was "
