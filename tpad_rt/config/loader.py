@@ -11,7 +11,7 @@ from pydantic import TypeAdapter, ValidationError
 from tpad_rt.config.breadcrumb import breadcrumb
 from tpad_rt.config.device_schema import DeviceFile
 from tpad_rt.config.messages import explain
-from tpad_rt.config.texture_schema import BASE_DIR, TextureFile
+from tpad_rt.config.texture_schema import BASE_DIR, IMAGE_PIXELS, TextureFile
 from tpad_rt.config.yaml_io import YamlDocument, load_yaml
 from tpad_rt.errors import ConfigError
 
@@ -57,7 +57,8 @@ def check_file(path: PathLike) -> list[str]:
 def _validate(root: Any, path: PathLike, document: YamlDocument) -> Any:
     """``document`` validated as ``root``; raises ConfigError with one line per problem."""
     try:
-        return _ADAPTERS[root].validate_python(document.data, context={BASE_DIR: Path(path).parent})
+        context = {BASE_DIR: Path(path).parent, IMAGE_PIXELS: [0]}
+        return _ADAPTERS[root].validate_python(document.data, context=context)
     except ValidationError as err:
         lines = []
         for error in err.errors(include_url=False):

@@ -43,6 +43,10 @@ from tpad_rt.errors import ConfigError
 
 #: Validation-context key: the directory relative image paths start from.
 BASE_DIR = "base_dir"
+#: Validation-context key: a one-item list counting the pixels of the images validated so far.
+IMAGE_PIXELS = "image_pixels"
+#: Most pixels all the images of one texture may hold (each reference counts: every one is loaded).
+MAX_TEXTURE_PIXELS = 4096 * 4096
 MAX_LAYERS = 16
 MAX_LAYER_DEPTH = 4
 
@@ -64,12 +68,24 @@ _layers_depth: ContextVar[int] = ContextVar("tpad_rt_layers_depth", default=0)
 
 
 def _usable_image(value: Path, info: ValidationInfo) -> Path:
-    """The absolute path of a readable image, relative paths taken from ``context[BASE_DIR]``."""
-    path = Path((info.context or {}).get(BASE_DIR, ".")) / value
+    """The absolute path of a readable image, relative paths taken from ``context[BASE_DIR]``.
+
+    Counts its pixels in ``context[IMAGE_PIXELS]`` (a one-item list) when the context has
+    it: every image a texture names is held in memory once rendered, so all of them
+    together may have at most MAX_TEXTURE_PIXELS pixels.
+    """
+    context = info.context or {}
+    path = Path(context.get(BASE_DIR, ".")) / value
     try:
-        read_image(path)
+        pixels = read_image(path).size
     except ImageError as err:
         raise rule_error(str(err)) from None
+    counted = context.get(IMAGE_PIXELS)
+    if counted is not None:
+        counted[0] += pixels
+        if counted[0] > MAX_TEXTURE_PIXELS:
+            raise rule_error(f"the texture's images hold {counted[0]:,} pixels with this one, more than the "
+                             f"{MAX_TEXTURE_PIXELS:,} a texture may hold in all (one 4096 x 4096 image)")
     return path.absolute()
 
 
