@@ -1,6 +1,7 @@
 """``tpad-rt design``: the paper's Section VI trends from the command line."""
 
 import json
+import math
 import subprocess
 import sys
 from collections import defaultdict
@@ -87,10 +88,21 @@ def test_table_names_the_equations_and_the_models_bias(capsys):
         ["--plate", "SLG_0.4:0.3:2.5:70"],
         ["--reference", "SLG_9"],
         ["--length-mm", "0"],
+        ["--plate", "X:1e-300:2.5:70"],
+        ["--plate", "X:0.5:1e308:1e308", "--reference", "X"],
+        ["--plate", "X:0.5:2.5:nan"],
+        ["--length-mm", "1e-300"],
+        ["--length-mm", "inf"],
+        ["--mode", "0"],
+        ["--mode", "100000"],
     ],
 )
 def test_bad_options_exit_1_with_one_line(capsys, args):
-    assert main(["design", *args]) == 1
+    try:
+        status = main(["design", *args])
+    except SystemExit as exit_:  # argparse's refusals
+        status = exit_.code
+    assert status == 1
     captured = capsys.readouterr()
     assert captured.out == ""
     assert captured.err.count("\n") == 1 and captured.err.startswith("tpad-rt design: ")
@@ -112,3 +124,11 @@ def test_as_a_process():
     assert bad.returncode == 1
     assert bad.stderr.count("\n") == 1 and "Traceback" not in bad.stderr
     assert "LABEL:THICK_MM:DENSITY_G_CM3:E_GPA" in bad.stderr
+
+
+@pytest.mark.parametrize("plate", ["X:0.01:0.1:0.01", "X:100:50:2000", "X:0.01:50:2000", "X:100:0.1:0.01"])
+@pytest.mark.parametrize(("length", "mode"), [("1", "1"), ("1000", "1000")])
+def test_every_accepted_plate_gives_finite_figures(capsys, plate, length, mode):
+    assert main(["design", "--plate", plate, "--length-mm", length, "--mode", mode, "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert all(math.isfinite(value) for row in rows for value in row.values() if isinstance(value, float))

@@ -12,12 +12,16 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from typing import Any
+from collections.abc import Callable
+from typing import Any, get_args
+
+from annotated_types import Ge, Le
 
 from rich import box
 from rich.console import Console
 from rich.table import Table
 
+from tpad_rt.config.device_schema import DensityGCm3, ModeM, PlateSideMm, ThicknessMm, YoungsModulusGpa
 from tpad_rt.errors import ConfigError
 from tpad_rt.physics import plate
 from tpad_rt.physics.plate import ACTUATOR, TABLE1_GLASSES, Layer
@@ -59,15 +63,46 @@ def add_parser(subparsers: Any) -> None:
         metavar=_PLATE_FORM,
         help="add a plate (repeatable), e.g. MyGlass:0.5:2.5:70",
     )
-    parser.add_argument("--length-mm", type=float, default=130.0, help="plate length (default 130)")
-    parser.add_argument("--mode", type=int, default=20, help="m of the m x 0 mode (default 20)")
+    parser.add_argument("--length-mm", type=_in_range(float, PlateSideMm, "mm"), default=130.0,
+                        help="plate length (default 130)")
+    parser.add_argument("--mode", type=_in_range(int, ModeM, ""), default=20, help="m of the m x 0 mode (default 20)")
     parser.add_argument("--reference", default="SLG_0.56", help="plate the power is relative to (default SLG_0.56)")
     parser.set_defaults(func=run)
 
 
+def _bounds(alias: Any) -> tuple[float, float]:
+    """``(low, high)`` of a device-file number type (``Annotated[float, Ge(low), Le(high)]``)."""
+    metadata = get_args(alias)[1:]
+    return (next(item.ge for item in metadata if isinstance(item, Ge)),
+            next(item.le for item in metadata if isinstance(item, Le)))
+
+
+def _in_range(kind: type, alias: Any, unit: str) -> Callable[[str], Any]:
+    """An argparse type: a ``kind`` (float or int) within the bounds the device files give ``alias``."""
+    low, high = _bounds(alias)
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            value = math.nan
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be a number in [{low:g}, {high:g}]{' ' + unit if unit else ''}, "
+                                             f"got '{text}'")
+        return value
+
+    return parse
+
+
+#: ``--plate`` numbers: name, the device-file type whose bounds apply, unit.
+_PLATE_NUMBERS = (("thickness", ThicknessMm, "mm"), ("density", DensityGCm3, "g/cm3"),
+                  ("Young's modulus", YoungsModulusGpa, "GPa"))
+
+
 def _parse_plate(text: str) -> Layer:
-    """A ``--plate`` value as a Layer; ConfigError showing the expected form if malformed."""
-    problem = f"--plate {text!r}: expected {_PLATE_FORM} with three numbers > 0, e.g. MyGlass:0.5:2.5:70"
+    """A ``--plate`` value as a Layer; ConfigError showing the expected form if malformed, or naming a
+    number outside the range a device file accepts for it."""
+    problem = f"--plate {text!r}: expected {_PLATE_FORM} with three numbers, e.g. MyGlass:0.5:2.5:70"
     fields = text.split(":")
     if len(fields) != 4 or not fields[0].strip():
         raise ConfigError(problem)
@@ -75,8 +110,10 @@ def _parse_plate(text: str) -> Layer:
         numbers = [float(field) for field in fields[1:]]
     except ValueError:
         raise ConfigError(problem) from None
-    if not all(math.isfinite(x) and x > 0 for x in numbers):
-        raise ConfigError(problem)
+    for number, (name, alias, unit) in zip(numbers, _PLATE_NUMBERS):
+        low, high = _bounds(alias)
+        if not low <= number <= high:
+            raise ConfigError(f"--plate {text!r}: {name} must be in [{low:g}, {high:g}] {unit}, got {number:g}")
     return Layer(fields[0].strip(), "user", *numbers)
 
 

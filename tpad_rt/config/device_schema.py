@@ -30,6 +30,8 @@ ThicknessMm = Annotated[float, Strict(), Ge(0.01), Le(100)]
 DensityGCm3 = Annotated[float, Strict(), Ge(0.1), Le(50)]
 YoungsModulusGpa = Annotated[float, Strict(), Ge(0.01), Le(2000)]
 PlateSideMm = Annotated[float, Strict(), Ge(1), Le(1000)]
+#: m of the plate's m x n mode (nodal lines along its length).
+ModeM = Annotated[int, Strict(), Ge(1), Le(1000)]
 Volts = Annotated[float, Strict(), Ge(0.1), Le(10_000)]
 ForceN = Annotated[float, Strict(), Ge(0), Le(MAX_FORCE_N)]
 ForceTable = Annotated[list[ForceN], MinLen(1)]
@@ -48,7 +50,7 @@ class Plate(StrictModel):
     youngs_modulus_gpa: YoungsModulusGpa
     length_mm: PlateSideMm
     width_mm: PlateSideMm
-    mode: tuple[Annotated[int, Strict(), Ge(1), Le(1000)], Annotated[int, Strict(), Ge(0), Le(1000)]]
+    mode: tuple[ModeM, Annotated[int, Strict(), Ge(0), Le(1000)]]
 
 
 class Actuator(StrictModel):
