@@ -38,7 +38,7 @@ LIMIT_FS = DEVICE.max_voltage_v / DEVICE.volts_per_full_scale
 GOOD_X = st.floats(-130.0, 260.0)
 GOOD_Y = st.floats(-60.0, 120.0)
 GOOD_FORCE = st.one_of(st.none(), st.floats(0.0, 50.0))
-BAD_NUMBERS = st.sampled_from([math.nan, math.inf, -math.inf, 1e308, -1e308, "1", None, True])
+BAD_NUMBERS = st.sampled_from([math.nan, math.inf, -math.inf, 1e308, -1e308, 10**400, -(10**400), "1", None, True])
 #: A finite value out of range for each push argument (x, y, force, time).
 OUT_OF_RANGE = (260.5, -60.5, 50.5, 1e9)
 
