@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.errors import BackendError, ConfigError, printable
 from tpad_rt.files import check_writable_target, ensure_regular
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
 from tpad_rt.recording import Recording, read_recording
@@ -130,8 +130,9 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
         handles, _ = panel.get_legend_handles_labels()
         panel.legend(handles=handles + (shading if panel is friction else []),
                      loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    figure.suptitle(f"{meta['texture_description']}  ·  {meta['device_label']}  ·  "
-                    f"{meta.get('input_url', '')}", fontsize=11)
+    # printable: a control character (a NUL in a description) has no glyph, and matplotlib warns about it
+    figure.suptitle(printable(f"{meta['texture_description']}  ·  {meta['device_label']}  ·  "
+                              f"{meta.get('input_url', '')}"), fontsize=11)
     return figure
 
 

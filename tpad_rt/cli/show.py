@@ -27,7 +27,7 @@ import numpy as np
 from rich.console import Console
 
 from tpad_rt.device import Device
-from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.errors import BackendError, ConfigError, printable
 from tpad_rt.files import check_writable_target
 from tpad_rt.physics.friction import amplitude_for
 from tpad_rt.texture import CompiledTexture, load_compiled
@@ -179,9 +179,10 @@ def draw(maps: PlateMaps, texture: CompiledTexture, device: Device, finger: Fing
     from matplotlib import pyplot as plt
 
     figure, panels = plt.subplots(3, 1, figsize=(8.6, 11.0), layout="constrained", sharex=True)
-    figure.suptitle(texture.description, fontsize=12, fontweight="bold")
+    # printable: a control character (a NUL in a description) has no glyph, and matplotlib warns about it
+    figure.suptitle(printable(texture.description), fontsize=12, fontweight="bold")
     moving = f"towards {finger.direction_deg:g}°" if finger.speed_mm_s > 0 else "(still)"
-    figure.supxlabel(f"{source} ({texture.kind}) on {device.label}: finger {finger.speed_mm_s:g} mm/s {moving}, "
+    figure.supxlabel(f"{printable(source)} ({texture.kind}) on {printable(device.label)}: finger {finger.speed_mm_s:g} mm/s {moving}, "
                      f"{finger.force_n:g} N, t = {t_s:g} s", fontsize=9, color="0.3")
     extent = (0.0, device.plate.length_m * 1e3, device.plate.width_m * 1e3, 0.0)
     _friction_panel(figure, panels[0], maps, extent)
