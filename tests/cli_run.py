@@ -37,14 +37,19 @@ class Run:
 
 @functools.cache
 def warm_numba_cache() -> None:
-    """Import every subcommand once, so numba's on-disk cache holds the kernels compiled at import.
+    """Render and play a few milliseconds once, so numba's on-disk cache holds every kernel compiled.
 
-    With a cold cache (a kernel file just edited) the imports themselves compile for
-    about a minute and near 1 GB; a measurement of what a refusal allocates must not
-    include that.
+    With a cold cache (a fresh clone, a kernel file just edited) the first render compiles
+    for about a minute and near 1 GB; a measurement of what a refusal allocates must not
+    include that, should a case get that far.
     """
-    done = tpad_rt("render", "--help", timeout_s=600)
-    assert done.returncode == 0, done.stderr
+    with tempfile.TemporaryDirectory() as folder:
+        for args in (("render", "textures/grating.yaml", "--input", "scripted://still?duration_s=0.01",
+                      "--out", f"{folder}/warm.wav"),
+                     ("play", "textures/grating.yaml", "--input", "scripted://still?duration_s=0.05",
+                      "--output", "sim://", "--duration", "0.05")):
+            done = tpad_rt(*args, timeout_s=600)
+            assert done.returncode == 0, done.stderr
 
 
 def tpad_rt(*args: str, timeout_s: float = 300.0, env: dict[str, str] | None = None) -> Run:

@@ -21,9 +21,11 @@ AUDIO_FORM = "audio://[device name or index]?rate=192000&block=64&channel=1"
 
 
 @pytest.mark.parametrize(("url", "problem"), [
-    ("audio://?rate=fast", "option rate: must be a whole number >= 1, got 'fast'"),
+    ("audio://?rate=fast", "option rate: must be a whole number in [1, 768000], got 'fast'"),
+    ("audio://?rate=1000000000000", "option rate: must be a whole number in [1, 768000], got '1000000000000'"),
+    ("audio://?block=65537", "option block: must be a whole number in [1, 65536]"),
     ("audio://?blok=64", "unknown option 'blok'; did you mean 'block'?"),
-    ("audio://?channel=0", "option channel: must be a whole number >= 1"),
+    ("audio://?channel=0", "option channel: must be a whole number in [1, 1024]"),
 ])
 def test_bad_audio_url_shows_the_expected_form(url: str, problem: str) -> None:
     with pytest.raises(ConfigError) as caught:

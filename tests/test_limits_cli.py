@@ -145,6 +145,8 @@ def test_a_trajectory_with_too_many_rows_is_refused_within_bounded_memory(tmp_pa
     ["render", GRATING, "--input", "scripted://tap?count=1000000000", "--out", "x.npz"],
     ["play", GRATING, "--input", "scripted://tap?count=1000000000", "--output", "null://"],
     ["play", GRATING, "--input", "file:///dev/zero", "--output", "null://"],
+    ["play", "tests/bad_files/negative_period.yaml", "--input", "scripted://swipe", "--output", "null://"],
+    ["play", GRATING, "--input", "scripted://swipe", "--output", "nul://"],
 ])
 def test_a_refusal_compiles_nothing_even_with_a_cold_numba_cache(tmp_path: Path, command: list[str]) -> None:
     """An empty numba cache: a refusal must not pay for compiling the kernels (about 1 GB and a minute)."""

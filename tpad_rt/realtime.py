@@ -9,7 +9,7 @@ CallbackTable(arrays, texture, *, channels=1, channel=0, scratch_frames=4096, dr
     shared, not copied), two texture slots, the output scratch, the drive ring, the
     statistics (``.stats``) and the per-block records (``.blocks``)
     ``.user_data``: the address to pass as ``userData``; ``.set_texture(texture, t0_s, running)``;
-    ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.copy()``; ``.call(out, callback)``
+    ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.copy()``; ``.call(out, callback=None)``
 monotonic_ns() -> int
     the clock the callback stamps blocks with (CLOCK_MONOTONIC, ns)
 
@@ -169,12 +169,14 @@ class CallbackTable:
         twin.slot_t0_s[:] = self.slot_t0_s
         return twin
 
-    def call(self, out: np.ndarray, callback: Any = cb.render_callback) -> None:
-        """Run ``callback`` once from Python on ``out`` (float32, frames x channels), as PortAudio would.
+    def call(self, out: np.ndarray, callback: Any = None) -> None:
+        """Run ``callback`` (None: ``render_callback``) once from Python on ``out`` (float32, frames x
+        channels), as PortAudio would.
 
         Its time info says the samples play at once (DAC time = current time). The
         ctypes call releases the GIL while the callback runs.
         """
+        callback = cb.render_callback if callback is None else callback
         channels = int(self.table[cb.TAB_CHANNELS])
         if out.dtype != np.float32 or not out.flags.c_contiguous or out.size % channels:
             raise ValueError(f"out: must be C-contiguous float32 holding whole frames of {channels} channels")

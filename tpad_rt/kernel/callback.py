@@ -5,6 +5,8 @@ API map
 render_callback, silence_callback
     ``@cfunc``s of type ``PaStreamCallback``: ``.address`` goes to ``Pa_OpenStream``
     with ``userData`` = the address of a pointer table (int64 ``[TAB_SIZE]``, below).
+    Each is compiled (or loaded from numba's cache) on first use, not when this module is
+    imported: a command that refuses its arguments never pays for it.
     ``render_callback`` renders the drive with :func:`tpad_rt.kernel.render.render_block`;
     ``silence_callback`` writes zeros (the empty-callback baseline of the tests and
     benchmarks). Both keep the same statistics.
@@ -43,6 +45,8 @@ callback); a finger row, then ``finger_count`` (acquired once per callback into
 """
 
 from __future__ import annotations
+
+import functools
 
 import numba
 import numpy as np
@@ -199,8 +203,7 @@ def _finish(stats, row, entry_ns, frames, status_flags):  # type: ignore[no-unty
 _SIGNATURE = types.int32(types.voidptr, types.voidptr, types.uint64, types.voidptr, types.uint64, types.voidptr)
 
 
-@numba.cfunc(_SIGNATURE, nopython=True, cache=True, error_model="numpy")
-def silence_callback(input_buffer, output_buffer, frames, time_info, status_flags, user_data):  # type: ignore[no-untyped-def]
+def _silence(input_buffer, output_buffer, frames, time_info, status_flags, user_data):  # type: ignore[no-untyped-def]
     """Write zeros to every channel; keep the statistics (the empty-callback baseline)."""
     table = numba.carray(user_data, TAB_SIZE, _I8)
     stats = numba.carray(_pointer(table[TAB_STATS]), STAT_SIZE, _I8)
@@ -212,8 +215,7 @@ def silence_callback(input_buffer, output_buffer, frames, time_info, status_flag
     return PA_CONTINUE
 
 
-@numba.cfunc(_SIGNATURE, nopython=True, cache=True, error_model="numpy")
-def render_callback(input_buffer, output_buffer, frames, time_info, status_flags, user_data):  # type: ignore[no-untyped-def]
+def _render(input_buffer, output_buffer, frames, time_info, status_flags, user_data):  # type: ignore[no-untyped-def]
     """Render ``frames`` drive samples into the table's channel (zeros elsewhere); keep the statistics."""
     table = numba.carray(user_data, TAB_SIZE, _I8)
     state = numba.carray(_pointer(table[TAB_STATE]), table[TAB_STATE_SIZE], _F8)
@@ -252,3 +254,20 @@ def render_callback(input_buffer, output_buffer, frames, time_info, status_flags
         done += count
     _finish(stats, row, entry_ns, frames, status_flags)
     return PA_CONTINUE
+
+
+#: The callbacks' Python sources, by their public names.
+_SOURCES = {"render_callback": _render, "silence_callback": _silence}
+
+
+@functools.cache
+def _compiled(name: str) -> numba.core.ccallback.CFunc:
+    """The ``@cfunc`` ``name`` (a key of _SOURCES), compiled or loaded from numba's cache once."""
+    return numba.cfunc(_SIGNATURE, nopython=True, cache=True, error_model="numpy")(_SOURCES[name])
+
+
+def __getattr__(name: str) -> numba.core.ccallback.CFunc:
+    """``render_callback`` and ``silence_callback``, compiled on first use (module docstring)."""
+    if name in _SOURCES:
+        return _compiled(name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
