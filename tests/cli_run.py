@@ -1,13 +1,17 @@
 """Run ``tpad-rt`` in a fresh interpreter and measure it: exit status, output and peak memory.
 
-The peak resident memory is the child's own (``os.wait4`` on its pid), so an earlier
-child or the test process cannot hide or inflate it.
+The peak resident memory is the command's own. Linux counts a process's peak from the
+memory it was forked from, and Python's subprocess forks (vfork) from the test process,
+whose memory (over a GB late in a run) would then be every command's peak. So a small
+launcher interpreter forks the command and reports its ``os.wait4`` figure: the command's
+peak then starts from the launcher's few MB.
 """
 
 from __future__ import annotations
 
 import functools
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -52,23 +56,39 @@ def warm_numba_cache() -> None:
             assert done.returncode == 0, done.stderr
 
 
+#: Forks ``python -m tpad_rt ARGS`` from a small interpreter; writes the command's peak RSS (kB) to the file
+#: named by the first argument and exits with the command's status.
+_LAUNCHER = """
+import os, sys
+pid = os.fork()
+if pid == 0:
+    os.execv(sys.executable, [sys.executable, "-m", "tpad_rt", *sys.argv[2:]])
+_, status, usage = os.wait4(pid, 0)
+with open(sys.argv[1], "w") as peak:
+    peak.write(str(usage.ru_maxrss))
+sys.exit(os.waitstatus_to_exitcode(status))
+"""
+
+
 def tpad_rt(*args: str, timeout_s: float = 300.0, env: dict[str, str] | None = None) -> Run:
     """Run ``python -m tpad_rt ARGS`` (stdin closed, no terminal) from the repository root, with
     ``env`` added to the environment.
 
-    ``timeout_s`` is only a safety net (long enough for a cold numba cache): a process
-    still running then is killed, and its return code is -9.
+    ``timeout_s`` is only a safety net (long enough for a cold numba cache): a command
+    still running then is killed (with its launcher), and its return code is -9.
     """
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        process = subprocess.Popen([sys.executable, "-m", "tpad_rt", *args], stdin=subprocess.DEVNULL,
-                                   stdout=out, stderr=err, cwd=REPO, env={**os.environ, **(env or {})})
-        timer = threading.Timer(timeout_s, process.kill)
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err, \
+            tempfile.NamedTemporaryFile("r") as peak:
+        process = subprocess.Popen([sys.executable, "-c", _LAUNCHER, peak.name, *args], stdin=subprocess.DEVNULL,
+                                   stdout=out, stderr=err, cwd=REPO, env={**os.environ, **(env or {})},
+                                   start_new_session=True)
+        timer = threading.Timer(timeout_s, lambda: os.killpg(process.pid, signal.SIGKILL))
         timer.start()
         try:
-            _, status, usage = os.wait4(process.pid, 0)
+            process.wait()
         finally:
             timer.cancel()
-        process.returncode = os.waitstatus_to_exitcode(status)
         out.seek(0)
         err.seek(0)
-        return Run(process.returncode, out.read().decode(), err.read().decode(), usage.ru_maxrss / 1024)
+        peak_kb = float(peak.read() or "nan")
+        return Run(process.returncode, out.read().decode(), err.read().decode(), peak_kb / 1024)
