@@ -81,13 +81,15 @@ def assert_recovers(p: Pipeline, before_v: float) -> None:
     assert not int(rows[-1, 1]) & layout.FLAG_FAULT
 
 
-@pytest.mark.parametrize("column", [layout.FINGER_X_MM, layout.FINGER_Y_MM, layout.FINGER_FORCE_N])
-@pytest.mark.parametrize("value", BAD_VALUES + (-1.0,))
+#: (column, value) of a bad finger row: every bad value in each column, and a negative force (-1 mm is a
+#: valid position; a NaN force in the ring means 'unknown', the default force applies).
+BAD_FINGER_VALUES = [(column, value) for column in (layout.FINGER_X_MM, layout.FINGER_Y_MM, layout.FINGER_FORCE_N)
+                     for value in BAD_VALUES if not (column == layout.FINGER_FORCE_N and math.isnan(value))]
+BAD_FINGER_VALUES.append((layout.FINGER_FORCE_N, -1.0))
+
+
+@pytest.mark.parametrize(("column", "value"), BAD_FINGER_VALUES)
 def test_a_bad_finger_sample_ramps_the_drive_down_is_counted_and_the_run_recovers(column: int, value: float) -> None:
-    if column != layout.FINGER_FORCE_N and value == -1.0:
-        pytest.skip("-1 mm is a valid position")
-    if column == layout.FINGER_FORCE_N and math.isnan(value):
-        pytest.skip("a NaN force in the ring means 'unknown' (the default force applies)")
     p = pipeline()
     samples, rows = render(p, SETTLE_BLOCKS)
     before_v = rows[-4:, 0].max()
@@ -153,11 +155,11 @@ def test_tables_and_power_ring_overwritten_are_rebuilt() -> None:
     assert_recovers(p, rows[-4:, 0].max())
 
 
-@pytest.mark.parametrize("row", [layout.DEV_AMP_M_PER_V, layout.DEV_POWER_W_PER_V2, layout.DEV_TAU_S])
-@pytest.mark.parametrize("value", (math.nan, math.inf, -1.0, 0.0))
+@pytest.mark.parametrize(("row", "value"), [
+    (row, value) for row in (layout.DEV_AMP_M_PER_V, layout.DEV_POWER_W_PER_V2, layout.DEV_TAU_S)
+    for value in (math.nan, math.inf, -1.0, 0.0) if not (row == layout.DEV_TAU_S and value == 0.0)  # tau 0: valid
+])
 def test_a_bad_device_table_is_a_device_fault(row: int, value: float) -> None:
-    if row == layout.DEV_TAU_S and value == 0.0:
-        pytest.skip("tau = 0 is valid (no pre-emphasis boost)")
     p = pipeline()
     _, rows = render(p, SETTLE_BLOCKS)
     kept = p.arrays.dev[row].copy()
