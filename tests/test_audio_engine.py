@@ -2,7 +2,7 @@
 
 Every timing assertion is relative to something measured in the same test: callbacks
 against the stream's own clock, underflows against an empty-callback baseline
-(ARCHITECTURE.md sections 5 and 6). The output is captured by a second JACK client
+(docs/testing.md). The output is captured by a second JACK client
 (tests/jack_capture.py) in its own process.
 """
 

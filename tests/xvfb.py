@@ -1,4 +1,4 @@
-"""An Xvfb X server for tests (ARCHITECTURE.md section 5), started and stopped by PID.
+"""An Xvfb X server for tests (docs/testing.md), started and stopped by PID.
 
 Import the fixtures into a test module: ``from xvfb import display, xvfb_server``.
 ``xvfb_server`` (one per module) starts ``Xvfb :N -screen 0 1280x800x24 -nolisten tcp -noreset``

@@ -1,7 +1,7 @@
 """A JACK server on the dummy backend, started and stopped by PID.
 
 The real-time stand-in for a sound card that the tests and the latency benchmark use
-(ARCHITECTURE.md section 5 says why each flag): ``dummy_server(rate_hz,
+(docs/testing.md says why each flag): ``dummy_server(rate_hz,
 period_frames)`` starts ``jackd -n NAME -p 16 -d dummy -r RATE -p PERIOD``, waits for
 it with ``jack_wait -s NAME -w`` and yields a :class:`RunningServer` (point clients at
 it with ``JACK_DEFAULT_SERVER=NAME``); on exit it sends SIGTERM to the PID and waits.

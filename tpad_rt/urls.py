@@ -1,6 +1,6 @@
 """Backend URLs, ``scheme://target?option=value&...``, parsed and checked against forms.
 
-Inputs and outputs are chosen by URL (ARCHITECTURE.md section 3). A backend module
+Inputs and outputs are chosen by URL (README "Inputs and outputs"). A backend module
 describes each URL it accepts with a :class:`UrlForm`: the scheme, the target (a fixed
 word such as ``swipe``, or a placeholder such as ``/path/out.wav``) and its options,
 each an :class:`Option` with a default and a value parser. A form reads a parsed

@@ -31,7 +31,7 @@ or a count next to a baseline measured in the same run:
    to ``python -c "import tpad_rt"``.
 
 bench/latency/README.md says what each figure means. Nothing here is a pass/fail test
-(ARCHITECTURE.md section 6); the Markdown says which of issue 4's targets were met.
+(docs/testing.md); the Markdown says which of issue 4's targets were met.
 """
 
 from __future__ import annotations
