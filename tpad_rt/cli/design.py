@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from collections.abc import Callable
 from typing import Any, get_args
 
 from annotated_types import Ge, Le
@@ -21,6 +20,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
+from tpad_rt.cli.arguments import number, whole
 from tpad_rt.config.device_schema import DensityGCm3, ModeM, PlateSideMm, ThicknessMm, YoungsModulusGpa
 from tpad_rt.errors import ConfigError
 from tpad_rt.physics import plate
@@ -63,9 +63,11 @@ def add_parser(subparsers: Any) -> None:
         metavar=_PLATE_FORM,
         help="add a plate (repeatable), e.g. MyGlass:0.5:2.5:70",
     )
-    parser.add_argument("--length-mm", type=_in_range(float, PlateSideMm, "mm"), default=130.0,
+    (shortest_mm, longest_mm), (lowest_m, highest_m) = _bounds(PlateSideMm), _bounds(ModeM)
+    parser.add_argument("--length-mm", type=number(shortest_mm, True, longest_mm, "mm"), default=130.0,
                         help="plate length (default 130)")
-    parser.add_argument("--mode", type=_in_range(int, ModeM, ""), default=20, help="m of the m x 0 mode (default 20)")
+    parser.add_argument("--mode", type=whole(int(highest_m), "m of a device file's mode", int(lowest_m)), default=20,
+                        help="m of the m x 0 mode (default 20)")
     parser.add_argument("--reference", default="SLG_0.56", help="plate the power is relative to (default SLG_0.56)")
     parser.set_defaults(func=run)
 
@@ -75,23 +77,6 @@ def _bounds(alias: Any) -> tuple[float, float]:
     metadata = get_args(alias)[1:]
     return (next(item.ge for item in metadata if isinstance(item, Ge)),
             next(item.le for item in metadata if isinstance(item, Le)))
-
-
-def _in_range(kind: type, alias: Any, unit: str) -> Callable[[str], Any]:
-    """An argparse type: a ``kind`` (float or int) within the bounds the device files give ``alias``."""
-    low, high = _bounds(alias)
-
-    def parse(text: str) -> Any:
-        try:
-            value = kind(text)
-        except ValueError:
-            value = math.nan
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"must be a number in [{low:g}, {high:g}]{' ' + unit if unit else ''}, "
-                                             f"got '{text}'")
-        return value
-
-    return parse
 
 
 #: ``--plate`` numbers: name, the device-file type whose bounds apply, unit.

@@ -40,7 +40,8 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from tpad_rt.cli.render import _number, add_session_arguments
+from tpad_rt.cli.arguments import number
+from tpad_rt.cli.render import add_session_arguments
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
@@ -92,7 +93,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="also write a recording (the format of render); it keeps at most "
                         f"{MAX_RECORDING_SAMPLES:,} drive samples ({MAX_RECORDING_SAMPLES // 192000} s at 192 kHz), "
                         "a longer play ends with an error")
-    parser.add_argument("--stall-timeout", metavar="S", type=_number(0, False, MAX_STALL_TIMEOUT_S, "s"), default=0.5,
+    parser.add_argument("--stall-timeout", metavar="S", type=number(0, False, MAX_STALL_TIMEOUT_S, "s"), default=0.5,
                         help="an audio stream without a callback for S seconds has stalled (a hung device or a "
                         "stopped JACK server): play ends with an error (default 0.5)")
     parser.set_defaults(func=run)

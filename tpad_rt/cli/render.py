@@ -32,6 +32,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
 
 from tpad_rt import __version__
+from tpad_rt.cli.arguments import number, whole
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.files import check_writable_target
@@ -52,38 +53,6 @@ DEFAULT_OUTPUT = "sim://"
 MAX_POWER_W = 1000.0
 
 
-def _whole(high: int, what: str) -> Any:
-    """An argparse type: a whole number in [1, ``high``] (``what`` says what the bound is)."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            value = 0
-        if not 1 <= value <= high:
-            raise argparse.ArgumentTypeError(f"must be a whole number in [1, {high}] ({what}), got '{text}'")
-        return value
-
-    return parse
-
-
-def _number(low: float, low_closed: bool, high: float = math.inf, what: str = "") -> Any:
-    """An argparse type: a finite number above ``low`` (or equal, when ``low_closed``), at most ``high``."""
-    expected = f"{'>=' if low_closed else '>'} {low:g}"
-    if high < math.inf:
-        expected = f"in {'[' if low_closed else '('}{low:g}, {high:g}]" + (f" ({what})" if what else "")
-
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
-        if not (math.isfinite(value) and (value >= low if low_closed else value > low) and value <= high):
-            raise argparse.ArgumentTypeError(f"must be a number {expected}, got '{text}'")
-        return value
-
-    return parse
-
-
 def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str | None,
                           max_duration_s: float = MAX_RENDER_S) -> None:
     """The arguments ``render`` and ``play`` share (``--input`` required when ``input_default`` is None).
@@ -98,18 +67,18 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
                         + (f" (default {input_default})" if input_default else ""))
     parser.add_argument("--output", metavar="URL", default=DEFAULT_OUTPUT,
                         help=f"output: sim://, wav:///path/out.wav or null:// (default {DEFAULT_OUTPUT})")
-    parser.add_argument("--rate", metavar="HZ", type=_whole(MAX_RATE_HZ, "Hz, the highest rate tpad-rt runs at"),
+    parser.add_argument("--rate", metavar="HZ", type=whole(MAX_RATE_HZ, "Hz, the highest rate tpad-rt runs at"),
                         default=192000, help=f"sample rate, at most {MAX_RATE_HZ} Hz (default 192000)")
-    parser.add_argument("--block", metavar="N", type=_whole(MAX_BLOCK_FRAMES, "frames"), default=64,
+    parser.add_argument("--block", metavar="N", type=whole(MAX_BLOCK_FRAMES, "frames"), default=64,
                         help=f"samples per block, 1 to {MAX_BLOCK_FRAMES} (default 64)")
-    parser.add_argument("--duration", metavar="S", type=_number(0, False, max_duration_s, "s"),
+    parser.add_argument("--duration", metavar="S", type=number(0, False, max_duration_s, "s"),
                         help=f"seconds of input, at most {max_duration_s:g} (default: the input's own duration)")
-    parser.add_argument("--power-budget", metavar="W", type=_number(0, False, MAX_POWER_W, "W"),
+    parser.add_argument("--power-budget", metavar="W", type=number(0, False, MAX_POWER_W, "W"),
                         help=f"instantaneous power cap, at most {MAX_POWER_W:g} W "
                         "(default: the device's power_budget_w)")
-    parser.add_argument("--power-avg", metavar="W", type=_number(0, False, MAX_POWER_W, "W"),
+    parser.add_argument("--power-avg", metavar="W", type=number(0, False, MAX_POWER_W, "W"),
                         help=f"average power budget over the window, at most {MAX_POWER_W:g} W (default: the cap)")
-    parser.add_argument("--force", metavar="N", type=_number(0, True, MAX_FORCE_N, "N"),
+    parser.add_argument("--force", metavar="N", type=number(0, True, MAX_FORCE_N, "N"),
                         help=f"contact force (N, at most {MAX_FORCE_N:g}) for every finger sample, overriding the "
                         "input's")
 
