@@ -165,7 +165,6 @@ class Renderer:
                         "energy_w": 0.0, "peak_w": 0.0}
         self._push_ns = np.zeros(options.finger_ring, dtype=np.int64)
         self._producer = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
-        self._last_t_s = -math.inf
         self._output_latency_s = math.nan
         self._audio_device: audio.AudioDevice | None = None
         self._record_path: Path | None = None
@@ -514,13 +513,12 @@ class Renderer:
                 t_s = min(max(self.now_s(), stream_s - FINGER_TIME_WINDOW_S), stream_s + FINGER_TIME_WINDOW_S)
             else:
                 t_s = self._pipeline.check_time(t, "t")
-            t_s = max(t_s, self._last_t_s)
+            t_s = max(t_s, self._pipeline.last_time_s)
             x_mm, y_mm = self._pipeline.last_position_mm() if position_mm is None else position_mm
             pushed_ns = monotonic_ns()
             index = int(self._pipeline.arrays.finger_count[0])
             self._pipeline.push_finger(t_s, x_mm, y_mm, force_n, down)
             self._push_ns[index % len(self._push_ns)] = pushed_ns
-            self._last_t_s = t_s
 
     # --- measurements --------------------------------------------------------------
 

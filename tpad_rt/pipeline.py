@@ -10,7 +10,7 @@ RenderOptions(power_budget_w=None, power_avg_w=None, power_window_s=1.0, control
 Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
     ``.fs_hz``, ``.sample_index``, ``.time_s``, ``.device``, ``.texture``, ``.options``, ``.running``
     ``.push_finger(t_s, x_mm, y_mm, force_n=None, down=True)``, ``.lift(t_s)``: validated (SampleError)
-    ``.stream_time_s``, ``.position_range_mm``, ``.check_time(t_s, name)``, ``.faults() -> dict``
+    ``.stream_time_s``, ``.last_time_s``, ``.position_range_mm``, ``.check_time(t_s, name)``, ``.faults() -> dict``
     ``.set_texture(texture, t_s=None)``, ``.start()``, ``.stop()``
     ``.render(out)``: the next ``len(out)`` float32 samples (1.0 = ``volts_per_full_scale``)
     ``.drain_telemetry() -> dict[str, np.ndarray]``: rows since the last drain, keyed by TEL_NAMES
@@ -292,7 +292,7 @@ class Pipeline:
         self.sample_index = 0
         self._drained = 0
         self._producer = threading.Lock()  # push_finger may be called from several threads
-        self._last_t_s = -math.inf
+        self._last_t_s = -math.inf  # the newest sample's time (s): finger times never decrease
         self.position_range_mm = position_range_mm(device.plate.length_m * 1e3, device.plate.width_m * 1e3)
         dev, start_n, step_n = device_tables(device)
         window_steps = max(1, round(options.power_window_s * fs_hz / options.control_interval))
@@ -422,6 +422,11 @@ class Pipeline:
         time_s = self.check_time(t_s)
         with self._producer:  # the position and the row under one lock: no other producer in between
             self._append((time_s, *self.last_position_mm(), math.nan, 0.0))
+
+    @property
+    def last_time_s(self) -> float:
+        """Stream time (s) of the newest finger sample pushed (``-inf`` before the first)."""
+        return self._last_t_s
 
     def _append(self, row: tuple[float, float, float, float, float]) -> None:
         """Write a checked ``row`` into the ring, then bump the count (release store); the producer lock held.

@@ -75,8 +75,8 @@ def add_parser(subparsers: Any) -> None:
 def _bounds(alias: Any) -> tuple[float, float]:
     """``(low, high)`` of a device-file number type (``Annotated[float, Ge(low), Le(high)]``)."""
     metadata = get_args(alias)[1:]
-    return (next(item.ge for item in metadata if isinstance(item, Ge)),
-            next(item.le for item in metadata if isinstance(item, Le)))
+    return (float(next(item.ge for item in metadata if isinstance(item, Ge))),
+            float(next(item.le for item in metadata if isinstance(item, Le))))
 
 
 #: ``--plate`` numbers: name, the device-file type whose bounds apply, unit.
