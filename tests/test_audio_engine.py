@@ -43,9 +43,10 @@ PYTHON_CALLBACK = Path(__file__).resolve().parent / "python_callback.py"
 DRIVE_PORT = "PortAudio:out_"
 #: Seconds each timed stream runs.
 RUN_S = 1.5
-#: Underflows a native callback may show beyond the empty-callback baseline of the same test
-#: (the dummy driver logs a few xruns per 5 s by itself).
-UNDERFLOW_MARGIN = 5
+#: Underflows a native callback may show beyond the empty-callback baseline of the same test:
+#: the dummy driver logs a few xruns per 5 s by itself, in bursts from the machine's other
+#: work (a full CI run saw 7 against a baseline of 1 once); a starved callback shows hundreds.
+UNDERFLOW_MARGIN = 10
 
 
 @pytest.fixture(scope="module")
@@ -194,7 +195,7 @@ def test_gil_load_does_not_starve_the_native_callback(jack: str) -> None:
     assert stats["callbacks_in_run"] == pytest.approx(expected, rel=0.03)
     assert stats["underflows"] <= baseline[cb.STAT_UNDERFLOWS] + UNDERFLOW_MARGIN
     collapsed = (python_callbacks < 0.5 * python_expected
-                 or python_underflows > baseline[cb.STAT_UNDERFLOWS] + 10 * UNDERFLOW_MARGIN)
+                 or python_underflows > baseline[cb.STAT_UNDERFLOWS] + 5 * UNDERFLOW_MARGIN)
     assert collapsed, (python_callbacks, python_expected, python_underflows)
 
 
