@@ -91,6 +91,7 @@ class Scenario:
     options: RenderOptions = field(default_factory=RenderOptions)
     run: Sequence[tuple[int, bool]] = ((0, True),)
     fs_hz: float = FS_HZ
+    envelope_output: bool = False
 
     def __post_init__(self) -> None:
         self.options = replace(self.options, finger_ring=max(self.options.finger_ring, len(self.fingers) + 2))
@@ -125,7 +126,8 @@ def render_kernel(scenario: Scenario, blocks: Sequence[int] = (64,), push_ahead_
     the block that ends ``push_ahead_s`` after it.
     """
     compiled = {id(model): compile_texture(model) for _, model, _ in scenario.textures}
-    pipeline = Pipeline(device(), compiled[id(scenario.textures[0][1])], fs_hz=scenario.fs_hz, options=scenario.options)
+    pipeline = Pipeline(device(), compiled[id(scenario.textures[0][1])], fs_hz=scenario.fs_hz, options=scenario.options,
+                        envelope_output=scenario.envelope_output)
     events: dict[int, list[Any]] = {}
     for first, model, t0_s in scenario.textures[1:]:
         events.setdefault(first, []).append(lambda m=model, t=t0_s: pipeline.set_texture(compiled[id(m)], t))
@@ -158,7 +160,8 @@ def assert_samples_match(kernel: np.ndarray, reference: np.ndarray) -> None:
     assert abs(kernel[worst] - reference[worst]) <= 1e-6 * scale, f"sample {worst}: {kernel[worst]} vs {reference[worst]}"
 
 
-def assert_steps_match(telemetry: dict[str, np.ndarray], steps: dict[str, np.ndarray], interval: int = 32) -> None:
+def assert_steps_match(telemetry: dict[str, np.ndarray], steps: dict[str, np.ndarray], interval: int = 32,
+                       fs_hz: float = FS_HZ) -> None:
     """Telemetry of a render in blocks of one control step == the reference's steps (flags exactly).
 
     Rows of blocks starting mid-step (cut by an event) are left out. Amplitude (after the
@@ -167,7 +170,7 @@ def assert_steps_match(telemetry: dict[str, np.ndarray], steps: dict[str, np.nda
     watts only when every block is one whole step.
     """
     whole_steps = len(telemetry["t"]) == len(steps["t"])
-    at_steps = np.round(telemetry["t"] * FS_HZ).astype(np.int64) % interval == 0
+    at_steps = np.round(telemetry["t"] * fs_hz).astype(np.int64) % interval == 0
     telemetry = {name: values[at_steps] for name, values in telemetry.items()}
     np.testing.assert_array_equal(telemetry["saturated"], steps["flags"])
     for name in ("t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu"):
@@ -206,6 +209,22 @@ def test_kernel_matches_the_reference(case: str) -> None:
     assert_samples_match(kernel.samples, reference.samples)
     assert_steps_match(kernel.telemetry, reference.steps)
     assert np.abs(reference.samples).max() > 0.05, "the case must drive the plate"
+
+
+@pytest.mark.parametrize("case", ["grating", "swap_mid_step"])
+def test_envelope_output_is_the_reference_envelope_at_an_amplifier_rate(case: str) -> None:
+    """With CFG_OUTPUT_ENVELOPE (a serial amplifier makes the carrier) the kernel's samples are the envelope the
+    DAC path modulates: the same control stage, limits and telemetry, at an envelope rate below the carrier."""
+    fs_hz = 16000
+    n = int(DURATION_S * fs_hz)
+    scenario = Scenario(wander(DURATION_S, seed=1), n, CASES[case](n), RenderOptions(control_interval=3),
+                        fs_hz=fs_hz, envelope_output=True)
+    kernel = render_kernel(scenario, blocks=(3,))
+    reference = scenario.reference()
+    volts_per_fs = device().volts_per_full_scale
+    assert_samples_match(kernel.samples, (reference.envelope / volts_per_fs).astype(np.float32))
+    assert_steps_match(kernel.telemetry, reference.steps, 3, fs_hz)
+    assert kernel.samples.min() >= 0.0 and kernel.samples.max() > 0.05, "the case must drive the plate"
 
 
 def test_kernel_matches_the_reference_with_stop_start_limits_and_options() -> None:

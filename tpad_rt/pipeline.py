@@ -253,13 +253,14 @@ def device_tables(device: Device) -> tuple[np.ndarray, float, float]:
     return dev, start_n, step_n
 
 
-def _check_rate(device: Device, fs_hz: float) -> None:
-    """ConfigError unless ``fs_hz`` is a finite rate (Hz) of at least ``resonance_hz / 0.45`` and at most MAX_RATE_HZ."""
+def _check_rate(device: Device, fs_hz: float, envelope_output: bool) -> None:
+    """ConfigError unless ``fs_hz`` is a finite rate (Hz) in (0, MAX_RATE_HZ], and (for carrier samples,
+    not ``envelope_output``) at least ``resonance_hz / 0.45``."""
     problem = _number_problem(fs_hz, f"in (0, {MAX_RATE_HZ}]", lambda v: 0 < v <= MAX_RATE_HZ)
     if problem:
         raise ConfigError(f"fs_hz: {problem}")
     needed_hz = device.resonance_hz / MAX_CARRIER_FRACTION
-    if fs_hz < needed_hz:
+    if fs_hz < needed_hz and not envelope_output:
         raise ConfigError(
             f"fs_hz: device {device.label}'s carrier ({device.resonance_hz:g} Hz) needs a sample rate of at "
             f"least {math.ceil(needed_hz)} Hz (carrier <= {MAX_CARRIER_FRACTION} x fs), got {fs_hz:g}"
@@ -274,8 +275,11 @@ def _writable(array: np.ndarray, dtype: type) -> np.ndarray:
 class Pipeline:
     """One stream of drive samples for ``device`` rendering ``texture`` at ``fs_hz``; owns every array.
 
-    Created stopped (silent): :meth:`start` ramps the drive up once a finger slides.
-    Raises ConfigError for a sample rate below ``resonance_hz / 0.45`` or not > 0.
+    The samples are the carrier (DAC samples), or with ``envelope_output`` its envelope,
+    for an amplifier that makes the carrier itself (:meth:`set_drive_scale` then sets its
+    full scale, clamp and achieved carrier). Created stopped (silent): :meth:`start` ramps
+    the drive up once a finger slides. Raises ConfigError for a sample rate not in
+    ``(0, MAX_RATE_HZ]``, or (carrier samples) below ``resonance_hz / 0.45``.
     """
 
     def __init__(
@@ -284,8 +288,11 @@ class Pipeline:
         texture: CompiledTexture,
         fs_hz: float = 192000,
         options: RenderOptions = RenderOptions(),
+        *,
+        envelope_output: bool = False,
     ):
-        _check_rate(device, fs_hz)
+        _check_rate(device, fs_hz, envelope_output)
+        self.envelope_output = envelope_output
         self.device = device
         self.options = options
         self.fs_hz = fs_hz
@@ -341,6 +348,7 @@ class Pipeline:
             layout.CFG_DEFAULT_FORCE_N: options.default_force_n,
             layout.CFG_FORCE_GRID_START_N: grid_start_n,
             layout.CFG_FORCE_GRID_STEP_N: grid_step_n,
+            layout.CFG_OUTPUT_ENVELOPE: 1.0 if self.envelope_output else 0.0,
         }.items():
             cfg[index] = value
         return cfg
@@ -364,6 +372,24 @@ class Pipeline:
     def running(self) -> bool:
         """True between :meth:`start` and :meth:`stop`."""
         return self._arrays.cfg[layout.CFG_RUN] != 0.0
+
+    def set_drive_scale(self, volts_per_full_scale: float, max_voltage_v: float, carrier_hz: float) -> None:
+        """For an amplifier found at start: sample 1.0 is ``volts_per_full_scale`` (V), the drive is capped at the
+        lower of ``max_voltage_v`` and the device's maximum, and the carrier made is ``carrier_hz`` (Hz).
+
+        Raises ConfigError for a value that is not a finite number > 0, RuntimeError while running.
+        """
+        if self.running:
+            raise RuntimeError("Pipeline.set_drive_scale: stop the pipeline first")
+        cfg = self._arrays.cfg
+        values = {"volts_per_full_scale": volts_per_full_scale, "max_voltage_v": max_voltage_v, "carrier_hz": carrier_hz}
+        for name, value in values.items():
+            problem = _number_problem(value, "> 0", lambda v: v > 0)
+            if problem:
+                raise ConfigError(f"{name}: {problem}")
+        cfg[layout.CFG_VOLTS_PER_FS] = volts_per_full_scale
+        cfg[layout.CFG_MAX_VOLTAGE_V] = min(max_voltage_v, self.device.max_voltage_v)
+        cfg[layout.CFG_CARRIER_HZ] = carrier_hz
 
     def start(self) -> None:
         """Let the drive ramp up (from the next control step) while a finger slides."""

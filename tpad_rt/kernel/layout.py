@@ -30,7 +30,8 @@ CFG_FORCE_GRID_START_N = 20   # dev tables: force of column 0
 CFG_FORCE_GRID_STEP_N = 21    # dev tables: force step between columns
 CFG_RUN = 22                  # 1.0 while running, 0.0 to ramp down and stay silent
 CFG_TEXTURE_T0_S = 23         # stream time the current texture was set (temporal kinds)
-CFG_SIZE = 24
+CFG_OUTPUT_ENVELOPE = 24      # 1.0: samples are the envelope (for an amplifier that makes the carrier); 0.0: carrier
+CFG_SIZE = 25
 
 # --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
 DEV_AMP_M_PER_V = 0           # plate amplitude (m) per peak drive volt

@@ -1,11 +1,13 @@
-"""The render kernel: finger samples and a compiled texture in, carrier drive samples out.
+"""The render kernel: finger samples and a compiled texture in, drive samples out (carrier or envelope).
 
 API map
 -------
 render_block(out, start_index, cfg, dev, state, power_ring, finger, finger_count,
              prog, params, img, stack, telem, telem_count) -> None
-    fill ``out`` (float32 DAC samples, 1 = ``volts_per_full_scale``) with samples
-    ``start_index .. start_index + len(out) - 1`` of the stream; write one telemetry row
+    fill ``out`` (float32, 1 = ``volts_per_full_scale``) with samples ``start_index ..
+    start_index + len(out) - 1`` of the stream: DAC samples of the carrier, or with
+    ``cfg[CFG_OUTPUT_ENVELOPE]`` set, the envelope itself (for an amplifier that makes the
+    carrier); write one telemetry row
 carrier_phase_units(n, step_units) -> int
     the carrier phase of sample ``n`` in units of 2**-60 cycles (exact integer arithmetic)
 carrier_step_units(carrier_hz, fs_hz) -> int
@@ -54,6 +56,7 @@ from tpad_rt.kernel.layout import (
     CFG_MAX_VOLTAGE_V,
     CFG_MU0,
     CFG_MU_FLOOR,
+    CFG_OUTPUT_ENVELOPE,
     CFG_POISSON,
     CFG_POWER_AVG_W,
     CFG_POWER_CAP_W,
@@ -655,13 +658,18 @@ def _control_step(
 
 @_inline
 def _render_samples(
-    out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float
+    out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float, modulate: bool
 ) -> bool:
     """Render ``out[first:stop]``, all inside the open step, and store their envelope in ``state``.
 
-    Returns True if every sample's magnitude is within ``limit`` (full scale; NaN is not):
-    the output guard's first check (render_block then checks the envelope). No value is
-    carried from one sample to the next, so the loop vectorises.
+    The control stage (command, pre-emphasis, cap, gain ramp) makes each sample's
+    envelope ``e_j`` (volts); the modulation stage multiplies it by the carrier when
+    ``modulate`` (DAC samples), or passes it on (an amplifier that makes the carrier
+    itself), both scaled by ``out_per_v``. Every limit is applied in the control stage,
+    so both kinds of output obey the same ones. Returns True if every sample's magnitude
+    is within ``limit`` (full scale; NaN is not): the output guard's first check
+    (render_block then checks the envelope). No value is carried from one sample to the
+    next, so the loops vectorise.
     """
     command_v = state[STATE_COMMAND_V]
     cap_v = state[STATE_CAP_V]
@@ -670,25 +678,32 @@ def _render_samples(
     per_ramp_sample = 1.0 / ramp_samples
     ramp_direction = 1.0 if state[STATE_GATE] != 0.0 else -1.0
     ramp_start = state[STATE_RAMP_START] + ramp_direction
-    sin0 = state[STATE_CARRIER_SIN] * out_per_v
-    cos0 = state[STATE_CARRIER_COS] * out_per_v
     j0 = int(state[STATE_STEP_SAMPLES])
     count = stop - first
     decay = state[STATE_DECAY_TABLE + j0 : STATE_DECAY_TABLE + j0 + count]
-    cos_jw = state[STATE_COS_TABLE + j0 : STATE_COS_TABLE + j0 + count]
-    sin_jw = state[STATE_SIN_TABLE + j0 : STATE_SIN_TABLE + j0 + count]
     envelope = state[STATE_ENVELOPE + j0 : STATE_ENVELOPE + j0 + count]
     samples = out[first:stop]
-    for k in range(count):
-        drive_v = min(max(command_v + offset_v * decay[k], 0.0), cap_v)
-        ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
-        e_v = ramp * per_ramp_sample * drive_v
-        sample = e_v * (sin0 * cos_jw[k] + cos0 * sin_jw[k])
-        samples[k] = sample
-        envelope[k] = e_v
+    if modulate:
+        sin0 = state[STATE_CARRIER_SIN] * out_per_v
+        cos0 = state[STATE_CARRIER_COS] * out_per_v
+        cos_jw = state[STATE_COS_TABLE + j0 : STATE_COS_TABLE + j0 + count]
+        sin_jw = state[STATE_SIN_TABLE + j0 : STATE_SIN_TABLE + j0 + count]
+        for k in range(count):
+            drive_v = min(max(command_v + offset_v * decay[k], 0.0), cap_v)
+            ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
+            e_v = ramp * per_ramp_sample * drive_v
+            samples[k] = e_v * (sin0 * cos_jw[k] + cos0 * sin_jw[k])
+            envelope[k] = e_v
+    else:
+        for k in range(count):
+            drive_v = min(max(command_v + offset_v * decay[k], 0.0), cap_v)
+            ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
+            e_v = ramp * per_ramp_sample * drive_v
+            samples[k] = e_v * out_per_v
+            envelope[k] = e_v
     state[STATE_STEP_SAMPLES] = j0 + count
     within = 0
-    for k in range(count):  # a loop of its own: the one above vectorises as it did before the guard
+    for k in range(count):  # a loop of its own: the ones above vectorise as they did before the guard
         within += 1 if abs(samples[k]) <= limit else 0
     return within == count
 
@@ -780,6 +795,7 @@ def render_block(
     limit = max_v * out_per_v  # the output guard's bound, in full scale (<= 1)
     if not limit <= 1.0:
         limit = 1.0 if limit > 1.0 else 0.0
+    modulate = cfg[CFG_OUTPUT_ENVELOPE] == 0.0
     total = out.shape[0]
     peak_v = 0.0
     energy_w = 0.0
@@ -794,7 +810,7 @@ def render_block(
             _control_step(start_index + i, cfg, dev, state, power_ring, finger, finger_count, prog, params, img, stack)
         j0 = int(state[STATE_STEP_SAMPLES])
         stop = min(total, i + interval - phase, i + interval - j0)
-        inside = _render_samples(out, i, stop, state, out_per_v, limit)
+        inside = _render_samples(out, i, stop, state, out_per_v, limit, modulate)
         segment_peak_v, segment_v2 = _envelope_sums(state, j0, j0 + stop - i)
         if not (inside and segment_peak_v <= max_v and segment_v2 <= (stop - i) * max_v * max_v):  # NaN fails
             envelope = state[STATE_ENVELOPE + j0 : STATE_ENVELOPE + j0 + stop - i]
