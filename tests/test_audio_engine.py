@@ -25,6 +25,7 @@ from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError
 from tpad_rt.jackd import playback_latency_frames
 from tpad_rt.kernel import callback as cb
+from tpad_rt.kernel import table as tab
 from tpad_rt.outputs import audio
 from tpad_rt.pipeline import Pipeline
 from tpad_rt.realtime import CallbackTable
@@ -145,7 +146,7 @@ def test_renderer_keeps_the_stream_clock(jack: str) -> None:
     print(stats)
     assert stats["callbacks_in_run"] == pytest.approx(expected, rel=0.03)
     assert stats["frames"] == stats["callbacks"] * BLOCK
-    assert stats["underflows"] <= baseline[cb.STAT_UNDERFLOWS] + UNDERFLOW_MARGIN
+    assert stats["underflows"] <= baseline[tab.STAT_UNDERFLOWS] + UNDERFLOW_MARGIN
     assert stats["compute_us_p50"] > 0 and stats["compute_us_max"] >= stats["compute_us_p99"]
     assert 0 < stats["callback_load_p99"] < 1
     assert stats["blocks"] > 0 and stats["power_peak_w"] <= stats["power_budget_w"]
@@ -188,14 +189,14 @@ def test_gil_load_does_not_starve_the_native_callback(jack: str) -> None:
         swipe(renderer, 10.0, 50.0, RUN_S, 0.3)
         stats, expected = renderer_run(renderer, RUN_S)
     python_callbacks, python_underflows, python_expected = run_python_callback(RUN_S)
-    print(f"baseline underflows {baseline[cb.STAT_UNDERFLOWS]}; native under GIL load: "
+    print(f"baseline underflows {baseline[tab.STAT_UNDERFLOWS]}; native under GIL load: "
           f"{stats['callbacks_in_run']} of {expected:.0f} callbacks, {stats['underflows']} underflows; "
           f"Python callback under GIL load: {python_callbacks} of {python_expected:.0f}, "
           f"{python_underflows} underflows")
     assert stats["callbacks_in_run"] == pytest.approx(expected, rel=0.03)
-    assert stats["underflows"] <= baseline[cb.STAT_UNDERFLOWS] + UNDERFLOW_MARGIN
+    assert stats["underflows"] <= baseline[tab.STAT_UNDERFLOWS] + UNDERFLOW_MARGIN
     collapsed = (python_callbacks < 0.5 * python_expected
-                 or python_underflows > baseline[cb.STAT_UNDERFLOWS] + 5 * UNDERFLOW_MARGIN)
+                 or python_underflows > baseline[tab.STAT_UNDERFLOWS] + 5 * UNDERFLOW_MARGIN)
     assert collapsed, (python_callbacks, python_expected, python_underflows)
 
 

@@ -43,7 +43,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Iterator
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -56,11 +56,12 @@ from tpad_rt.errors import BackendError, ConfigError, TpadError
 from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
 from tpad_rt.kernel import callback as cb
+from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, FLAG_FAULT,
     FLAG_POWER, FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEL_NAMES, TEX_PROG_COLS,
 )
-from tpad_rt.outputs import Output, audio, open_output, output_forms
+from tpad_rt.outputs import Output, audio, open_output, output_forms, serial_amp
 from tpad_rt.pipeline import Pipeline, RenderOptions, shown
 from tpad_rt.realtime import CallbackTable, monotonic_ns
 from tpad_rt.recording import Recording, write_recording
@@ -81,6 +82,10 @@ STALL_MIN_BLOCKS = 4
 #: Stopping and closing an audio stream may take the stall limit plus this long (s; it takes tens of ms)
 #: before the stream counts as stalled and is abandoned.
 CLOSE_GRACE_S = 1.0
+
+#: The rate (Hz) at which RenderOptions' default control_interval gives the default control period; an
+#: envelope output (a serial amplifier, at its own rate) with the default interval keeps that period.
+DEFAULT_CONTROL_RATE_HZ = 192000
 
 #: Friction 1 everywhere: the drive stays silent (the texture before any is set).
 NO_TEXTURE = CompiledTexture(np.array([[OP_PUSH_ONE] + [0] * (TEX_PROG_COLS - 1)]), np.zeros(0), np.zeros(0), 1,
@@ -130,8 +135,15 @@ class Renderer:
                  block_frames: int = 64, options: RenderOptions = RenderOptions(), stall_timeout_s: float = 0.5):
         self.device = device if device is not None else Device.default()
         self.output_url = output
-        url = parse_url(output, "output", {**output_forms(), "audio": audio.FORMS})
+        url = parse_url(output, "output", {**output_forms(), "audio": audio.FORMS, "serial": serial_amp.FORMS})
         self._audio = audio.parse_audio_url(url) if url.scheme == "audio" else None
+        self._serial = serial_amp.parse_serial_url(url) if url.scheme == "serial" else None
+        if self._serial is not None:  # the amplifier makes the carrier: the kernel renders the envelope
+            rate_hz = self._serial.envelope_hz
+            block_frames = max(1, round(self._serial.frame_ms * 1e-3 * rate_hz))  # until INFO says more
+            if options.control_interval == RenderOptions.control_interval:  # the same control period
+                options = replace(options, control_interval=max(1, round(
+                    RenderOptions.control_interval * rate_hz / DEFAULT_CONTROL_RATE_HZ)))
         if self._audio is not None:
             rate_hz = self._audio.rate_hz if "rate" in self._audio.given else rate_hz
             block_frames = self._audio.block_frames if "block" in self._audio.given else block_frames
@@ -148,8 +160,11 @@ class Renderer:
         self.block_frames = block_frames
         self.options = options
         compiled, self._texture_path = _compiled(texture)
-        self._pipeline = Pipeline(self.device, compiled, fs_hz=rate_hz, options=options)
+        self._pipeline = Pipeline(self.device, compiled, fs_hz=rate_hz, options=options,
+                                  envelope_output=self._serial is not None)
         self._table: CallbackTable | None = None  # while running
+        self._link: serial_amp.AmpLink | None = None  # the serial amplifier of the current run
+        self._last_link: serial_amp.AmpLink | None = None  # the last run's, for stats() after stop()
         self._last_table: CallbackTable | None = None  # the last run's, for stats() after stop()
         self._stream: audio.AudioStream | None = None
         self._paced: threading.Thread | None = None
@@ -217,9 +232,19 @@ class Renderer:
         self._last_table = table
         warm = table.copy()
         warm.call(np.zeros(self.block_frames * channels, dtype=np.float32))
+        if self._serial is not None:  # the kernel's arrays are the table's: the amplifier's scale goes in them
+            serial_amp.warm_up(warm)
+            self._link = self._last_link = serial_amp.AmpLink.open(self._serial, carrier_hz=self.device.resonance_hz)
+            info = self._link.info
+            assert info is not None
+            self._pipeline.set_drive_scale(info.full_scale_v, info.max_v, self._link.carrier_hz)
+            self.block_frames = self._link.frame_samples
         self._pipeline.start()
         try:
-            if device is not None:
+            if self._link is not None:
+                self._table = table
+                self._link.start(table)
+            elif device is not None:
                 self._stream = audio.AudioStream(device, self.rate_hz, self.block_frames, channels,
                                                  cb.render_callback.address, table.user_data)
                 self._output_latency_s = self._stream.output_latency_s
@@ -234,6 +259,7 @@ class Renderer:
         except BaseException:
             self._pipeline.stop()
             self._close_stream()
+            self._close_link()
             self._table = None
             raise
         self._watcher = threading.Thread(target=self._guard, args=(self._watch,), name="tpad-rt watcher", daemon=True)
@@ -269,6 +295,7 @@ class Renderer:
             self._close_stream()
         except BackendError as error:
             self._error = self._error or error
+        self._error = self._error or self._close_link()
         self._drain(table)
         self._table = None
         if self._record_path is not None:
@@ -311,6 +338,16 @@ class Renderer:
             raise _stall_error(stream.device, f"stopping it took over {bound_s:.2f} s")
         if errors:
             raise errors[0]
+
+    def _close_link(self) -> BaseException | None:
+        """End the serial amplifier's stream (STOP with the run's ramp) and close its port; the error that
+        ended the stream, if one did."""
+        link, self._link = self._link, None
+        if link is None:
+            return None
+        failure = link.failure()
+        link.stop(self.options.ramp_ms)
+        return failure
 
     def _stall_limit_s(self) -> float:
         """Seconds without a callback after which the audio stream counts as stalled."""
@@ -367,7 +404,7 @@ class Renderer:
             while not self._halt.is_set():
                 due = int((time.monotonic() - started) * self.rate_hz / self.block_frames) + 1
                 if due - rendered > most_behind:  # stalled (e.g. compiling): skip ahead, count an underflow
-                    table.stats[cb.STAT_UNDERFLOWS] += 1
+                    table.stats[tab.STAT_UNDERFLOWS] += 1
                     rendered = due - 1
                 for _ in range(due - rendered):
                     table.call(block)
@@ -383,6 +420,9 @@ class Renderer:
         seen, seen_at, limit_s = -1, time.monotonic(), self._stall_limit_s()
         while not self._halt.wait(WATCH_PERIOD_S):
             self._drain(table)
+            link = self._link
+            if link is not None and (failure := link.failure()) is not None:
+                raise failure
             stream = self._stream
             if stream is None or self._halt.is_set():
                 continue
@@ -391,7 +431,7 @@ class Renderer:
             # The clock is read before the count, and after it on an advance: the gap measured never exceeds
             # the time without a callback, however late this thread runs (GIL, load).
             now = time.monotonic()
-            count = int(table.stats[cb.STAT_CALLBACKS])
+            count = int(table.stats[tab.STAT_CALLBACKS])
             if count != seen:
                 seen, seen_at = count, time.monotonic()
             elif now - seen_at >= limit_s:
@@ -545,14 +585,14 @@ class Renderer:
             counters = table.stats.copy()
             blocks = table.recent_blocks()
         else:
-            counters, blocks = np.zeros(cb.STAT_SIZE, dtype=np.int64), np.zeros((0, cb.BLOCK_COLS), dtype=np.int64)
-        result.update(callbacks=int(counters[cb.STAT_CALLBACKS]), frames=int(counters[cb.STAT_FRAMES]),
-                      underflows=int(counters[cb.STAT_UNDERFLOWS]), output_latency_s=self._output_latency_s)
-        compute_us = blocks[:, cb.BLOCK_COMPUTE_NS] * 1e-3
+            counters, blocks = np.zeros(tab.STAT_SIZE, dtype=np.int64), np.zeros((0, tab.BLOCK_COLS), dtype=np.int64)
+        result.update(callbacks=int(counters[tab.STAT_CALLBACKS]), frames=int(counters[tab.STAT_FRAMES]),
+                      underflows=int(counters[tab.STAT_UNDERFLOWS]), output_latency_s=self._output_latency_s)
+        compute_us = blocks[:, tab.BLOCK_COMPUTE_NS] * 1e-3
         for name, q in (("p50", 50), ("p99", 99), ("max", 100)):
             result[f"compute_us_{name}"] = float(np.percentile(compute_us, q)) if len(compute_us) else math.nan
         result["callback_load_p99"] = result["compute_us_p99"] * 1e-6 * self.rate_hz / self.block_frames
-        dac_delay_ms = blocks[:, cb.BLOCK_DAC_DELAY_NS] * 1e-6
+        dac_delay_ms = blocks[:, tab.BLOCK_DAC_DELAY_NS] * 1e-6
         result["dac_delay_ms"] = float(np.median(dac_delay_ms)) if len(dac_delay_ms) else math.nan
         latency_ms = self._latencies_ms(blocks)
         for name, q in (("p50", 50), ("p99", 99)):
@@ -566,17 +606,19 @@ class Renderer:
                       power_peak_w=totals["peak_w"], power_budget_w=float(cfg[CFG_POWER_CAP_W]),
                       power_avg_w=float(cfg[CFG_POWER_AVG_W]))
         result.update(self._pipeline.faults())
+        if self._last_link is not None:
+            result["amplifier"] = self._last_link.stats()
         return result
 
     def _latencies_ms(self, blocks: np.ndarray) -> np.ndarray:
         """Push-to-DAC latency (ms) of each finger sample first read by one of ``blocks`` (oldest first)."""
-        counts = blocks[:, cb.BLOCK_FINGER_COUNT]
+        counts = blocks[:, tab.BLOCK_FINGER_COUNT]
         if len(counts) < 2:
             return np.zeros(0)
         first_seen = np.flatnonzero(np.diff(counts) > 0) + 1
         new = counts[first_seen] - counts[first_seen - 1]
         samples = np.repeat(counts[first_seen], new) - (np.arange(new.sum()) - np.repeat(np.cumsum(new) - new, new)) - 1
-        out_ns = np.repeat(blocks[first_seen, cb.BLOCK_ENTRY_NS] + blocks[first_seen, cb.BLOCK_DAC_DELAY_NS], new)
+        out_ns = np.repeat(blocks[first_seen, tab.BLOCK_ENTRY_NS] + blocks[first_seen, tab.BLOCK_DAC_DELAY_NS], new)
         pushed = int(self._pipeline.arrays.finger_count[0])
         kept = samples >= pushed - len(self._push_ns)  # their push times are still in the ring
         return (out_ns[kept] - self._push_ns[samples[kept] % len(self._push_ns)]) * 1e-6

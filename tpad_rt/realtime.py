@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from tpad_rt.kernel import callback as cb
+from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.atomics import publish
 from tpad_rt.kernel.layout import CFG_FS_HZ, CFG_TEXTURE_T0_S, STATE_NEXT_INDEX
 from tpad_rt.pipeline import KernelArrays
@@ -65,34 +66,34 @@ class CallbackTable:
         self.arrays = arrays
         self.scratch = np.zeros(scratch_frames, dtype=np.float32)
         self.drive = np.zeros(drive_frames, dtype=np.float32)
-        self.stats = np.zeros(cb.STAT_SIZE, dtype=np.int64)
-        self.blocks = np.zeros((block_rows, cb.BLOCK_COLS), dtype=np.int64)
+        self.stats = np.zeros(tab.STAT_SIZE, dtype=np.int64)
+        self.blocks = np.zeros((block_rows, tab.BLOCK_COLS), dtype=np.int64)
         for written_by_callback in (self.scratch, self.drive, self.blocks, arrays.state, arrays.power_ring,
                                     arrays.telem):
             _prefault(written_by_callback)
         self.slot_t0_s = np.zeros(2)
         self._slots: list[tuple[np.ndarray, ...]] = [(), ()]
         self._flip_callbacks = -2  # the callback count when a slot was last flipped
-        table = np.zeros(cb.TAB_SIZE, dtype=np.int64)
+        table = np.zeros(tab.TAB_SIZE, dtype=np.int64)
         for address_at, array, sizes in (
-            (cb.TAB_CFG, arrays.cfg, (cb.TAB_CFG_SIZE,)),
-            (cb.TAB_DEV, arrays.dev, (cb.TAB_DEV_ROWS, cb.TAB_DEV_COLS)),
-            (cb.TAB_STATE, arrays.state, (cb.TAB_STATE_SIZE,)),
-            (cb.TAB_POWER_RING, arrays.power_ring, (cb.TAB_POWER_RING_SIZE,)),
-            (cb.TAB_FINGER, arrays.finger, (cb.TAB_FINGER_ROWS,)),
-            (cb.TAB_FINGER_COUNT, arrays.finger_count, ()),
-            (cb.TAB_TELEM, arrays.telem, (cb.TAB_TELEM_ROWS,)),
-            (cb.TAB_TELEM_COUNT, arrays.telem_count, ()),
-            (cb.TAB_SLOT_T0, self.slot_t0_s, ()),
-            (cb.TAB_SCRATCH, self.scratch, (cb.TAB_SCRATCH_FRAMES,)),
-            (cb.TAB_DRIVE, self.drive, (cb.TAB_DRIVE_FRAMES,)),
-            (cb.TAB_STATS, self.stats, ()),
-            (cb.TAB_BLOCKS, self.blocks, (cb.TAB_BLOCK_ROWS,)),
+            (tab.TAB_CFG, arrays.cfg, (tab.TAB_CFG_SIZE,)),
+            (tab.TAB_DEV, arrays.dev, (tab.TAB_DEV_ROWS, tab.TAB_DEV_COLS)),
+            (tab.TAB_STATE, arrays.state, (tab.TAB_STATE_SIZE,)),
+            (tab.TAB_POWER_RING, arrays.power_ring, (tab.TAB_POWER_RING_SIZE,)),
+            (tab.TAB_FINGER, arrays.finger, (tab.TAB_FINGER_ROWS,)),
+            (tab.TAB_FINGER_COUNT, arrays.finger_count, ()),
+            (tab.TAB_TELEM, arrays.telem, (tab.TAB_TELEM_ROWS,)),
+            (tab.TAB_TELEM_COUNT, arrays.telem_count, ()),
+            (tab.TAB_SLOT_T0, self.slot_t0_s, ()),
+            (tab.TAB_SCRATCH, self.scratch, (tab.TAB_SCRATCH_FRAMES,)),
+            (tab.TAB_DRIVE, self.drive, (tab.TAB_DRIVE_FRAMES,)),
+            (tab.TAB_STATS, self.stats, ()),
+            (tab.TAB_BLOCKS, self.blocks, (tab.TAB_BLOCK_ROWS,)),
         ):
             table[address_at] = _address(array)
             table[list(sizes)] = array.shape[:len(sizes)]
-        table[cb.TAB_CHANNELS] = channels
-        table[cb.TAB_CHANNEL] = channel
+        table[tab.TAB_CHANNELS] = channels
+        table[tab.TAB_CHANNEL] = channel
         self.table = table
         self._write_slot(0, texture, float(arrays.cfg[CFG_TEXTURE_T0_S]))
 
@@ -104,14 +105,14 @@ class CallbackTable:
     @property
     def active_slot(self) -> int:
         """The texture slot the callback renders (0 or 1)."""
-        return int(self.table[cb.TAB_ACTIVE_SLOT])
+        return int(self.table[tab.TAB_ACTIVE_SLOT])
 
     def _write_slot(self, slot: int, texture: CompiledTexture, t0_s: float) -> None:
         """Copy ``texture`` into ``slot`` (writable arrays the table points to) with start time ``t0_s`` (s)."""
         arrays = (np.array(texture.prog, dtype=np.int64, order="C"), np.array(texture.params, dtype=np.float64),
                   np.array(texture.img, dtype=np.float64), np.zeros(max(texture.stack_depth, 1)))
-        base = cb.TAB_SLOTS + slot * cb.SLOT_SIZE
-        for offset, array in zip((cb.SLOT_PROG, cb.SLOT_PARAMS, cb.SLOT_IMG, cb.SLOT_STACK), arrays):
+        base = tab.TAB_SLOTS + slot * tab.SLOT_SIZE
+        for offset, array in zip((tab.SLOT_PROG, tab.SLOT_PARAMS, tab.SLOT_IMG, tab.SLOT_STACK), arrays):
             self.table[base + offset] = _address(array)
             self.table[base + offset + 1] = array.shape[0]
         self.slot_t0_s[slot] = t0_s
@@ -127,16 +128,16 @@ class CallbackTable:
         """
         if running:
             deadline = time.monotonic() + SLOT_RELEASE_TIMEOUT_S
-            while self.stats[cb.STAT_CALLBACKS] < self._flip_callbacks + 2 and time.monotonic() < deadline:
+            while self.stats[tab.STAT_CALLBACKS] < self._flip_callbacks + 2 and time.monotonic() < deadline:
                 time.sleep(0.0005)
         idle = 1 - self.active_slot
         self._write_slot(idle, texture, t0_s)
-        publish(self.table, cb.TAB_ACTIVE_SLOT, idle)  # after the slot: a release store
-        self._flip_callbacks = int(self.stats[cb.STAT_CALLBACKS])
+        publish(self.table, tab.TAB_ACTIVE_SLOT, idle)  # after the slot: a release store
+        self._flip_callbacks = int(self.stats[tab.STAT_CALLBACKS])
 
     def recent_blocks(self) -> np.ndarray:
         """The block records still in the ring, oldest first (int64 ``[rows, BLOCK_COLS]``, a copy)."""
-        callbacks = int(self.stats[cb.STAT_CALLBACKS])
+        callbacks = int(self.stats[tab.STAT_CALLBACKS])
         rows = self.blocks.shape[0]
         first = max(0, callbacks - rows + 1)  # the oldest row may be rewritten by the running callback
         return self.blocks[np.arange(first, callbacks) % rows]
@@ -147,12 +148,12 @@ class CallbackTable:
         A block's first sample reaches the DAC ``BLOCK_DAC_DELAY_NS`` after the callback
         began; the rate is the stream's (cfg). 0.0 before the first callback.
         """
-        callbacks = int(self.stats[cb.STAT_CALLBACKS])
+        callbacks = int(self.stats[tab.STAT_CALLBACKS])
         if callbacks == 0:
             return 0.0
         row = self.blocks[(callbacks - 1) % self.blocks.shape[0]]
-        since_s = (now_ns - row[cb.BLOCK_ENTRY_NS] - row[cb.BLOCK_DAC_DELAY_NS]) * 1e-9
-        return float(row[cb.BLOCK_SAMPLE_INDEX]) + since_s * float(self.arrays.cfg[CFG_FS_HZ])
+        since_s = (now_ns - row[tab.BLOCK_ENTRY_NS] - row[tab.BLOCK_DAC_DELAY_NS]) * 1e-9
+        return float(row[tab.BLOCK_SAMPLE_INDEX]) + since_s * float(self.arrays.cfg[CFG_FS_HZ])
 
     @property
     def next_sample(self) -> int:
@@ -163,7 +164,7 @@ class CallbackTable:
         """A table over copies of every array (the same textures): for warming the callback up."""
         twin = CallbackTable(KernelArrays(*(array.copy() for array in self.arrays)),
                              _texture_of(self._slots[self.active_slot]),
-                             channels=int(self.table[cb.TAB_CHANNELS]), channel=int(self.table[cb.TAB_CHANNEL]),
+                             channels=int(self.table[tab.TAB_CHANNELS]), channel=int(self.table[tab.TAB_CHANNEL]),
                              scratch_frames=len(self.scratch), drive_frames=len(self.drive),
                              block_rows=len(self.blocks))
         twin.slot_t0_s[:] = self.slot_t0_s
@@ -177,7 +178,7 @@ class CallbackTable:
         ctypes call releases the GIL while the callback runs.
         """
         callback = cb.render_callback if callback is None else callback
-        channels = int(self.table[cb.TAB_CHANNELS])
+        channels = int(self.table[tab.TAB_CHANNELS])
         if out.dtype != np.float32 or not out.flags.c_contiguous or out.size % channels:
             raise ValueError(f"out: must be C-contiguous float32 holding whole frames of {channels} channels")
         callback.ctypes(None, _address(out), out.size // channels, _TIME_INFO(0.0, 0.0, 0.0), 0, self.user_data)

@@ -83,17 +83,17 @@ class RecordRing:
     """Copies the new rows of a CallbackTable's per-block record ring (call ``poll`` often enough)."""
 
     def __init__(self, table: object):
-        from tpad_rt.kernel import callback as cb
-        self.cb = cb
+        from tpad_rt.kernel import table as tab
+        self.tab = tab
         self.table = table
-        self.next = int(table.stats[cb.STAT_CALLBACKS])
+        self.next = int(table.stats[tab.STAT_CALLBACKS])
         self.chunks: list = []
         self.lost = 0
 
     def poll(self) -> None:
         import numpy as np
-        cb = self.cb
-        done = int(self.table.stats[cb.STAT_CALLBACKS])
+        tab = self.tab
+        done = int(self.table.stats[tab.STAT_CALLBACKS])
         rows = self.table.blocks.shape[0]
         first = max(self.next, done - rows + 1)  # row (done % rows) may be being rewritten
         self.lost += first - self.next
@@ -103,7 +103,7 @@ class RecordRing:
 
     def rows(self):
         import numpy as np
-        return np.concatenate(self.chunks) if self.chunks else np.zeros((0, self.cb.BLOCK_COLS), dtype=np.int64)
+        return np.concatenate(self.chunks) if self.chunks else np.zeros((0, self.tab.BLOCK_COLS), dtype=np.int64)
 
 
 def _app_loop(seconds: float, push, poll) -> None:
@@ -132,6 +132,7 @@ def stream_native(callback: str, block: int, seconds: float, gil_threads: int) -
     from tpad_rt.device import Device
     from tpad_rt.engine import Renderer
     from tpad_rt.kernel import callback as cb
+    from tpad_rt.kernel import table as tab
     from tpad_rt.outputs import audio
     from tpad_rt.pipeline import Pipeline
     from tpad_rt.realtime import CallbackTable, monotonic_ns
@@ -171,12 +172,12 @@ def stream_native(callback: str, block: int, seconds: float, gil_threads: int) -
     end_s, end, end_wall_s = clock(), table.stats.copy(), time.monotonic()
     rows = ring.rows()
     result = {
-        "callbacks": int(end[cb.STAT_CALLBACKS] - begin[cb.STAT_CALLBACKS]),
-        "underflows": int(end[cb.STAT_UNDERFLOWS] - begin[cb.STAT_UNDERFLOWS]),
+        "callbacks": int(end[tab.STAT_CALLBACKS] - begin[tab.STAT_CALLBACKS]),
+        "underflows": int(end[tab.STAT_UNDERFLOWS] - begin[tab.STAT_UNDERFLOWS]),
         "expected": (end_s - begin_s) * RATE_HZ / block, "due_wall": (end_wall_s - begin_wall_s) * RATE_HZ / block,
         "records": int(len(rows)), "records_lost": ring.lost,
-        "compute_us": _percentiles(rows[:, cb.BLOCK_COMPUTE_NS], 1e-3),
-        "dac_delay_ms": _percentiles(rows[:, cb.BLOCK_DAC_DELAY_NS], 1e-6),
+        "compute_us": _percentiles(rows[:, tab.BLOCK_COMPUTE_NS], 1e-3),
+        "dac_delay_ms": _percentiles(rows[:, tab.BLOCK_DAC_DELAY_NS], 1e-6),
     }
     if renderer is not None:
         result.update(_latency(rows, pushes, cb))
@@ -199,13 +200,13 @@ def _latency(rows, pushes: list[tuple[int, int]], cb) -> dict:
     if not pushes or len(rows) < 2:
         return {"latency_ms": {"n": 0}}
     pushed_ns, index = np.array(pushes, dtype=np.int64).T
-    counts = rows[:, cb.BLOCK_FINGER_COUNT]
+    counts = rows[:, tab.BLOCK_FINGER_COUNT]
     first = np.searchsorted(counts, index, side="right")  # first block whose start saw sample `index`
     # keep samples whose reading block was recorded, and not the first record (it may have been read earlier)
     kept = (first > 0) & (first < len(rows))
     first, pushed_ns = first[kept], pushed_ns[kept]
-    entry_ns = rows[first, cb.BLOCK_ENTRY_NS]
-    dac_ns = rows[first, cb.BLOCK_DAC_DELAY_NS]
+    entry_ns = rows[first, tab.BLOCK_ENTRY_NS]
+    dac_ns = rows[first, tab.BLOCK_DAC_DELAY_NS]
     return {
         "latency_ms": _percentiles(entry_ns + dac_ns - pushed_ns, 1e-6),
         "wait_ms": _percentiles(entry_ns - pushed_ns, 1e-6),
@@ -274,13 +275,13 @@ def startup(block: int) -> dict:
     started_ns = monotonic_ns()
     table = renderer.callback_table
     deadline = time.monotonic() + 10
-    while table.stats[cb.STAT_CALLBACKS] == 0 and time.monotonic() < deadline:
+    while table.stats[tab.STAT_CALLBACKS] == 0 and time.monotonic() < deadline:
         time.sleep(0.0001)
     first = table.blocks[0].copy()
     renderer.stop()
     return {"process_begin_ns": begin_ns, "imported_ns": imported_ns, "built_ns": built_ns,
-            "started_ns": started_ns, "first_entry_ns": int(first[cb.BLOCK_ENTRY_NS]),
-            "first_dac_ns": int(first[cb.BLOCK_ENTRY_NS] + first[cb.BLOCK_DAC_DELAY_NS])}
+            "started_ns": started_ns, "first_entry_ns": int(first[tab.BLOCK_ENTRY_NS]),
+            "first_dac_ns": int(first[tab.BLOCK_ENTRY_NS] + first[tab.BLOCK_DAC_DELAY_NS])}
 
 
 def startup_play(block: int) -> dict:
@@ -301,11 +302,11 @@ def startup_play(block: int) -> dict:
         noted["started_ns"] = monotonic_ns()
         table = self.callback_table
         deadline = time.monotonic() + 10
-        while table.stats[cb.STAT_CALLBACKS] == 0 and time.monotonic() < deadline:
+        while table.stats[tab.STAT_CALLBACKS] == 0 and time.monotonic() < deadline:
             time.sleep(0.0001)
         first = table.blocks[0].copy()
-        noted["first_entry_ns"] = int(first[cb.BLOCK_ENTRY_NS])
-        noted["first_dac_ns"] = int(first[cb.BLOCK_ENTRY_NS] + first[cb.BLOCK_DAC_DELAY_NS])
+        noted["first_entry_ns"] = int(first[tab.BLOCK_ENTRY_NS])
+        noted["first_dac_ns"] = int(first[tab.BLOCK_ENTRY_NS] + first[tab.BLOCK_DAC_DELAY_NS])
 
     Renderer.start = start  # type: ignore[method-assign]
     status = cli.main(["play", str(GRATING), "--output", f"audio://?rate={RATE_HZ}&block={block}",

@@ -1,0 +1,441 @@
+"""The serial amplifier's streamer: one numba call that streams the envelope for a whole run, without the GIL.
+
+API map
+-------
+stream(table, link, buffers) -> int
+    render envelope frames with the pointer table's arrays (:mod:`tpad_rt.kernel.table`)
+    and write them to the port's file descriptor at the amplifier's pace, reading its
+    STATUS and ACK frames, until ``link[LINK_STOP]`` is set or the link fails; returns
+    the EXIT_* reason (also in ``link[LINK_EXIT]``)
+LINK_*, EXIT_*, EXIT_NAMES, BUF_*
+    the layout of the int64 ``link`` array it shares with the Python side, the exit
+    reasons, and the uint8 buffers it works in
+
+docs/amp-protocol.md is the protocol (rules H3-H7 are the host's, here) and
+docs/realtime.md the design. The Python side (:mod:`tpad_rt.outputs.serial`) opens the
+port, makes the handshake (HELLO, SET_CARRIER, START) and calls :func:`stream` from a
+thread of its own; numba releases the GIL for the whole call, so the frames keep their
+cadence while the application's Python threads hold it. The loop wakes every
+``WAKE_NS`` (or sooner when a frame is due): it reads what the amplifier sent (never
+blocking: the descriptor is non-blocking), keeps the amplifier's buffer at the target
+fill from its own clock, corrected by each STATUS, renders one frame at a time through
+the same block as the audio callback (:func:`tpad_rt.kernel.table.render_into`; the
+kernel renders the envelope: ``cfg[CFG_OUTPUT_ENVELOPE]``), and writes it; bytes a
+full port refuses wait in a pending buffer. It allocates nothing.
+
+Play position: the host estimates the sample ``p`` the amplifier plays now as
+``ref_index + (now - ref_ns) * envelope_hz``, from when the prefill has been written
+until a RUNNING STATUS says which sample (``play_index``, unwrapped from 32 bits) it
+played at its own time ``time_us``. That time is put on the host's clock by the
+smallest offset (receive time - ``time_us``) seen so far: the STATUS the line and the
+scheduler delayed least (allowed to grow by CLOCK_SKEW). So a STATUS read late does
+not make the estimate lag. The host sends while ``written < p + target_fill`` and never
+more than the amplifier's buffer ahead; if ``p`` has passed what was sent (the host was
+held up), it skips the stream ahead, since samples for played indices are refused.
+A STATUS showing that the amplifier's watchdog tripped (it went IDLE) makes the host
+send START again from the next sample (``LINK_RESTARTS``): the run recovers.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from tpad_rt.kernel import amp_codec as codec
+from tpad_rt.kernel import table as tab
+from tpad_rt.kernel.amp_codec import (
+    ACK_ACKED_TYPE,
+    ACK_CODE,
+    ACK_VALUE,
+    ENVELOPE_FIRST_INDEX,
+    ENVELOPE_SAMPLES,
+    MAX_ENCODED,
+    MSG_ACK,
+    MSG_ENVELOPE,
+    MSG_START,
+    MSG_STATUS,
+    PAYLOAD,
+    START_BYTES,
+    START_ENVELOPE_HZ,
+    START_INDEX,
+    START_PREFILL,
+    STATUS_BUFFER_FILL,
+    STATUS_BYTES,
+    STATUS_CARRIER_MHZ,
+    STATUS_CURRENT_UA_RMS,
+    STATUS_ENVELOPE_MV,
+    STATUS_FAULTS,
+    STATUS_FRAMES_BAD,
+    STATUS_FRAMES_OK,
+    STATUS_FRAMES_REJECTED,
+    STATUS_PHASE_CDEG,
+    STATUS_PLAY_INDEX,
+    STATUS_SEQUENCE_GAPS,
+    STATUS_STATE,
+    STATUS_UNDERRUNS,
+    STATUS_VOLTAGE_MV_RMS,
+    STATUS_WATCHDOG_TRIPS,
+)
+from tpad_rt.kernel.atomics import load_acquire
+from tpad_rt.kernel.cache_stamp import stamp_cache
+from tpad_rt.kernel.layout import STATE_NEXT_INDEX
+from tpad_rt.kernel.libc import EAGAIN, EINTR, errno, monotonic_ns, pointer, read_fd, sleep_until_ns, write_fd
+from tpad_rt.kernel.table import TAB_STATE, TAB_STATE_SIZE, begin_block, finish_block, render_into
+
+stamp_cache(__file__, codec.__file__, *tab.COMPILED_SOURCES)
+
+# --- link: int64[LINK_SIZE]; the Python side writes the first block before the run --------
+LINK_FD = 0                   # the port's file descriptor (non-blocking)
+LINK_ENVELOPE_HZ = 1          # the envelope rate START agreed
+LINK_FRAME_SAMPLES = 2        # samples per ENVELOPE frame (<= the amplifier's max_frame_samples)
+LINK_TARGET_FILL = 3          # samples kept ahead of the amplifier's play position (also START's prefill)
+LINK_BUFFER_SAMPLES = 4       # the amplifier's buffer (INFO)
+LINK_STATUS_TIMEOUT_NS = 5    # no STATUS for this long: the amplifier is lost (H7)
+LINK_STOP = 6                 # the Python side sets it to 1 (release store) to end the run with STOP (H8)
+LINK_SEQ = 7                  # the host's next frame seq: the run continues the handshake's numbering
+LINK_START_INDEX = 8          # the stream index START named (the kernel's next sample)
+# --- written by the streamer -------------------------------------------------------------
+LINK_WRITTEN = 9              # the next stream index to send
+LINK_EXIT = 10                # why the run ended (EXIT_*)
+LINK_ERRNO = 11               # errno of the read or write that failed
+LINK_STATUS_NS = 12           # CLOCK_MONOTONIC (ns) when the last STATUS arrived
+LINK_STATUSES = 13            # STATUS frames received
+LINK_RX_BAD = 14              # frames from the amplifier that failed COBS, length or CRC
+LINK_FRAMES_SENT = 15         # ENVELOPE frames written
+LINK_TX_BLOCKED = 16          # writes the port refused for now (its buffer full)
+LINK_LATE = 17                # times the amplifier's play position had passed what was sent
+LINK_RESTARTS = 18            # STARTs sent again after the amplifier's watchdog tripped
+LINK_ACK_TYPE = 19            # the last ACK: the type it answered, its code and value
+LINK_ACK_CODE = 20
+LINK_ACK_VALUE = 21
+LINK_AMP_VERSION = 22         # the version byte of a frame of another protocol version
+LINK_AMP_PLAY_INDEX = 23      # the last STATUS, as received (play index unwrapped to the stream's)
+LINK_AMP_FILL = 24
+LINK_AMP_STATE = 25
+LINK_AMP_FAULTS = 26
+LINK_AMP_FRAMES_OK = 27
+LINK_AMP_FRAMES_BAD = 28
+LINK_AMP_FRAMES_REJECTED = 29
+LINK_AMP_SEQUENCE_GAPS = 30
+LINK_AMP_UNDERRUNS = 31
+LINK_AMP_WATCHDOG_TRIPS = 32
+LINK_AMP_ENVELOPE_MV = 33
+LINK_AMP_VOLTAGE_MV_RMS = 34
+LINK_AMP_CURRENT_UA_RMS = 35
+LINK_AMP_PHASE_CDEG = 36
+LINK_AMP_CARRIER_MHZ = 37
+LINK_AMP_TIME_US = 38         # the amplifier's clock when it sent the last STATUS (us, 32 bits)
+LINK_STOP_RAMP_MS = 39        # the STOP the run ends with: its ramp (ms), set before LINK_STOP
+LINK_STOP_SEQ = 40            # the seq that STOP went out with (-1 if it could not)
+LINK_SIZE = 41
+
+# --- exit reasons -----------------------------------------------------------------------------
+EXIT_RUNNING = 0
+EXIT_STOPPED = 1              # LINK_STOP was set
+EXIT_PORT_LOST = 2            # a read or write failed (LINK_ERRNO), or the port reached its end
+EXIT_STATUS_TIMEOUT = 3       # no STATUS for LINK_STATUS_TIMEOUT_NS
+EXIT_FAULT = 4                # a STATUS reported a fault (LINK_AMP_FAULTS)
+EXIT_VERSION = 5              # a frame of another protocol version (LINK_AMP_VERSION), or ACK BAD_VERSION
+EXIT_REFUSED = 6              # the amplifier refused a restart (LINK_ACK_CODE)
+EXIT_TX_STALLED = 7           # the port took no byte for LINK_STATUS_TIMEOUT_NS
+EXIT_NAMES = ("running", "stopped", "port lost", "status timeout", "fault", "version", "refused", "stalled")
+
+# --- buffers: uint8[BUF_ROWS, BUF_BYTES] ------------------------------------------------------
+BUF_RX = 0                    # bytes received, up to a delimiter
+BUF_BODY = 1                  # a decoded body
+BUF_FRAME = 2                 # a body being built
+BUF_TX = 3                    # encoded bytes waiting for the port
+BUF_ROWS = 4
+BUF_BYTES = 1 << 16
+#: Seconds between the loop's wake-ups when no frame is due sooner (ns).
+WAKE_NS = 250_000
+#: How fast (s per s) the host lets the amplifier's clock offset grow: an amplifier clock up to this much
+#: slower than the host's is followed (a crystal is within 1e-4).
+CLOCK_SKEW = 1e-4
+#: Float32 envelope scratch (samples): the largest frame.
+ENVELOPE_SCRATCH = codec.MAX_FRAME_SAMPLES
+
+_F4 = np.float32
+_F8 = np.float64
+_I8 = np.int64
+_U32 = 1 << 32
+_KERNEL = dict(nogil=True, cache=True, error_model="numpy")
+
+
+@numba.njit(inline="always", **_KERNEL)
+def _unwrap(index_u32: int, near: int) -> int:
+    """The number whose low 32 bits are ``index_u32`` closest to ``near`` (a stream index, a time in us)."""
+    delta = (index_u32 - near) % _U32
+    if delta >= _U32 // 2:
+        delta -= _U32
+    return near + delta
+
+
+@numba.njit(**_KERNEL)
+def _take_status(link: np.ndarray, body: np.ndarray, now_ns: int) -> None:
+    """Copy a STATUS payload (docs/amp-protocol.md 3.2) into the link."""
+    p = PAYLOAD
+    link[LINK_AMP_PLAY_INDEX] = _unwrap(codec.get_u32(body, p + STATUS_PLAY_INDEX), link[LINK_WRITTEN])
+    link[LINK_AMP_FILL] = codec.get_u16(body, p + STATUS_BUFFER_FILL)
+    link[LINK_AMP_STATE] = body[p + STATUS_STATE]
+    link[LINK_AMP_FAULTS] = body[p + STATUS_FAULTS]
+    link[LINK_AMP_FRAMES_OK] = codec.get_u32(body, p + STATUS_FRAMES_OK)
+    link[LINK_AMP_FRAMES_BAD] = codec.get_u32(body, p + STATUS_FRAMES_BAD)
+    link[LINK_AMP_FRAMES_REJECTED] = codec.get_u32(body, p + STATUS_FRAMES_REJECTED)
+    link[LINK_AMP_SEQUENCE_GAPS] = codec.get_u32(body, p + STATUS_SEQUENCE_GAPS)
+    link[LINK_AMP_UNDERRUNS] = codec.get_u32(body, p + STATUS_UNDERRUNS)
+    link[LINK_AMP_WATCHDOG_TRIPS] = codec.get_u32(body, p + STATUS_WATCHDOG_TRIPS)
+    link[LINK_AMP_ENVELOPE_MV] = codec.get_i32(body, p + STATUS_ENVELOPE_MV)
+    link[LINK_AMP_VOLTAGE_MV_RMS] = codec.get_u32(body, p + STATUS_VOLTAGE_MV_RMS)
+    link[LINK_AMP_CURRENT_UA_RMS] = codec.get_u32(body, p + STATUS_CURRENT_UA_RMS)
+    link[LINK_AMP_PHASE_CDEG] = codec.get_i16(body, p + STATUS_PHASE_CDEG)
+    link[LINK_AMP_CARRIER_MHZ] = codec.get_u32(body, p + STATUS_CARRIER_MHZ)
+    link[LINK_AMP_TIME_US] = codec.get_u32(body, p + codec.STATUS_TIME_US)
+    link[LINK_STATUS_NS] = now_ns
+    link[LINK_STATUSES] += 1
+
+
+@numba.njit(**_KERNEL)
+def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.ndarray, now_ns: int) -> int:
+    """Decode and act on one frame from the amplifier (``encoded[:length]``, no delimiter).
+
+    Returns 1 for a STATUS, 0 for anything else, or -EXIT_VERSION for a frame of another
+    version or an ACK BAD_VERSION. Bad frames are counted and dropped.
+    """
+    if length == 0:
+        return 0  # an empty frame (a lone delimiter)
+    size = codec.cobs_decode(encoded, length, body)
+    kind = codec.open_body(body, size) if size >= 0 else codec.CHECK_SHORT
+    if kind == codec.CHECK_VERSION:
+        link[LINK_AMP_VERSION] = body[0]
+        return -EXIT_VERSION
+    if kind < 0:
+        link[LINK_RX_BAD] += 1
+        return 0
+    payload = size - PAYLOAD - codec.CRC_BYTES
+    if kind == MSG_STATUS and payload == STATUS_BYTES:
+        _take_status(link, body, now_ns)
+        return 1
+    if kind == MSG_ACK and payload == codec.ACK_BYTES:
+        link[LINK_ACK_TYPE] = body[PAYLOAD + ACK_ACKED_TYPE]
+        link[LINK_ACK_CODE] = body[PAYLOAD + ACK_CODE]
+        link[LINK_ACK_VALUE] = codec.get_u32(body, PAYLOAD + ACK_VALUE)
+        if link[LINK_ACK_CODE] == codec.ACK_BAD_VERSION:
+            link[LINK_AMP_VERSION] = link[LINK_ACK_VALUE]
+            return -EXIT_VERSION
+        return 0
+    link[LINK_RX_BAD] += 1  # a type the host does not expect, or a wrong length
+    return 0
+
+
+@numba.njit(**_KERNEL)
+def _receive(link: np.ndarray, buffers: np.ndarray, rx_length: int, now_ns: int) -> tuple[int, int, int]:
+    """Read what the port holds and act on each whole frame; (bytes kept, STATUS frames, exit reason or 0)."""
+    rx = buffers[BUF_RX]
+    body = buffers[BUF_BODY]
+    statuses = 0
+    while True:
+        got = read_fd(link[LINK_FD], rx.ctypes.data + rx_length, rx.shape[0] - rx_length)
+        if got == 0:  # a tty with VMIN = 0 says "nothing now" so; a silent loss shows as no STATUS (H7)
+            return rx_length, statuses, 0
+        if got < 0:
+            error = errno()
+            if error == EAGAIN:
+                return rx_length, statuses, 0
+            if error != EINTR:
+                link[LINK_ERRNO] = error
+                return rx_length, statuses, EXIT_PORT_LOST
+            continue
+        end = rx_length + got
+        start = 0
+        for i in range(rx_length, end):
+            if rx[i] == 0:
+                taken = _take_frame(link, rx[start:i], i - start, body, now_ns)
+                if taken < 0:
+                    return 0, statuses, -taken
+                statuses += taken
+                start = i + 1
+        rx_length = end - start
+        for k in range(rx_length if start > 0 else 0):  # keep the unfinished frame at the front
+            rx[k] = rx[start + k]
+        if rx_length > MAX_ENCODED:  # no delimiter where one had to be: drop the bytes, count a bad frame
+            link[LINK_RX_BAD] += 1
+            rx_length = 0
+
+
+@numba.njit(**_KERNEL)
+def _flush(link: np.ndarray, tx: np.ndarray, pending: tuple[int, int]) -> tuple[int, int, int]:
+    """Write the pending bytes ``tx[first:end]``; (first, end, exit reason or 0) after it."""
+    first, end = pending
+    while first < end:
+        wrote = write_fd(link[LINK_FD], tx.ctypes.data + first, end - first)
+        if wrote < 0:
+            error = errno()
+            if error == EAGAIN:
+                link[LINK_TX_BLOCKED] += 1
+                return first, end, 0
+            if error != EINTR:
+                link[LINK_ERRNO] = error
+                return first, end, EXIT_PORT_LOST
+            continue
+        first += wrote
+    return 0, 0, 0
+
+
+@numba.njit(**_KERNEL)
+def _queue(link: np.ndarray, buffers: np.ndarray, payload_length: int, msg_type: int, end: int) -> int:
+    """Seal the body in BUF_FRAME (payload written) as the next host frame, appended to BUF_TX at ``end``;
+    the new end."""
+    seq = link[LINK_SEQ]
+    link[LINK_SEQ] = (seq + 1) & 0xFFFF
+    return end + codec.seal(buffers[BUF_FRAME], payload_length, msg_type, seq, buffers[BUF_TX][end:])
+
+
+@numba.njit(**_KERNEL)
+def _queue_start(link: np.ndarray, buffers: np.ndarray, end: int) -> int:
+    """Queue a START from LINK_WRITTEN with the target fill as prefill (a restart after the watchdog)."""
+    frame = buffers[BUF_FRAME]
+    codec.put_u32(frame, PAYLOAD + START_ENVELOPE_HZ, link[LINK_ENVELOPE_HZ])
+    codec.put_u32(frame, PAYLOAD + START_INDEX, link[LINK_WRITTEN])
+    codec.put_u16(frame, PAYLOAD + START_PREFILL, min(link[LINK_TARGET_FILL], link[LINK_BUFFER_SAMPLES]))
+    return _queue(link, buffers, START_BYTES, MSG_START, end)
+
+
+@numba.njit(**_KERNEL)
+def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buffers: np.ndarray,
+                    envelope: np.ndarray, delay_ns: int, late: bool, end: int) -> int:
+    """Render the next frame's samples (one block of the table) and queue its ENVELOPE frame; the new end.
+
+    The kernel's samples are in [-1, 1] of full scale (its output guard); each becomes
+    round(32767 x sample), and anything else (never expected) is sent as 0.
+    """
+    count = link[LINK_FRAME_SAMPLES]
+    first = np.int64(state[STATE_NEXT_INDEX])
+    stats, row, entry_ns = begin_block(table, first, count, delay_ns)
+    render_into(table, state, envelope, count, 1, 0)
+    frame = buffers[BUF_FRAME]
+    codec.put_u32(frame, PAYLOAD + ENVELOPE_FIRST_INDEX, first)
+    for k in range(count):
+        value = envelope[k]
+        level = np.int64(round(value * 32767.0)) if abs(value) <= 1.0 else 0  # NaN is not <= 1
+        codec.put_i16(frame, PAYLOAD + ENVELOPE_SAMPLES + 2 * k, level)
+    end = _queue(link, buffers, ENVELOPE_SAMPLES + 2 * count, MSG_ENVELOPE, end)
+    finish_block(stats, row, entry_ns, count, late, False)
+    link[LINK_WRITTEN] = first + count
+    link[LINK_FRAMES_SENT] += 1
+    return end
+
+
+@numba.njit(**_KERNEL)
+def _skip_to(table: np.ndarray, state: np.ndarray, link: np.ndarray, index: int) -> None:
+    """Continue the stream at ``index`` (past the next one): the kernel renders on from there as if no
+    sample were missing, and the drive ring's skipped samples read 0 (a recording shows the gap)."""
+    drive = numba.carray(pointer(table[tab.TAB_DRIVE]), table[tab.TAB_DRIVE_FRAMES], _F4)
+    for n in range(max(link[LINK_WRITTEN], index - drive.shape[0]), index):
+        drive[n % drive.shape[0]] = 0.0
+    state[STATE_NEXT_INDEX] = index
+    link[LINK_WRITTEN] = index
+
+
+@numba.njit(**_KERNEL)
+def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: np.ndarray) -> int:
+    """Stream until LINK_STOP or a failure (module docstring); the EXIT_* reason, also in LINK_EXIT.
+
+    ``table`` is the pointer table (its kernel's cfg set for envelope output), ``link``
+    the int64 LINK_* array, ``buffers`` uint8 ``[BUF_ROWS, BUF_BYTES]``, ``envelope``
+    float32 of at least LINK_FRAME_SAMPLES samples.
+    """
+    state = numba.carray(pointer(table[TAB_STATE]), table[TAB_STATE_SIZE], _F8)
+    rate_hz = link[LINK_ENVELOPE_HZ]
+    frame_samples = link[LINK_FRAME_SAMPLES]
+    body_bytes = PAYLOAD + ENVELOPE_SAMPLES + 2 * frame_samples + codec.CRC_BYTES
+    frame_bytes = body_bytes + body_bytes // 254 + 2  # its most COBS bytes, delimiter included
+    tx = buffers[BUF_TX]
+    timeout_ns = link[LINK_STATUS_TIMEOUT_NS]
+    now_ns = monotonic_ns()
+    link[LINK_WRITTEN] = np.int64(state[STATE_NEXT_INDEX])
+    link[LINK_STATUS_NS] = now_ns
+    ref_index = float(link[LINK_WRITTEN])
+    ref_ns = now_ns
+    primed = False
+    amp_us = np.int64(0)
+    offset_ns = np.int64(1) << 62  # no STATUS yet
+    synced_ns = now_ns
+    trips_at_start = link[LINK_AMP_WATCHDOG_TRIPS]
+    rx_length = 0
+    first, end = 0, 0
+    moved_ns = now_ns  # the last time the port took bytes
+    exit_reason = EXIT_RUNNING
+    while exit_reason == EXIT_RUNNING:
+        if load_acquire(link, LINK_STOP) != 0:
+            exit_reason = EXIT_STOPPED
+            break
+        now_ns = monotonic_ns()
+        rx_length, statuses, exit_reason = _receive(link, buffers, rx_length, now_ns)
+        if exit_reason != EXIT_RUNNING:
+            break
+        if statuses > 0:
+            if link[LINK_AMP_FAULTS] != 0:
+                exit_reason = EXIT_FAULT
+                break
+            if link[LINK_AMP_WATCHDOG_TRIPS] > trips_at_start:  # A4: it went IDLE; start again (H7: recover)
+                trips_at_start = link[LINK_AMP_WATCHDOG_TRIPS]
+                link[LINK_RESTARTS] += 1
+                end = _queue_start(link, buffers, end)
+                primed = False
+                ref_index, ref_ns = float(link[LINK_WRITTEN]), now_ns
+            elif link[LINK_AMP_STATE] == codec.STATE_RUNNING:
+                # The amplifier played sample play_index at its time time_us: on the host's clock, at
+                # time_us + offset, where offset is the smallest (receive time - time_us) seen, the one the
+                # line delayed least (allowed to grow by CLOCK_SKEW, for a slower amplifier clock).
+                amp_ns = _unwrap(link[LINK_AMP_TIME_US], amp_us) * 1000
+                amp_us = amp_ns // 1000
+                offset_ns = min(now_ns - amp_ns, offset_ns + np.int64((now_ns - synced_ns) * CLOCK_SKEW))
+                synced_ns = now_ns
+                ref_index, ref_ns, primed = float(link[LINK_AMP_PLAY_INDEX]), amp_ns + offset_ns, True
+        if link[LINK_ACK_TYPE] == MSG_START and link[LINK_ACK_CODE] != codec.ACK_OK:
+            exit_reason = EXIT_REFUSED
+            break
+        if now_ns - link[LINK_STATUS_NS] > timeout_ns:
+            exit_reason = EXIT_STATUS_TIMEOUT
+            break
+        play = ref_index + (now_ns - ref_ns) * 1e-9 * rate_hz if primed else ref_index
+        if link[LINK_WRITTEN] < play - frame_samples:
+            # The amplifier played past what it was sent (an underrun: it plays 0 and moves on), so samples
+            # for those indices would be refused as already played: skip the stream ahead of it.
+            link[LINK_LATE] += 1
+            _skip_to(table, state, link, np.int64(play) + frame_samples)
+        while (link[LINK_WRITTEN] < play + link[LINK_TARGET_FILL]
+               and link[LINK_WRITTEN] + frame_samples <= play + link[LINK_BUFFER_SAMPLES]
+               and end + frame_bytes + MAX_ENCODED <= tx.shape[0]):  # room left for a START or STOP
+            delay_ns = np.int64((link[LINK_WRITTEN] - play) * 1e9 / rate_hz)
+            end = _queue_envelope(table, state, link, buffers, envelope, delay_ns, not primed, end)
+        if end > first:
+            before = first
+            first, end, exit_reason = _flush(link, tx, (first, end))
+            if first != before or end == 0:
+                moved_ns = now_ns
+            elif now_ns - moved_ns > timeout_ns:
+                exit_reason = EXIT_TX_STALLED
+        if not primed and end == 0 and link[LINK_WRITTEN] >= ref_index + link[LINK_TARGET_FILL]:
+            primed = True  # the prefill is out: the amplifier starts playing about now
+            ref_ns = monotonic_ns()
+        next_due_ns = ref_ns + np.int64((link[LINK_WRITTEN] - link[LINK_TARGET_FILL] - ref_index) * 1e9 / rate_hz)
+        sleep_until_ns(min(now_ns + WAKE_NS, max(next_due_ns, now_ns + 20_000)))
+    link[LINK_STOP_SEQ] = -1
+    if exit_reason == EXIT_STOPPED:  # H8: STOP right after the last envelope frame, then flush it all
+        frame = buffers[BUF_FRAME]
+        codec.put_u16(frame, PAYLOAD, min(max(link[LINK_STOP_RAMP_MS], 1), 0xFFFF))
+        link[LINK_STOP_SEQ] = link[LINK_SEQ]
+        end = _queue(link, buffers, codec.STOP_BYTES, codec.MSG_STOP, end)
+        while end > first and exit_reason == EXIT_STOPPED and monotonic_ns() - moved_ns <= timeout_ns:
+            before = first
+            first, end, flushed = _flush(link, tx, (first, end))
+            exit_reason = flushed if flushed != 0 else exit_reason
+            if first != before or end == 0:
+                moved_ns = monotonic_ns()
+            sleep_until_ns(monotonic_ns() + WAKE_NS)
+        if end > first and exit_reason == EXIT_STOPPED:
+            exit_reason = EXIT_TX_STALLED
+    link[LINK_EXIT] = exit_reason
+    return exit_reason

@@ -1,0 +1,187 @@
+"""The pointer table a real-time driver reaches the render kernel through, and the block it renders.
+
+API map
+-------
+TAB_*, SLOT_*, STAT_*, BLOCK_*
+    the layout of the pointer table (int64 ``[TAB_SIZE]``), the statistics and the
+    per-block record ring; :class:`tpad_rt.realtime.CallbackTable` owns one
+begin_block(table, first_sample, frames, dac_delay_ns) -> (stats, row, entry_ns)
+render_into(table, state, out, frames, channels, channel)
+finish_block(stats, row, entry_ns, frames, underflow, priming)
+    one block, as every driver renders it: record its start, render it from the
+    table's arrays (the texture slot it finds active), close its record
+
+Both drivers use them: the PortAudio callback (:mod:`tpad_rt.kernel.callback`) and the
+serial amplifier's streamer (:mod:`tpad_rt.kernel.amp_stream`). docs/realtime.md is the
+design. A driver receives only raw pointers; it rebuilds each array with
+``numba.carray`` from an address and a size in the table (views: no allocation, no
+reference counting, no Python object) and never raises. The table, and every array it
+points to, is owned by the Python side and must outlive the driver.
+
+The pointer table (int64; addresses are ``ndarray.ctypes.data``):
+
+- the render kernel's arrays except the texture (``TAB_CFG`` .. ``TAB_TELEM_ROWS``,
+  addresses and the sizes a view needs);
+- two texture slots at ``TAB_SLOTS + k * SLOT_SIZE``: prog, params, img and stack
+  addresses and sizes; ``TAB_ACTIVE_SLOT`` says which one is rendered. The texture's
+  start time ``t0_s`` lives with each slot in the float64 array at ``TAB_SLOT_T0``
+  and is copied into ``cfg[CFG_TEXTURE_T0_S]`` at each block, so a texture and its
+  time origin change together;
+- the output: ``TAB_CHANNELS`` interleaved channels, the drive in ``TAB_CHANNEL``
+  (0-based), zeros in the others; a mono scratch buffer (``TAB_SCRATCH``,
+  ``TAB_SCRATCH_FRAMES``) the kernel renders into, in pieces if a block asks for more;
+- a drive ring (float32, ``TAB_DRIVE``, ``TAB_DRIVE_FRAMES``) holding the last samples
+  rendered (sample ``n`` at ``n % frames``), for recordings;
+- the statistics (int64 ``[STAT_SIZE]``) and the per-block record ring (int64
+  ``[TAB_BLOCK_ROWS, BLOCK_COLS]``, row ``blocks % rows``);
+- ``TAB_FINGER_SEEN``: the finger count the running block acquired (below).
+
+The Python side publishes with release stores (:func:`tpad_rt.kernel.atomics.publish`)
+and a driver reads with acquire loads, so it never sees an index before the data it
+covers, on any CPU: a whole idle slot, then ``TAB_ACTIVE_SLOT`` (read once per block);
+a finger row, then ``finger_count`` (acquired once per block into ``TAB_FINGER_SEEN``,
+which the kernel reads in its place).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from tpad_rt.kernel import atomics, libc, render
+from tpad_rt.kernel.atomics import load_acquire
+from tpad_rt.kernel.libc import monotonic_ns, pointer
+from tpad_rt.kernel.layout import CFG_TEXTURE_T0_S, FINGER_COLS, STATE_NEXT_INDEX, TEL_COLS, TEX_PROG_COLS
+from tpad_rt.kernel.render import render_block
+
+#: The sources compiled into a driver that renders a block (its cache stamp: cache_stamp.stamp_cache).
+COMPILED_SOURCES = (__file__, atomics.__file__, libc.__file__, *render.COMPILED_SOURCES)
+
+# --- pointer table: int64[TAB_SIZE] ----------------------------------------------
+TAB_CFG = 0                   # cfg [TAB_CFG_SIZE]
+TAB_CFG_SIZE = 1
+TAB_DEV = 2                   # dev [DEV_ROWS, TAB_DEV_COLS]
+TAB_DEV_ROWS = 3
+TAB_DEV_COLS = 4
+TAB_STATE = 5
+TAB_STATE_SIZE = 6
+TAB_POWER_RING = 7
+TAB_POWER_RING_SIZE = 8
+TAB_FINGER = 9                # finger [TAB_FINGER_ROWS, FINGER_COLS]
+TAB_FINGER_ROWS = 10
+TAB_FINGER_COUNT = 11
+TAB_TELEM = 12                # telem [TAB_TELEM_ROWS, TEL_COLS]
+TAB_TELEM_ROWS = 13
+TAB_TELEM_COUNT = 14
+TAB_ACTIVE_SLOT = 15          # 0 or 1: the texture slot rendered
+TAB_SLOT_T0 = 16              # float64[2]: each slot's texture start time (s, stream clock)
+TAB_CHANNELS = 17             # interleaved output channels
+TAB_CHANNEL = 18              # the channel the drive goes to (0-based)
+TAB_SCRATCH = 19              # float32[TAB_SCRATCH_FRAMES]: mono render buffer
+TAB_SCRATCH_FRAMES = 20
+TAB_DRIVE = 21                # float32[TAB_DRIVE_FRAMES]: ring of the last rendered samples
+TAB_DRIVE_FRAMES = 22
+TAB_STATS = 23                # int64[STAT_SIZE]
+TAB_BLOCKS = 24               # int64[TAB_BLOCK_ROWS, BLOCK_COLS]
+TAB_BLOCK_ROWS = 25
+TAB_FINGER_SEEN = 26          # finger_count as this callback acquired it (written by the callback)
+TAB_SLOTS = 27                # two texture slots of SLOT_SIZE entries each
+# --- a texture slot: offsets from TAB_SLOTS + k * SLOT_SIZE -------------------------
+SLOT_PROG = 0                 # prog [SLOT_PROG_ROWS, TEX_PROG_COLS] int64
+SLOT_PROG_ROWS = 1
+SLOT_PARAMS = 2               # float64[SLOT_PARAMS_SIZE]
+SLOT_PARAMS_SIZE = 3
+SLOT_IMG = 4                  # float64[SLOT_IMG_SIZE]
+SLOT_IMG_SIZE = 5
+SLOT_STACK = 6                # float64[SLOT_STACK_SIZE]: the texture's evaluation scratch
+SLOT_STACK_SIZE = 7
+SLOT_SIZE = 8
+TAB_SIZE = TAB_SLOTS + 2 * SLOT_SIZE
+
+# --- statistics: int64[STAT_SIZE], written by the driver -------------------------
+STAT_CALLBACKS = 0            # blocks so far (callbacks, or frames streamed; written last)
+STAT_FRAMES = 1               # frames written so far
+STAT_UNDERFLOWS = 2           # blocks that came late (paOutputUnderflow; the amplifier's underruns)
+STAT_PRIMING = 3              # blocks rendered before the output played (paPrimingOutput; prefill)
+STAT_SIZE = 4
+
+# --- per-block records: int64[rows, BLOCK_COLS], row STAT_CALLBACKS % rows -------
+BLOCK_SAMPLE_INDEX = 0        # stream sample index of the block's first sample
+BLOCK_ENTRY_NS = 1            # CLOCK_MONOTONIC (ns) when the block began
+BLOCK_DAC_DELAY_NS = 2        # ns from then until its first sample plays (at the DAC, or the amplifier)
+BLOCK_COMPUTE_NS = 3          # time spent rendering it (ns)
+BLOCK_FINGER_COUNT = 4        # finger samples written when the block started
+BLOCK_FRAMES = 5              # frames of the block
+BLOCK_COLS = 6
+
+_F8 = np.float64
+_F4 = np.float32
+_I8 = np.int64
+
+
+@numba.njit(inline="always", nogil=True, error_model="numpy")
+def begin_block(table, first_sample, frames, dac_delay_ns):  # type: ignore[no-untyped-def]
+    """Start a block's record: its row in the block ring (``first_sample``, entry time, ``dac_delay_ns``
+    from now to the first sample at the DAC or amplifier, finger count, ``frames``). The finger count is
+    load-acquired once into ``TAB_FINGER_SEEN``: the rows of those samples are then visible, and the
+    kernel reads that count, not the live one. Returns (stats, row, entry time in ns)."""
+    entry_ns = monotonic_ns()
+    stats = numba.carray(pointer(table[TAB_STATS]), STAT_SIZE, _I8)
+    blocks = numba.carray(pointer(table[TAB_BLOCKS]), (table[TAB_BLOCK_ROWS], BLOCK_COLS), _I8)
+    finger_count = numba.carray(pointer(table[TAB_FINGER_COUNT]), 1, _I8)
+    table[TAB_FINGER_SEEN] = load_acquire(finger_count, 0)
+    row = blocks[stats[STAT_CALLBACKS] % blocks.shape[0]]
+    row[BLOCK_SAMPLE_INDEX] = first_sample
+    row[BLOCK_ENTRY_NS] = entry_ns
+    row[BLOCK_DAC_DELAY_NS] = dac_delay_ns
+    row[BLOCK_FINGER_COUNT] = table[TAB_FINGER_SEEN]
+    row[BLOCK_FRAMES] = frames
+    return stats, row, entry_ns
+
+
+@numba.njit(inline="always", nogil=True, error_model="numpy")
+def finish_block(stats, row, entry_ns, frames, underflow, priming):  # type: ignore[no-untyped-def]
+    """Close a block's record: compute time, counters (the block count last)."""
+    if underflow:
+        stats[STAT_UNDERFLOWS] += 1
+    if priming:
+        stats[STAT_PRIMING] += 1
+    stats[STAT_FRAMES] += frames
+    row[BLOCK_COMPUTE_NS] = monotonic_ns() - entry_ns
+    stats[STAT_CALLBACKS] += 1
+
+
+@numba.njit(inline="always", nogil=True, error_model="numpy")
+def render_into(table, state, out, frames, channels, channel):  # type: ignore[no-untyped-def]
+    """Render ``frames`` samples with the table's arrays into ``out[k * channels + channel]`` (other
+    channels untouched) and the drive ring, in pieces of at most the scratch's length. Call it after
+    :func:`begin_block` (which acquires the finger count the kernel reads)."""
+    cfg = numba.carray(pointer(table[TAB_CFG]), table[TAB_CFG_SIZE], _F8)
+    dev = numba.carray(pointer(table[TAB_DEV]), (table[TAB_DEV_ROWS], table[TAB_DEV_COLS]), _F8)
+    power_ring = numba.carray(pointer(table[TAB_POWER_RING]), table[TAB_POWER_RING_SIZE], _F8)
+    finger = numba.carray(pointer(table[TAB_FINGER]), (table[TAB_FINGER_ROWS], FINGER_COLS), _F8)
+    finger_count = table[TAB_FINGER_SEEN:TAB_FINGER_SEEN + 1]  # acquired in begin_block
+    telem = numba.carray(pointer(table[TAB_TELEM]), (table[TAB_TELEM_ROWS], TEL_COLS), _F8)
+    telem_count = numba.carray(pointer(table[TAB_TELEM_COUNT]), 1, _I8)
+    active = load_acquire(table, TAB_ACTIVE_SLOT)  # the slot's contents were written before it
+    slot = table[TAB_SLOTS + active * SLOT_SIZE: TAB_SLOTS + (active + 1) * SLOT_SIZE]
+    prog = numba.carray(pointer(slot[SLOT_PROG]), (slot[SLOT_PROG_ROWS], TEX_PROG_COLS), _I8)
+    params = numba.carray(pointer(slot[SLOT_PARAMS]), slot[SLOT_PARAMS_SIZE], _F8)
+    img = numba.carray(pointer(slot[SLOT_IMG]), slot[SLOT_IMG_SIZE], _F8)
+    stack = numba.carray(pointer(slot[SLOT_STACK]), slot[SLOT_STACK_SIZE], _F8)
+    cfg[CFG_TEXTURE_T0_S] = numba.carray(pointer(table[TAB_SLOT_T0]), 2, _F8)[active]
+    scratch = numba.carray(pointer(table[TAB_SCRATCH]), table[TAB_SCRATCH_FRAMES], _F4)
+    drive = numba.carray(pointer(table[TAB_DRIVE]), table[TAB_DRIVE_FRAMES], _F4)
+    done = 0
+    while done < frames:
+        count = min(frames - done, scratch.shape[0])
+        piece = scratch[:count]
+        start = np.int64(state[STATE_NEXT_INDEX])
+        render_block(piece, start, cfg, dev, state, power_ring, finger, finger_count,
+                     prog, params, img, stack, telem, telem_count)
+        for k in range(count):
+            out[(done + k) * channels + channel] = piece[k]
+            drive[(start + k) % drive.shape[0]] = piece[k]
+        done += count
+
+

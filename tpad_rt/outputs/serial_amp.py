@@ -1,0 +1,438 @@
+"""``serial://PORT``: a serial amplifier that makes the carrier itself and takes the envelope from the host.
+
+API map
+-------
+FORMS
+    ``serial:///dev/ttyACM0?envelope_hz=16000&buffer_ms=2&frame_ms=0.5&baud=921600``
+parse_serial_url(url) -> SerialTarget
+    the port and options; ConfigError (showing the expected form) for a bad one
+AmpLink.open(target, *, carrier_hz, timeout_s=HELLO_TIMEOUT_S) -> AmpLink
+    open the port (pyserial), say HELLO, check INFO (rule H1), set the carrier (H2);
+    BackendError for a port that cannot open, no or a bad answer, another protocol
+    version, a carrier or envelope rate the amplifier cannot make
+AmpLink.start(table) / .failure() / .stop(ramp_ms) / .stats() / .info / .carrier_hz
+    stream with the GIL-free streamer (:mod:`tpad_rt.kernel.amp_stream`) in a thread;
+    the error that ended the stream (a BackendError), or None; end with STOP (H8), close
+warm_up(table)
+    compile the streamer before a port opens
+
+docs/amp-protocol.md is the protocol, docs/amplifiers.md how to connect one. The
+handshake runs in Python with the same codec the streamer uses
+(:mod:`tpad_rt.kernel.amp_codec`); the stream runs in one numba call that holds no GIL.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.kernel import amp_codec as codec
+from tpad_rt.kernel import amp_stream
+from tpad_rt.kernel.atomics import publish
+from tpad_rt.urls import Option, Url, UrlForm, count, number, parse_url
+
+FORMS = (UrlForm("serial", "/dev/ttyACM0", (
+    Option("envelope_hz", 16000, count(1000, 100_000)), Option("buffer_ms", 2.0, number(0.1, high=1000.0)),
+    Option("frame_ms", 0.5, number(0.05, high=20.0)), Option("baud", 921600, count(1200, 20_000_000)))),)
+#: Seconds to wait for INFO after a HELLO (H1), and HELLOs sent before giving up.
+HELLO_TIMEOUT_S = 0.5
+HELLO_TRIES = 3
+#: Seconds to wait for the ACK of SET_CARRIER, START and STOP.
+ACK_TIMEOUT_S = 0.5
+STOP_ACK_TIMEOUT_S = 0.2
+#: What the host calls itself in HELLO.
+HOST_NAME = b"tpad-rt"
+
+
+@dataclass(frozen=True)
+class SerialTarget:
+    """A parsed ``serial://`` URL: the port's path and the stream's settings."""
+
+    port: str
+    envelope_hz: int
+    buffer_ms: float
+    frame_ms: float
+    baud: int
+
+
+@dataclass(frozen=True)
+class AmpInfo:
+    """What an amplifier's INFO says (docs/amp-protocol.md 3.2), in SI units."""
+
+    firmware: str
+    serial: str
+    envelope_rates_hz: tuple[int, ...]
+    carrier_min_hz: float
+    carrier_max_hz: float
+    carrier_step_hz: float
+    full_scale_v: float
+    max_v: float
+    slew_v_per_ms: float
+    buffer_samples: int
+    max_frame_samples: int
+    watchdog_ms: int
+    status_period_ms: int
+    measures: int
+    max_current_a: float
+
+
+def parse_serial_url(url: Url | str) -> SerialTarget:
+    """Read a ``serial://`` URL; ConfigError (showing the expected form) for a bad option or no port."""
+    if isinstance(url, str):
+        url = parse_url(url, "output", {"serial": FORMS})
+    values = FORMS[0].read(url)
+    if not url.target:
+        raise url.fail("no port: name the serial port, e.g. serial:///dev/ttyACM0", FORMS)
+    return SerialTarget(url.target, values["envelope_hz"], values["buffer_ms"], values["frame_ms"], values["baud"])
+
+
+def _text(field: np.ndarray) -> str:
+    """An INFO string field: ASCII up to its first NUL, unprintable bytes shown as '?'."""
+    raw = bytes(field).split(b"\0", 1)[0]
+    return "".join(chr(b) if 32 <= b < 127 else "?" for b in raw)
+
+
+def _read_info(body: np.ndarray) -> AmpInfo:
+    """AmpInfo from an INFO body; BackendError naming the first field out of the document's ranges (H1)."""
+    p = codec.PAYLOAD
+    u16 = lambda at: int(codec.get_u16(body, p + at))  # noqa: E731
+    u32 = lambda at: int(codec.get_u32(body, p + at))  # noqa: E731
+    rates = tuple(rate for rate in (u32(codec.INFO_RATES + 4 * k) for k in range(4)) if rate)
+    info = AmpInfo(
+        firmware=_text(body[p + codec.INFO_FIRMWARE:p + codec.INFO_FIRMWARE + 16]),
+        serial=_text(body[p + codec.INFO_SERIAL:p + codec.INFO_SERIAL + 16]),
+        envelope_rates_hz=rates,
+        carrier_min_hz=u32(codec.INFO_CARRIER_MIN_MHZ) / 1000, carrier_max_hz=u32(codec.INFO_CARRIER_MAX_MHZ) / 1000,
+        carrier_step_hz=u32(codec.INFO_CARRIER_STEP_MHZ) / 1000,
+        full_scale_v=u32(codec.INFO_FULL_SCALE_MV) / 1000, max_v=u32(codec.INFO_MAX_MV) / 1000,
+        slew_v_per_ms=u32(codec.INFO_SLEW_MV_PER_MS) / 1000, buffer_samples=u16(codec.INFO_BUFFER_SAMPLES),
+        max_frame_samples=u16(codec.INFO_MAX_FRAME_SAMPLES), watchdog_ms=u16(codec.INFO_WATCHDOG_MS),
+        status_period_ms=u16(codec.INFO_STATUS_PERIOD_MS), measures=int(body[p + codec.INFO_MEASURES]),
+        max_current_a=u32(codec.INFO_MAX_CURRENT_MA) / 1000,
+    )
+    for problem, bad in (
+        ("no envelope rate", not rates),
+        (f"carrier range {info.carrier_min_hz:g}-{info.carrier_max_hz:g} Hz is empty",
+         not 0 < info.carrier_min_hz <= info.carrier_max_hz),
+        (f"full scale {info.full_scale_v:g} V is 0", info.full_scale_v <= 0),
+        (f"max {info.max_v:g} V is not in (0, full scale {info.full_scale_v:g} V]",
+         not 0 < info.max_v <= info.full_scale_v),
+        (f"max_frame_samples {info.max_frame_samples} is not in [1, {codec.MAX_FRAME_SAMPLES}]",
+         not 1 <= info.max_frame_samples <= codec.MAX_FRAME_SAMPLES),
+        (f"buffer of {info.buffer_samples} samples is smaller than two frames",
+         info.buffer_samples < 2 * info.max_frame_samples and info.buffer_samples < 2),
+        (f"watchdog {info.watchdog_ms} ms is not in [1, 50]", not 1 <= info.watchdog_ms <= 50),
+        (f"status period {info.status_period_ms} ms is not in [1, 100]", not 1 <= info.status_period_ms <= 100),
+    ):
+        if bad:
+            raise BackendError(f"the amplifier's INFO is out of the protocol's ranges: {problem}")
+    return info
+
+
+class AmpLink:
+    """An open session with a serial amplifier (create it with :meth:`open`)."""
+
+    def __init__(self, target: SerialTarget, port: object, fd: int):
+        self.target = target
+        self._port = port  # the pyserial object: it owns fd
+        self._fd = fd
+        self._rx = b""
+        self._frame = np.zeros(codec.MAX_BODY, dtype=np.uint8)
+        self._body = np.zeros(codec.MAX_BODY, dtype=np.uint8)
+        self._out = np.zeros(codec.MAX_ENCODED, dtype=np.uint8)
+        self.link = np.zeros(amp_stream.LINK_SIZE, dtype=np.int64)
+        self._buffers = np.zeros((amp_stream.BUF_ROWS, amp_stream.BUF_BYTES), dtype=np.uint8)
+        self._envelope = np.zeros(amp_stream.ENVELOPE_SCRATCH, dtype=np.float32)
+        self._thread: threading.Thread | None = None
+        self._crash: BaseException | None = None
+        self.info: AmpInfo | None = None
+        self.carrier_hz = float("nan")
+        self.frame_samples = 0
+        self.target_fill = 0
+
+    # --- opening ----------------------------------------------------------------------
+
+    @classmethod
+    def open(cls, target: SerialTarget, *, carrier_hz: float, timeout_s: float = HELLO_TIMEOUT_S) -> AmpLink:
+        """Open ``target``'s port, make the handshake (H1) and set the carrier (H2); errors as the module says."""
+        import serial  # pyserial
+
+        try:
+            port = serial.Serial(target.port, target.baud, timeout=0, write_timeout=0, exclusive=True)
+        except (serial.SerialException, OSError, ValueError) as error:
+            raise BackendError(f"serial: cannot open {target.port}: {_reason(error)}") from None
+        fd = port.fileno()
+        os.set_blocking(fd, False)
+        link = cls(target, port, fd)
+        try:
+            link._hello(timeout_s)
+            link._set_carrier(carrier_hz)
+            link._plan()
+        except BaseException:
+            link.close()
+            raise
+        return link
+
+    def _send(self, payload: bytes, msg_type: int) -> int:
+        """Send one host frame with ``payload``; its seq."""
+        seq = int(self.link[amp_stream.LINK_SEQ])
+        self._frame[codec.PAYLOAD:codec.PAYLOAD + len(payload)] = np.frombuffer(payload, dtype=np.uint8)
+        size = codec.seal(self._frame, len(payload), msg_type, seq, self._out)
+        self.link[amp_stream.LINK_SEQ] = (seq + 1) & 0xFFFF
+        self._write(bytes(self._out[:size]))
+        return seq
+
+    def _write(self, data: bytes) -> None:
+        """Write ``data`` whole (waiting, at most ACK_TIMEOUT_S, while the port is full)."""
+        deadline = time.monotonic() + ACK_TIMEOUT_S
+        while data:
+            try:
+                data = data[os.write(self._fd, data):]
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    raise BackendError(f"serial: {self.target.port}: the amplifier does not read") from None
+                select.select([], [self._fd], [], 0.01)
+            except OSError as error:
+                raise BackendError(f"serial: {self.target.port}: {_reason(error)}") from None
+
+    def _receive(self, wanted: int, deadline: float) -> np.ndarray | None:
+        """The next valid body of type ``wanted`` before ``deadline`` (time.monotonic); None on timeout.
+
+        Other valid frames (STATUS) are passed over; an ACK BAD_VERSION or a frame of another
+        version is a BackendError (H6); so is a lost port.
+        """
+        while True:
+            while b"\0" in self._rx:
+                encoded, self._rx = self._rx.split(b"\0", 1)
+                body = self._decode(encoded)
+                if body is None:
+                    continue
+                if body[1] == codec.MSG_ACK and body[codec.PAYLOAD + codec.ACK_CODE] == codec.ACK_BAD_VERSION:
+                    raise _version_error(int(codec.get_u32(body, codec.PAYLOAD + codec.ACK_VALUE)))
+                if body[1] == wanted:
+                    return body
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            readable, _, _ = select.select([self._fd], [], [], left)
+            if readable:
+                try:
+                    chunk = os.read(self._fd, 4096)
+                except BlockingIOError:
+                    continue
+                except OSError as error:
+                    raise BackendError(f"serial: {self.target.port}: {_reason(error)}") from None
+                if not chunk:
+                    raise BackendError(f"serial: {self.target.port}: the port closed")
+                self._rx = (self._rx + chunk)[-4 * codec.MAX_ENCODED:]
+
+    def _decode(self, encoded: bytes) -> np.ndarray | None:
+        """The checked body of one received frame, or None for an empty or bad one."""
+        if not encoded or len(encoded) > codec.MAX_ENCODED:
+            return None
+        size = codec.cobs_decode(np.frombuffer(encoded, dtype=np.uint8), len(encoded), self._body)
+        kind = codec.open_body(self._body, size) if size >= 0 else codec.CHECK_SHORT
+        if kind == codec.CHECK_VERSION:
+            raise _version_error(int(self._body[0]))
+        return self._body[:size].copy() if kind >= 0 else None
+
+    def _command(self, payload: bytes, msg_type: int, what: str) -> int:
+        """Send a command and wait for its ACK: its value; BackendError for no ACK or a refusal."""
+        seq = self._send(payload, msg_type)
+        deadline = time.monotonic() + ACK_TIMEOUT_S
+        while (body := self._receive(codec.MSG_ACK, deadline)) is not None:
+            if codec.get_u16(body, codec.PAYLOAD + codec.ACK_ACKED_SEQ) != seq:
+                continue
+            code = int(body[codec.PAYLOAD + codec.ACK_CODE])
+            value = int(codec.get_u32(body, codec.PAYLOAD + codec.ACK_VALUE))
+            if code != codec.ACK_OK:
+                name = codec.ACK_NAMES[code] if code < len(codec.ACK_NAMES) else f"code {code}"
+                raise BackendError(f"serial: the amplifier on {self.target.port} refused {what}: {name}")
+            return value
+        raise BackendError(f"serial: the amplifier on {self.target.port} did not acknowledge {what} "
+                           f"within {ACK_TIMEOUT_S:g} s")
+
+    def _hello(self, timeout_s: float) -> None:
+        """HELLO until INFO comes (H1), HELLO_TRIES times at most."""
+        for _ in range(HELLO_TRIES):
+            self.link[amp_stream.LINK_SEQ] = 0
+            self._send(HOST_NAME.ljust(codec.HELLO_BYTES, b"\0"), codec.MSG_HELLO)
+            body = self._receive(codec.MSG_INFO, time.monotonic() + timeout_s)
+            if body is not None and len(body) == codec.PAYLOAD + codec.INFO_BYTES + codec.CRC_BYTES:
+                self.info = _read_info(body)
+                return
+        raise BackendError(f"serial: no amplifier answered on {self.target.port} ({HELLO_TRIES} HELLOs, "
+                           f"{timeout_s:g} s each): is it powered, and does it speak tpad-rt's protocol "
+                           f"version {codec.VERSION}? (docs/amplifiers.md)")
+
+    def _set_carrier(self, carrier_hz: float) -> None:
+        """SET_CARRIER (H2): the achieved carrier goes to ``carrier_hz``; BackendError out of the amplifier's range."""
+        info = self.info
+        assert info is not None
+        if not info.carrier_min_hz <= carrier_hz <= info.carrier_max_hz:
+            raise BackendError(f"serial: the device's carrier {carrier_hz:g} Hz is outside the amplifier's range "
+                               f"{info.carrier_min_hz:g}-{info.carrier_max_hz:g} Hz")
+        achieved_mhz = self._command(round(carrier_hz * 1000).to_bytes(4, "little"), codec.MSG_SET_CARRIER,
+                                     f"the carrier {carrier_hz:g} Hz")
+        self.carrier_hz = achieved_mhz / 1000
+
+    def _plan(self) -> None:
+        """Frame size and target fill from the URL and INFO; BackendError if the amplifier cannot take them."""
+        info, target = self.info, self.target
+        assert info is not None
+        if target.envelope_hz not in info.envelope_rates_hz:
+            raise BackendError(f"serial: the amplifier takes envelope rates of "
+                               f"{', '.join(map(str, info.envelope_rates_hz))} Hz, not {target.envelope_hz} "
+                               f"(envelope_hz=)")
+        self.frame_samples = max(1, min(info.max_frame_samples, round(target.frame_ms * 1e-3 * target.envelope_hz)))
+        self.target_fill = max(self.frame_samples, round(target.buffer_ms * 1e-3 * target.envelope_hz))
+        if self.target_fill + self.frame_samples > info.buffer_samples:
+            most_ms = (info.buffer_samples - self.frame_samples) / target.envelope_hz * 1e3
+            raise ConfigError(f"serial: buffer_ms={target.buffer_ms:g} is more than the amplifier's buffer holds "
+                              f"at {target.envelope_hz} Hz (at most {most_ms:g} ms)")
+
+    # --- streaming --------------------------------------------------------------------
+
+    def start(self, table: object) -> None:
+        """START at the table's next sample (prefill: the target fill), then stream in a thread of its own."""
+        link = self.link
+        info = self.info
+        assert info is not None
+        index = int(table.next_sample)  # type: ignore[attr-defined]
+        payload = (self.target.envelope_hz.to_bytes(4, "little") + (index & 0xFFFFFFFF).to_bytes(4, "little")
+                   + min(self.target_fill, info.buffer_samples).to_bytes(2, "little"))
+        self._command(payload, codec.MSG_START, f"START at {self.target.envelope_hz} Hz")
+        link[amp_stream.LINK_FD] = self._fd
+        link[amp_stream.LINK_ENVELOPE_HZ] = self.target.envelope_hz
+        link[amp_stream.LINK_FRAME_SAMPLES] = self.frame_samples
+        link[amp_stream.LINK_TARGET_FILL] = self.target_fill
+        link[amp_stream.LINK_BUFFER_SAMPLES] = info.buffer_samples
+        link[amp_stream.LINK_STATUS_TIMEOUT_NS] = (4 * info.status_period_ms + 100) * 1_000_000
+        link[amp_stream.LINK_START_INDEX] = index
+        self._thread = threading.Thread(target=self._run, args=(table,), name="tpad-rt serial streamer", daemon=True)
+        self._thread.start()
+
+    def _run(self, table: object) -> None:
+        try:
+            amp_stream.stream(table.table, self.link, self._buffers, self._envelope)  # type: ignore[attr-defined]
+        except BaseException as error:  # noqa: BLE001 - reported by failure()
+            self._crash = error
+
+    def failure(self) -> BaseException | None:
+        """The error that ended the stream (a BackendError), or None while it runs or after a requested stop."""
+        if self._crash is not None:
+            return self._crash
+        reason = int(self.link[amp_stream.LINK_EXIT])
+        if reason in (amp_stream.EXIT_RUNNING, amp_stream.EXIT_STOPPED):
+            return None
+        return BackendError(self._describe(reason))
+
+    def _describe(self, reason: int) -> str:
+        """The one-line message for an exit reason."""
+        link, port, info = self.link, self.target.port, self.info
+        assert info is not None
+        if reason == amp_stream.EXIT_PORT_LOST:
+            error = int(link[amp_stream.LINK_ERRNO])
+            why = os.strerror(error) if error else "the port closed"
+            return f"serial: lost the amplifier on {port}: {why} (unplugged, or its program ended)"
+        if reason == amp_stream.EXIT_STATUS_TIMEOUT:
+            return (f"serial: the amplifier on {port} stopped reporting (no STATUS for "
+                    f"{4 * info.status_period_ms + 100} ms): it hung or the line failed")
+        if reason == amp_stream.EXIT_FAULT:
+            faults = int(link[amp_stream.LINK_AMP_FAULTS])
+            names = [name for bit, name in codec.FAULT_BITS if faults & bit] or [f"bits {faults:#x}"]
+            return f"serial: the amplifier on {port} reported a fault: {', '.join(names)}; its output is off"
+        if reason == amp_stream.EXIT_VERSION:
+            return str(_version_error(int(link[amp_stream.LINK_AMP_VERSION])))
+        if reason == amp_stream.EXIT_REFUSED:
+            code = int(link[amp_stream.LINK_ACK_CODE])
+            name = codec.ACK_NAMES[code] if code < len(codec.ACK_NAMES) else f"code {code}"
+            return f"serial: the amplifier on {port} refused to start again after its watchdog: {name}"
+        return (f"serial: the amplifier on {port} stopped reading (the port took no byte for "
+                f"{4 * info.status_period_ms + 100} ms)")
+
+    @property
+    def streaming(self) -> bool:
+        """True while the streamer thread runs."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def stop(self, ramp_ms: float) -> None:
+        """End the stream with STOP and ``ramp_ms`` (H8: the streamer sends it right after the last envelope
+        frame), wait (STOP_ACK_TIMEOUT_S at most) for its ACK, and close the port. A missing ACK is not an
+        error: the amplifier's watchdog ramps to 0 anyway (A4)."""
+        if self._thread is not None:
+            self.link[amp_stream.LINK_STOP_RAMP_MS] = min(0xFFFF, max(1, round(ramp_ms)))
+            publish(self.link, amp_stream.LINK_STOP, 1)
+            self._thread.join()
+            self._thread = None
+        try:
+            seq = int(self.link[amp_stream.LINK_STOP_SEQ])
+            if self.failure() is None and seq >= 0:
+                self._rx = b""
+                deadline = time.monotonic() + STOP_ACK_TIMEOUT_S
+                while (body := self._receive(codec.MSG_ACK, deadline)) is not None:
+                    if codec.get_u16(body, codec.PAYLOAD + codec.ACK_ACKED_SEQ) == seq:
+                        break
+        except BackendError:
+            pass  # the port went away after the stream: nothing left to stop
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Close the port (safe twice)."""
+        port, self._port = self._port, None
+        if port is not None:
+            port.close()  # type: ignore[attr-defined]
+
+    def stats(self) -> dict[str, float | int | str]:
+        """The link's and the amplifier's counters (the last STATUS), by name."""
+        link, s = self.link, amp_stream
+        info = self.info
+        return {
+            "firmware": info.firmware if info else "", "carrier_hz": self.carrier_hz,
+            "envelope_hz": self.target.envelope_hz, "frame_samples": self.frame_samples,
+            "target_fill": self.target_fill, "frames_sent": int(link[s.LINK_FRAMES_SENT]),
+            "statuses": int(link[s.LINK_STATUSES]), "rx_bad": int(link[s.LINK_RX_BAD]),
+            "tx_blocked": int(link[s.LINK_TX_BLOCKED]), "late": int(link[s.LINK_LATE]),
+            "restarts": int(link[s.LINK_RESTARTS]), "amp_state": codec.STATE_NAMES[int(link[s.LINK_AMP_STATE]) % 5],
+            "amp_fill": int(link[s.LINK_AMP_FILL]), "amp_frames_ok": int(link[s.LINK_AMP_FRAMES_OK]),
+            "amp_frames_bad": int(link[s.LINK_AMP_FRAMES_BAD]),
+            "amp_frames_rejected": int(link[s.LINK_AMP_FRAMES_REJECTED]),
+            "amp_sequence_gaps": int(link[s.LINK_AMP_SEQUENCE_GAPS]), "amp_underruns": int(link[s.LINK_AMP_UNDERRUNS]),
+            "amp_watchdog_trips": int(link[s.LINK_AMP_WATCHDOG_TRIPS]),
+            "amp_voltage_v_rms": link[s.LINK_AMP_VOLTAGE_MV_RMS] / 1e3,
+            "amp_current_a_rms": link[s.LINK_AMP_CURRENT_UA_RMS] / 1e6,
+            "amp_phase_deg": link[s.LINK_AMP_PHASE_CDEG] / 100,
+        }
+
+
+def warm_up(table: object) -> None:
+    """Compile the streamer (or load it from numba's cache) with a run that ends at once, on ``table`` (a copy
+    of the real one): before a port is opened, so that the amplifier's watchdog never waits for a compile."""
+    link = np.zeros(amp_stream.LINK_SIZE, dtype=np.int64)
+    link[[amp_stream.LINK_FD, amp_stream.LINK_STOP]] = (-1, 1)
+    link[[amp_stream.LINK_ENVELOPE_HZ, amp_stream.LINK_FRAME_SAMPLES]] = (1000, 1)
+    buffers = np.zeros((amp_stream.BUF_ROWS, amp_stream.BUF_BYTES), dtype=np.uint8)
+    amp_stream.stream(table.table, link, buffers, np.zeros(amp_stream.ENVELOPE_SCRATCH, dtype=np.float32))  # type: ignore[attr-defined]
+
+
+def _version_error(version: int) -> BackendError:
+    """The error for an amplifier speaking another protocol version (H6)."""
+    return BackendError(f"serial: the amplifier speaks protocol version {version}; this tpad-rt speaks version "
+                        f"{codec.VERSION} (update one of them: docs/amp-protocol.md)")
+
+
+def _reason(error: BaseException) -> str:
+    """A short reason from an OSError or pyserial's SerialException (whose first argument is the errno)."""
+    number = getattr(error, "errno", None)
+    if not isinstance(number, int) and error.args and isinstance(error.args[0], int):
+        number = error.args[0]
+    if isinstance(number, int) and number > 0:
+        return os.strerror(number)
+    return str(error) or type(error).__name__
