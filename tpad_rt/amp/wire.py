@@ -27,12 +27,13 @@ from __future__ import annotations
 
 import enum
 import struct
+import threading
 from dataclasses import astuple, dataclass
 from typing import ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 import numpy.typing as npt
-from cobs import cobs
+from cobs import cobs  # type: ignore[import-untyped]
 from crc import Calculator, Crc16
 
 #: The protocol version this codec speaks (body byte 0).
@@ -50,7 +51,8 @@ MAX_FRAME_SAMPLES = 256
 
 _HEADER = struct.Struct("<BBH")
 _CRC = struct.Struct("<H")
-_CRC16 = Calculator(Crc16.IBM_3740, optimized=True)
+#: One crc.Calculator per thread: a Calculator keeps its register between calls, so it is not thread-safe.
+_CALCULATORS = threading.local()
 
 
 class Type(enum.IntEnum):
@@ -111,8 +113,11 @@ class Frame(NamedTuple):
 
 
 def crc16(data: bytes) -> int:
-    """CRC-16/IBM-3740 of ``data`` (section 2.2)."""
-    return int(_CRC16.checksum(data))
+    """CRC-16/IBM-3740 of ``data`` (section 2.2); safe to call from several threads."""
+    calculator = getattr(_CALCULATORS, "crc16", None)
+    if calculator is None:
+        calculator = _CALCULATORS.crc16 = Calculator(Crc16.IBM_3740.value, optimized=True)
+    return int(calculator.checksum(data))
 
 
 def encode(type_: int, seq: int, payload: bytes, version: int = VERSION) -> bytes:
@@ -301,8 +306,12 @@ class Info:
 
     @classmethod
     def unpack(cls, payload: bytes) -> Info:
-        fields = cls.LAYOUT.unpack(payload)
-        return cls(_text(fields[0]), _text(fields[1]), tuple(fields[2:6]), *fields[6:17], fields[18])  # type: ignore[arg-type]
+        (firmware, serial, rate_0, rate_1, rate_2, rate_3, carrier_min_mhz, carrier_max_mhz, carrier_step_mhz,
+         full_scale_mv, max_mv, slew_mv_per_ms, buffer_samples, max_frame_samples, watchdog_ms, status_period_ms,
+         measures, _reserved, max_current_ma) = cls.LAYOUT.unpack(payload)
+        return cls(_text(firmware), _text(serial), (rate_0, rate_1, rate_2, rate_3), carrier_min_mhz, carrier_max_mhz,
+                   carrier_step_mhz, full_scale_mv, max_mv, slew_mv_per_ms, buffer_samples, max_frame_samples,
+                   watchdog_ms, status_period_ms, measures, max_current_ma)
 
 
 @dataclass(frozen=True)

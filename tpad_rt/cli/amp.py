@@ -1,0 +1,203 @@
+"""``tpad-rt amp emulate``: a software serial amplifier that follows docs/amp-protocol.md (version 1).
+
+The emulator is an amplifier a host can talk to without hardware. By default it opens a
+new pseudo-terminal and prints, as its first line, ``amplifier emulator on /dev/pts/N``:
+a host opens that path as its serial port (``serial:///dev/pts/N``). It keeps its own
+end of the terminal open, so a host may close and reopen the port. ``--port PATH`` uses
+an existing serial device instead (raw mode, 921600 baud).
+
+It answers HELLO with INFO (firmware ``tpad-emu 1.0``; envelope rates 8000 and 16000 Hz;
+carriers 10-80 kHz, widened to take in the device's resonance, in 10 mHz steps; full
+scale 1.25 x the device's ``max_voltage_v``, clamp at it; a 1024-sample buffer, frames of
+up to 256 samples, a 50 ms watchdog with a 10 ms ramp, STATUS every 5 ms; current,
+voltage and phase measured; an overcurrent trip at 1.5 x the current at the clamp at
+resonance), and enforces every amplifier rule A1-A8. Envelope samples play in real time
+at their due times on the monotonic clock; each drives the device's simulated plate
+(``--device``, default calibration/default.yaml, at a contact force of 0.5 N), whose
+circuit gives the measured current and phase.
+
+It ends on SIGTERM or SIGINT (Ctrl-C), after ``--duration``, or at a ``disconnect`` fault:
+the output ramps to 0, ``--record FILE.npz`` is written (through a temporary file), and a
+one-line summary of the counters follows, with exit status 0. The recording holds one
+entry per applied envelope sample: ``t_s`` (time.monotonic() when applied), ``envelope_v``
+(signed volts, after clamp and slew), ``carrier_hz``, ``index`` (stream index, -1 for
+none: a held or ramped sample), ``plate_amplitude_um``, ``state``; and the scalars
+``frames_ok``, ``frames_bad``, ``frames_rejected``, ``sequence_gaps``, ``underruns``,
+``watchdog_trips``, ``faults`` (the counters since the last HELLO), ``envelope_hz`` (the
+last START's, 0 if none), ``full_scale_mv``, ``max_mv``, ``slew_mv_per_ms``, ``truncated``.
+It keeps at most 10 minutes at 16 kHz (a note on stderr says when it stops keeping).
+
+``--fault SPEC`` (repeatable) injects faults, listed in ``--help``; ``--seed`` makes the
+random ones repeatable. A bad flag, fault, device file, recording path or port ends in
+one line on stderr and exit status 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import gc
+import signal
+import textwrap
+import threading
+import time
+from collections.abc import Callable, Iterator
+from types import FrameType
+
+from tpad_rt.amp.emulator import (
+    Amplifier, Circuit, Emulator, FaultPlan, Plate, Port, Recorder, amplifier_info, check_record_path, sim_rate_hz,
+    write_recording,
+)
+from tpad_rt.cli.arguments import number, whole
+from tpad_rt.device import Device
+from tpad_rt.errors import ConfigError
+from tpad_rt.limits import MAX_INPUT_S
+from tpad_rt.pipeline import RenderOptions
+
+#: Contact force (N) of the simulated plate: the runtime's default finger force.
+CONTACT_FORCE_N = RenderOptions.default_force_n
+#: Longest delay:MS fault (ms).
+MAX_DELAY_MS = 10_000.0
+
+_RATE = number(0, True, 1, "a probability")
+_SECONDS = number(0, True, MAX_INPUT_S, "s")
+#: Each fault: its arguments (name, parser) and what it does.
+FAULTS: dict[str, tuple[tuple[tuple[str, Callable[[str], float]], ...], str]] = {
+    "drop": ((("RATE", _RATE),), "drop each received byte with probability RATE (0 to 1)"),
+    "corrupt": ((("RATE", _RATE),), "flip one random bit of each received byte with probability RATE (0 to 1)"),
+    "delay": ((("MS", number(0, True, MAX_DELAY_MS, "ms")),),
+              f"hand every received byte on MS ms late (0 to {MAX_DELAY_MS:g})"),
+    "stall": ((("AT_S", _SECONDS), ("FOR_S", _SECONDS)), "read nothing from AT_S s on, for FOR_S s (repeatable)"),
+    "overcurrent": ((("AT_S", _SECONDS),),
+                    "an overcurrent fault at AT_S s (A6: ramp to 0 within 1 ms, FAULT until HELLO; repeatable)"),
+    "disconnect": ((("AT_S", _SECONDS),), "close the port at AT_S s, then end as on SIGTERM"),
+}
+#: Faults that may be given more than once.
+_REPEATABLE = ("stall", "overcurrent")
+
+
+def _syntax(kind: str) -> str:
+    return ":".join((kind, *(name for name, _ in FAULTS[kind][0])))
+
+
+def fault_spec(text: str) -> tuple[str, tuple[float, ...]]:
+    """An argparse type: ``KIND:VALUE[:VALUE]`` (FAULTS) as ``(kind, values)``."""
+    kind, *fields = text.split(":")
+    if kind not in FAULTS:
+        raise argparse.ArgumentTypeError(
+            f"unknown fault '{kind}' in '{text}'; one of {', '.join(_syntax(name) for name in FAULTS)}")
+    arguments = FAULTS[kind][0]
+    if len(fields) != len(arguments):
+        raise argparse.ArgumentTypeError(f"fault {kind} is written {_syntax(kind)}, got '{text}'")
+    values = []
+    for (name, parse), field in zip(arguments, fields):
+        try:
+            values.append(parse(field))
+        except argparse.ArgumentTypeError as error:
+            raise argparse.ArgumentTypeError(f"{kind} {name} {error}") from None
+    return kind, tuple(values)
+
+
+def fault_plan(specs: list[tuple[str, tuple[float, ...]]], seed: int) -> FaultPlan:
+    """The FaultPlan of the parsed ``--fault`` specs; ConfigError when a single-valued fault is given twice."""
+    given: dict[str, list[tuple[float, ...]]] = {}
+    for kind, values in specs:
+        given.setdefault(kind, []).append(values)
+    for kind, occurrences in given.items():
+        if len(occurrences) > 1 and kind not in _REPEATABLE:
+            raise ConfigError(f"--fault {kind} given {len(occurrences)} times; it may be given once")
+    first = {kind: occurrences[0][0] for kind, occurrences in given.items()}
+    return FaultPlan(
+        drop_rate=first.get("drop", 0.0), corrupt_rate=first.get("corrupt", 0.0),
+        delay_s=first.get("delay", 0.0) / 1000,
+        stalls_s=tuple((at, span) for at, span in given.get("stall", [])),
+        overcurrent_at_s=tuple(at for (at,) in given.get("overcurrent", [])),
+        disconnect_at_s=first.get("disconnect"), seed=seed,
+    )
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    """Register ``amp`` and its action ``emulate``."""
+    parser = subparsers.add_parser(
+        "amp",
+        help="serial amplifier tools: emulate a protocol amplifier (docs/amp-protocol.md)",
+        description="Serial amplifier tools (docs/amp-protocol.md).",
+    )
+    actions = parser.add_subparsers(dest="action", metavar="ACTION")
+    actions.required = True
+    emulate = actions.add_parser(
+        "emulate",
+        help="a software amplifier on a new pty (or --port), following docs/amp-protocol.md",
+        description=textwrap.fill(
+            "Run a software amplifier that follows docs/amp-protocol.md (version 1). It prints 'amplifier "
+            "emulator on PATH' first (PATH: a new pty, or --port), serves the protocol in real time with the "
+            "device's simulated plate, and ends on SIGTERM, Ctrl-C, --duration or a disconnect fault: the "
+            "output ramps to 0, --record is written and a summary of the counters is printed.", 79),
+        epilog="faults (--fault SPEC, repeatable; times count from the emulator's start):\n"
+        + "\n".join(f"  {_syntax(kind):<20} {text}" for kind, (_, text) in FAULTS.items()),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    emulate.add_argument("--device", metavar="FILE", help="device file (default: calibration/default.yaml)")
+    emulate.add_argument("--port", metavar="PATH", help="serve this existing serial device instead of a new pty")
+    emulate.add_argument("--record", metavar="FILE.npz",
+                         help="write the applied samples and the counters here at the end (.npz)")
+    emulate.add_argument("--duration", metavar="S", type=number(0, False, MAX_INPUT_S, "s"),
+                         help=f"end after S seconds, at most {MAX_INPUT_S:g} (default: run until SIGTERM or Ctrl-C)")
+    emulate.add_argument("--fault", metavar="SPEC", action="append", default=[], type=fault_spec,
+                         help="inject a fault (see below); repeatable")
+    emulate.add_argument("--seed", metavar="N", type=whole(2**32 - 1, "a 32-bit seed", low=0), default=0,
+                         help="seed of the random faults (default 0)")
+    emulate.set_defaults(func=run)
+
+
+@contextlib.contextmanager
+def _stop_signals() -> Iterator[threading.Event]:
+    """An event set by SIGTERM or SIGINT while inside (the previous handlers come back after)."""
+    event = threading.Event()
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        event.set()
+
+    previous = {signum: signal.signal(signum, on_signal) for signum in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        yield event
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+_ENDINGS = {"stopped": "stopped by a signal", "duration": "ran for --duration", "disconnected": "disconnected"}
+
+
+def run(args: argparse.Namespace) -> int:
+    """Emulate until stopped; 0 when it ends as asked (ConfigError, BackendError for what a user can fix)."""
+    device = Device.default() if args.device is None else Device.from_file(args.device)
+    plan = fault_plan(args.fault, args.seed)
+    if args.record is not None:
+        check_record_path(args.record)
+    circuit = Circuit(device, CONTACT_FORCE_N)
+    info = amplifier_info(device, circuit)
+    plate = Plate(device, CONTACT_FORCE_N, sim_rate_hz(info.carrier_max_mhz))
+    recorder = Recorder() if args.record is not None else None
+    with _stop_signals() as stop:  # to the end: a second signal must not cut the recording short
+        port = Port.open_pty() if args.port is None else Port.open_device(args.port)
+        try:
+            origin_s = time.monotonic()
+            amplifier = Amplifier(info, circuit, plate, origin_s, recorder, on_hello=port.discard_output)
+            emulator = Emulator(amplifier, port, plan, origin_s, args.duration)
+            # The ~150k objects of the imports would make each full collection a 70 ms stall of the real-time
+            # loop, past A4's watchdog: frozen, a collection scans only what the emulator makes.
+            gc.freeze()
+            print(f"amplifier emulator on {port.name}", flush=True)
+            ending = emulator.run(stop.is_set)
+        finally:
+            port.close()
+        counters = {**vars(amplifier.counters), "faults": amplifier.faults}
+        if recorder is not None:
+            write_recording(args.record, recorder, {
+                **counters, "envelope_hz": amplifier.envelope_hz, "full_scale_mv": info.full_scale_mv,
+                "max_mv": info.max_mv, "slew_mv_per_ms": info.slew_mv_per_ms, "truncated": recorder.truncated,
+            })
+        summary = " ".join(f"{name}={value}" for name, value in counters.items())
+        print(f"amplifier emulator {_ENDINGS[ending]}: {summary}", flush=True)
+    return 0
