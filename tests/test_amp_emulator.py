@@ -2,7 +2,9 @@
 
 Each emulator runs in a process of its own; the test is its host, with a small codec of
 its own (``cobs`` and ``crc`` used directly, the struct layouts written again from the
-document), so a misreading of the document in tpad_rt/amp/wire.py shows up here. The
+document), so a misreading of the document in tpad_rt/amp/wire.py shows up here. Two
+tests drive the amplifier in-process on given times instead (a restart and HELLO's ramp,
+sample by sample) and the recording's limit. The
 tests wait for events (a STATUS showing a state, a counter reaching a value, an ACK),
 with generous timeouts as a safety net only. The only times asserted are the
 document's rule numbers (A4's ``watchdog_ms``, A6's 1 ms, STATUS's period), measured on
@@ -13,6 +15,7 @@ clock) and STATUS's ``time_us``.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import gc
 import math
 import os
@@ -22,6 +25,7 @@ import signal
 import struct
 import subprocess
 import sys
+import termios
 import threading
 import time
 from collections import namedtuple
@@ -34,7 +38,11 @@ from cobs import cobs
 from crc import Calculator, Crc16
 
 from cli_run import tpad_rt
+from tpad_rt.amp.emulator import (
+    RECORDED_COLUMNS, Amplifier, Circuit, Plate, Recorder, amplifier_info, sim_rate_hz, write_recording,
+)
 from tpad_rt.device import Device
+from tpad_rt.errors import BackendError
 
 REPO = Path(__file__).resolve().parents[1]
 DEVICE = Device.default()
@@ -93,6 +101,22 @@ def envelope(first_index: int, samples: np.ndarray) -> bytes:
 
 def start(rate_hz: int, start_index: int, prefill: int) -> bytes:
     return struct.pack("<IIH", rate_hz, start_index & 0xFFFFFFFF, prefill)
+
+
+def decode(encoded: bytes) -> Received | None:
+    """The frame between two 0x00, or None unless it is a valid version-1 frame."""
+    try:
+        decoded = cobs.decode(encoded)
+    except cobs.DecodeError:
+        return None
+    if len(decoded) < 6 or crc16(decoded[:-2]) != struct.unpack_from("<H", decoded, len(decoded) - 2)[0] \
+            or decoded[0] != 1:
+        return None
+    return Received(decoded[1], struct.unpack_from("<H", decoded, 2)[0], decoded[4:-2])
+
+
+def parse_status(payload: bytes) -> Status:
+    return Status._make(struct.unpack("<IIHBBIIIIIIHhiIII", payload))
 
 
 def parse_info(payload: bytes) -> Info:
@@ -158,24 +182,42 @@ class Amp:
         self.closed = threading.Event()
         self._changed = threading.Condition()
         self.fd = -1
+        self._leaving = threading.Event()
         if port is None:
             match = re.fullmatch(r"amplifier emulator on (/dev/pts/\d+)\n", self.first_line)
             assert match, (self.first_line, self.process.poll())
-            self.fd = os.open(match[1], os.O_RDWR | os.O_NOCTTY)
-            self._reader = threading.Thread(target=self._read, daemon=True)
-            self._reader.start()
+            self.path = match[1]
+            self.attach(os.open(self.path, os.O_RDWR | os.O_NOCTTY))
 
     def attach(self, fd: int) -> None:
-        """Talk through ``fd`` (the other end of a --port terminal)."""
+        """Talk through ``fd`` (the pty, or the other end of a --port terminal)."""
         self.fd = fd
+        self._leaving.clear()
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
+
+    def reopen(self) -> None:
+        """Close the port as a host that goes away, wait for STATUS frames to queue up unread, and open it again
+        as a new host, with nothing read yet."""
+        self._leaving.set()
+        self._reader.join(WAIT_S)
+        os.close(self.fd)
+        deadline = time.monotonic() + WAIT_S
+        self.fd = os.open(self.path, os.O_RDWR | os.O_NOCTTY)
+        while self.unread() < 10 * 64 and time.monotonic() < deadline:
+            time.sleep(0.001)
+
+    def unread(self) -> int:
+        """Bytes the emulator sent that wait on the port, unread."""
+        return struct.unpack("i", fcntl.ioctl(self.fd, termios.FIONREAD, b"\0" * 4))[0]
 
     # --- the line ---
 
     def _read(self) -> None:
         pending = b""
-        while True:
+        while not self._leaving.is_set():
+            if not select.select([self.fd], [], [], 0.05)[0]:
+                continue
             try:
                 data = os.read(self.fd, 65536)
             except OSError:
@@ -192,15 +234,10 @@ class Amp:
                 self._changed.notify_all()
 
     def _decode(self, encoded: bytes) -> Received | None:
-        try:
-            decoded = cobs.decode(encoded)
-        except cobs.DecodeError:
-            decoded = b""
-        if len(decoded) < 6 or crc16(decoded[:-2]) != struct.unpack_from("<H", decoded, len(decoded) - 2)[0] \
-                or decoded[0] != 1:
+        received = decode(encoded)
+        if received is None:
             self.bad.append(encoded)
-            return None
-        return Received(decoded[1], struct.unpack_from("<H", decoded, 2)[0], decoded[4:-2])
+        return received
 
     def write(self, data: bytes) -> float:
         """Write ``data``; returns ``last_sent_s``, the time.monotonic() just before: no byte of it reached the
@@ -236,16 +273,16 @@ class Amp:
 
     def statuses(self, after: int = 0) -> list[Status]:
         with self._changed:
-            return [Status._make(struct.unpack("<IIHBBIIIIIIHhiIII", received.payload))
+            return [parse_status(received.payload)
                     for received in self.frames[after:] if received.type == STATUS]
 
     def status(self, wanted: Callable[[Status], bool] = lambda status: True, after: int | None = None,
                what: str = "STATUS") -> Status:
         """The first STATUS from ``after`` (default: now) on that is ``wanted``."""
-        received = self.wait(lambda received: received.type == STATUS and wanted(
-            Status._make(struct.unpack("<IIHBBIIIIIIHhiIII", received.payload))),
-            self.mark() if after is None else after, what)
-        return Status._make(struct.unpack("<IIHBBIIIIIIHhiIII", received.payload))
+        def is_wanted(received: Received) -> bool:
+            return received.type == STATUS and wanted(parse_status(received.payload))
+
+        return parse_status(self.wait(is_wanted, self.mark() if after is None else after, what).payload)
 
     def acks(self, after: int = 0) -> list[Ack]:
         with self._changed:
@@ -344,7 +381,7 @@ class Amp:
             self.process.send_signal(signum)
         out, err = self.process.communicate(timeout=60)
         assert self.process.returncode == 0, (out, err)
-        assert err == ""
+        assert err == "", err
         self.summary = out
         assert re.fullmatch(r"amplifier emulator [^\n]+: frames_ok=\d+ [^\n]+\n", out), out
         if self.fd >= 0:
@@ -498,6 +535,23 @@ def test_start_priming_running_and_the_window(amp: Amp) -> None:
     assert not {ack.acked_seq for ack in amp.acks(after)} & set(refused)  # ENVELOPE refusals are not answered
 
 
+def test_a_host_that_goes_away_and_a_new_one(amp: Amp) -> None:
+    """The port closed and opened again: the emulator goes on; the new host's HELLO drops the stale frames queued
+    meanwhile, so INFO is the first frame it reads."""
+    amp.hello()
+    amp.reopen()
+    stale = amp.unread()
+    assert stale >= 640 and amp.process.poll() is None
+    amp.send(HELLO, b"again".ljust(16, b"\x00"))
+    deadline = time.monotonic() + WAIT_S
+    while amp.unread() >= stale and time.monotonic() < deadline:  # the emulator flushes when it acts on HELLO
+        time.sleep(0.001)
+    after = amp.mark()
+    amp.attach(amp.fd)
+    amp.collect(after, 2)
+    assert amp.frames[after].type == INFO and amp.frames[after].seq == 0
+
+
 def test_garbage_and_floods_leave_it_working(amp: Amp) -> None:
     """A 10 MB run without 0x00 is one bad frame and grows no memory; random bytes are bad frames; it still works."""
     amp.hello()
@@ -522,9 +576,9 @@ def test_envelope_plays_at_its_index(amps: Callable[..., Amp]) -> None:
     """A3: every sample sent plays once, at its index, in order, at its due time; then STOP's ramp."""
     amp = amps()
     first = 2**32 - 4000
-    info = amp.begin(16000, first, 256)
+    amp.begin(16000, first, 256)
     t = np.arange(8000) / 16000
-    samples = np.round(32767 * (0.35 - 0.25 * np.cos(2 * np.pi * 20 * t))).astype(np.int16)  # 5 V (a slew step) to 30 V
+    samples = np.round(32767 * (0.35 - 0.25 * np.cos(2 * np.pi * 20 * t))).astype(np.int16)  # 5 V (a slew step)..30 V
     amp.stream(samples, first)
     assert amp.command(STOP, struct.pack("<H", 5)).code == OK
     amp.status(lambda status: status.state == IDLE, what="IDLE after STOP")
@@ -547,7 +601,6 @@ def test_envelope_plays_at_its_index(amps: Callable[..., Amp]) -> None:
     peak = at[np.argmax(recording["envelope_v"][at])]
     steady_um = float(DEVICE.amplitude_m_per_v(FORCE_N)) * 1e6 * recording["envelope_v"][peak]
     assert abs(recording["plate_amplitude_um"][peak] / steady_um - 1) < 0.1
-    assert info.max_mv == MAX_MV
 
 
 def test_gaps_and_bad_frames_play_as_zero(amps: Callable[..., Amp]) -> None:
@@ -597,7 +650,7 @@ def test_clamp_slew_measurements_and_the_ramp_at_sigterm(amps: Callable[..., Amp
     assert plateau.voltage_mv_rms == round(info.max_mv / math.sqrt(2))
     assert plateau.current_ua_rms == pytest.approx(info.max_mv / math.sqrt(2) / abs(z) * 1000, rel=1e-3)
     assert plateau.phase_cdeg == pytest.approx(-math.degrees(math.atan2(z.imag, z.real)) * 100, abs=1)
-    recording = amp.finish()  # with about 500 samples still buffered
+    recording = amp.finish()  # with hundreds of samples still buffered
     assert recording["underruns"] == 0
     envelope_v = recording["envelope_v"]
     max_v, step_v = info.max_mv / 1000, info.slew_mv_per_ms / 16000
@@ -664,6 +717,7 @@ def assert_fault_ramp(recording: dict[str, np.ndarray]) -> None:
 
 
 def test_overcurrent_on_demand(amps: Callable[..., Amp]) -> None:
+    """overcurrent:AT_S: the fault of A6 while streaming, whatever the current."""
     amp = amps("--fault", "overcurrent:2")
     amp.begin(16000, 0, 64)
     amp.stream(np.full(16000 * 20, level(10.0), dtype=np.int16), 0, until=lambda status: status.faults)
@@ -673,6 +727,7 @@ def test_overcurrent_on_demand(amps: Callable[..., Amp]) -> None:
 
 
 def test_disconnect_fault_closes_the_port_and_ends(amps: Callable[..., Amp]) -> None:
+    """disconnect:AT_S: the host's port ends while streaming; the emulator ramps to 0, records and exits 0."""
     amp = amps("--fault", "disconnect:1.5")
     amp.begin(16000, 0, 64)
     amp.stream(np.full(16000 * 20, level(5.0), dtype=np.int16), 0)
@@ -744,6 +799,71 @@ def test_delay_holds_every_byte_back(amps: Callable[..., Amp]) -> None:
     assert amp.command(STOP, struct.pack("<H", 0)).code == OK
     recording = amp.finish()
     assert recording["t_s"][played(recording)[0]] >= sent_s + 0.030
+
+
+# --- the amplifier in-process, on given times -------------------------------------------------------------------
+
+def test_restart_holds_the_output_and_hello_ramps_with_the_old_carrier() -> None:
+    """START while RUNNING: PRIMING holds the present output and RUNNING slews on from it (3.1, A2); HELLO ramps
+    to 0 over R still making the carrier, then forgets it (3.1, A4's ramp)."""
+    circuit = Circuit(DEVICE, FORCE_N)
+    info = amplifier_info(DEVICE, circuit)
+    recorder = Recorder()
+    origin_s = 1000.0
+    amplifier = Amplifier(info, circuit, Plate(DEVICE, FORCE_N, sim_rate_hz(info.carrier_max_mhz)), origin_s, recorder)
+    seq = iter(range(100))
+
+    def receive(t_s: float, type_: int, payload: bytes = b"") -> None:
+        amplifier.receive(frame(type_, next(seq), payload)[:-1], origin_s + t_s)
+
+    receive(0, HELLO, bytes(16))
+    receive(0, SET_CARRIER, u32(RESONANCE_MHZ))
+    receive(0, START, start(16000, 0, 16))
+    receive(0, ENVELOPE, envelope(0, np.full(64, level(10.0))))
+    receive(0.002, START, start(16000, 5000, 16))  # a restart, 33 samples in
+    receive(0.003, ENVELOPE, envelope(5000, np.full(16, level(20.0))))
+    receive(0.004, HELLO, bytes(16))
+    amplifier.advance(origin_s + 0.020)
+    sent = [decode(encoded) for encoded in bytes(amplifier.out).split(b"\x00") if encoded]
+    statuses = [parse_status(received.payload) for received in sent if received.type == STATUS]
+    recorded = {name: recorder.column(name) for name in RECORDED_COLUMNS}
+    t_s, envelope_v, index, state = (recorded[name] for name in ("t_s", "envelope_v", "index", "state"))
+    ten, twenty = volts(np.array([level(10.0), level(20.0)]))
+    step = info.slew_mv_per_ms / 16000
+    first = np.flatnonzero(index == 0)[0]  # the START's own instant was held (PRIMING), at 0
+    restart = first + np.flatnonzero(index[first:] == -1)[0]
+    again = np.flatnonzero(index == 5000)[0]
+    hello = np.flatnonzero(state == RAMPING)[0]
+    assert np.allclose(envelope_v[first:first + 3], [step, ten, ten])
+    assert (index[first:restart] == np.arange(restart - first)).all() and restart - first == 32  # 2 ms
+    assert (envelope_v[restart:again] == ten).all() and (state[restart:again] == PRIMING).all()  # held
+    assert again - restart == 16  # 1 ms of PRIMING
+    assert np.allclose(envelope_v[again:again + 3], [ten + step, twenty, twenty])  # slewed on from the held value
+    assert t_s[hello] - t_s[again] == pytest.approx(0.001, abs=1e-9)
+    ramp = envelope_v[hello:hello + 160]
+    assert np.allclose(ramp, envelope_v[hello - 1] * (1 - np.arange(1, 161) / 160))  # R = 10 ms at 16 kHz
+    assert (state[hello:hello + 159] == RAMPING).all() and state[hello + 159] == IDLE
+    assert (recorded["carrier_hz"][hello:hello + 160] == RESONANCE_MHZ / 1000).all()
+    assert (recorded["carrier_hz"][hello + 160:] == 0).all() and (envelope_v[hello + 160:] == 0).all()
+    during, after = statuses[-3], statuses[-1]  # 5 and 15 ms after the second HELLO
+    assert (during.state, during.carrier_mhz, after.state, after.carrier_mhz) == (RAMPING, RESONANCE_MHZ, IDLE, 0)
+    assert sent[0].type == INFO and after.frames_ok == 1
+
+
+def test_recording_keeps_at_most_its_limit(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """The recording stops at its limit with one note; it is written whole or not at all."""
+    recorder = Recorder(limit=100)
+    for _ in range(3):
+        recorder.add(**{name: np.arange(60).astype(dtype) for name, dtype in RECORDED_COLUMNS.items()})
+    assert recorder.count == 100 and recorder.truncated
+    assert capsys.readouterr().err.count("\n") == 1
+    write_recording(str(tmp_path / "r.npz"), recorder, {"frames_ok": 3, "truncated": True})
+    with np.load(tmp_path / "r.npz", allow_pickle=False) as data:
+        assert (data["t_s"] == np.concatenate([np.arange(60), np.arange(40)])).all()
+        assert data["index"].dtype == np.int64 and data["frames_ok"] == 3 and data["truncated"]
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["r.npz"]
+    with pytest.raises(BackendError, match="cannot write the recording"):
+        write_recording(str(tmp_path / "missing" / "r.npz"), recorder, {})
 
 
 # --- the command line -------------------------------------------------------------------------------------------

@@ -21,13 +21,16 @@ Choices the document leaves open (each said again where it is made):
   OUT_OF_WINDOW are therefore never sent); START is checked in the order FAULT,
   BAD_RATE, NO_CARRIER, OUT_OF_RANGE; STOP outside a stream is acknowledged OK;
 - the watchdog (A4) is armed while PRIMING or RUNNING only, and trips READ_LATENCY_S
-  early: a frame is stamped when the emulator reads it, up to about a tick after it
-  reached the line;
+  early: a frame is stamped when the emulator reads it, up to a tick (and a busy
+  machine's scheduling) after it reached the line;
+- STATUS goes out from the first HELLO on (3.2), on a schedule of whole microseconds
+  restarted by each HELLO; before any HELLO the emulator sends only ACKs;
 - every ramp (STOP's, A4's, A6's, HELLO's) passes A1 and A2 like any sample; the slew
   limit is at least ``max_mv`` per ms, so A6's 1 ms ramp from ``max_mv`` fits it;
 - the output is held during PRIMING (0 after IDLE; the present value after a restart);
   during a ramp after HELLO the old carrier is still made and reported;
-- the carrier steps are multiples of CARRIER_STEP_MHZ, and so are its limits;
+- the carriers made are multiples of CARRIER_STEP_MHZ, and so are the limits (ties
+  round up); a carrier refused OUT_OF_RANGE is answered with value 0;
 - measured: ``voltage = |envelope| / sqrt(2)``, ``current = voltage / |Z|`` with ``Z`` the
   device's shunt in series with C0 parallel to the motional branch, at the carrier made.
 
@@ -52,11 +55,11 @@ import tempfile
 import termios
 import time
 import tty
+import zipfile
 from collections import deque
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -77,7 +80,6 @@ CARRIER_RANGE_HZ = (10_000, 80_000)
 #: Carrier resolution (mHz): the carriers made are multiples of it (a DDS-like step).
 CARRIER_STEP_MHZ = 10
 BUFFER_SAMPLES = 1024
-MAX_FRAME_SAMPLES = 256
 #: A4: time (ms) from the last valid frame to zero output, and R, the amplifier's own ramp (ms).
 WATCHDOG_MS = 50
 RAMP_MS = 10
@@ -205,7 +207,7 @@ def amplifier_info(device: Device, circuit: Circuit) -> wire.Info:
         carrier_min_mhz=low_mhz, carrier_max_mhz=high_mhz, carrier_step_mhz=step,
         full_scale_mv=round(device.max_voltage_v * 1250), max_mv=max_mv,
         slew_mv_per_ms=max(MIN_SLEW_MV_PER_MS, max_mv), buffer_samples=BUFFER_SAMPLES,
-        max_frame_samples=MAX_FRAME_SAMPLES, watchdog_ms=WATCHDOG_MS, status_period_ms=STATUS_PERIOD_MS,
+        max_frame_samples=wire.MAX_FRAME_SAMPLES, watchdog_ms=WATCHDOG_MS, status_period_ms=STATUS_PERIOD_MS,
         measures=MEASURES, max_current_ma=math.ceil(OVERCURRENT_MARGIN * resonance_ma),
     )
 
@@ -635,10 +637,10 @@ class Recorder:
             done += step
             self.count += step
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Every column, ``count`` samples long."""
-        return {name: np.concatenate([chunk[name] for chunk in self._chunks] or [np.empty(0, dtype)])[:self.count]
-                for name, dtype in RECORDED_COLUMNS.items()}
+    def column(self, name: str) -> np.ndarray:
+        """The column ``name`` of RECORDED_COLUMNS, ``count`` samples long (a new array)."""
+        parts = [chunk[name] for chunk in self._chunks] or [np.empty(0, RECORDED_COLUMNS[name])]
+        return np.concatenate(parts)[:self.count]
 
 
 def check_record_path(path: str) -> None:
@@ -657,7 +659,9 @@ def check_record_path(path: str) -> None:
 def write_recording(path: str, recorder: Recorder, scalars: dict[str, float | int]) -> None:
     """Write the recorded columns and ``scalars`` to ``path`` (.npz) through a temporary file in its folder.
 
-    Raises BackendError (nothing written at ``path``) when it cannot be written.
+    The archive is np.savez's (one ``NAME.npy`` per entry), written a column at a time so
+    that a full recording is not copied whole. Raises BackendError (nothing written at
+    ``path``) when it cannot be written.
     """
     target = Path(path).absolute()
     try:
@@ -665,9 +669,11 @@ def write_recording(path: str, recorder: Recorder, scalars: dict[str, float | in
     except OSError as error:
         raise BackendError(f"{printable(path)}: cannot write the recording ({error.strerror or error})") from None
     try:
-        entries: dict[str, Any] = {**recorder.arrays(), **{name: np.array(value) for name, value in scalars.items()}}
-        with os.fdopen(handle, "wb") as file:
-            np.savez(file, **entries)
+        with os.fdopen(handle, "wb") as file, zipfile.ZipFile(file, "w", allowZip64=True) as archive:
+            for name in (*RECORDED_COLUMNS, *scalars):
+                array = recorder.column(name) if name in RECORDED_COLUMNS else np.array(scalars[name])
+                with archive.open(f"{name}.npy", "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, array, allow_pickle=False)
         os.replace(temporary, path)
     except OSError as error:
         os.unlink(temporary)

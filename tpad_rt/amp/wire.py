@@ -46,7 +46,7 @@ MIN_BODY = 6
 MAX_ENCODED = MAX_BODY + MAX_BODY // 254 + 2
 #: Bytes before the payload of an ENVELOPE: ``first_index`` (u32).
 ENVELOPE_HEADER_BYTES = 4
-#: Most samples any ENVELOPE frame may carry (INFO's ``max_frame_samples`` is at most this).
+#: Most samples an ENVELOPE frame may carry (MAX_BODY's); INFO's ``max_frame_samples`` is at most this.
 MAX_FRAME_SAMPLES = 256
 
 _HEADER = struct.Struct("<BBH")

@@ -199,5 +199,7 @@ def run(args: argparse.Namespace) -> int:
                 "max_mv": info.max_mv, "slew_mv_per_ms": info.slew_mv_per_ms, "truncated": recorder.truncated,
             })
         summary = " ".join(f"{name}={value}" for name, value in counters.items())
+        if emulator.dropped_out_bytes:
+            summary += f" ({emulator.dropped_out_bytes} bytes for a host that did not read them were dropped)"
         print(f"amplifier emulator {_ENDINGS[ending]}: {summary}", flush=True)
     return 0
