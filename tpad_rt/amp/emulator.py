@@ -115,7 +115,7 @@ MAX_BATCH = 4096
 #: A periodic STATUS overdue by more than this (s; the emulator was stopped) is skipped, not sent late.
 MAX_STATUS_LAG_S = 0.1
 #: Most received bytes a tick reads, and most held back by a delay fault (then dropped, as by a full UART).
-READ_LIMIT_BYTES = 1 << 18
+READ_LIMIT_BYTES = 1 << 16
 MAX_DELAYED_BYTES = 1 << 20
 #: Most unsent bytes kept for a host that does not read; past it they are dropped (a 0x00 ends a cut frame).
 MAX_UNSENT_BYTES = 1 << 16

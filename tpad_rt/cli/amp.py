@@ -14,14 +14,18 @@ voltage and phase measured; an overcurrent trip at 1.5 x the current at the clam
 resonance), and enforces every amplifier rule A1-A8. Envelope samples play in real time
 at their due times on the monotonic clock; each drives the device's simulated plate
 (``--device``, default calibration/default.yaml, at a contact force of 0.5 N), whose
-circuit gives the measured current and phase.
+circuit gives the measured current and phase. The watchdog trips 38 ms after the last
+frame the emulator read (A4's 40 ms less 2 ms for its own reading latency), so the output
+is 0 within 50 ms of the frame's arrival. Should the machine be too busy for it to keep
+time (a tick 20 ms late while playing), a note on stderr says so.
 
 It ends on SIGTERM or SIGINT (Ctrl-C), after ``--duration``, or at a ``disconnect`` fault:
 the output ramps to 0, ``--record FILE.npz`` is written (through a temporary file), and a
 one-line summary of the counters follows, with exit status 0. The recording holds one
 entry per applied envelope sample: ``t_s`` (time.monotonic() when applied), ``envelope_v``
 (signed volts, after clamp and slew), ``carrier_hz``, ``index`` (stream index, -1 for
-none: a held or ramped sample), ``plate_amplitude_um``, ``state``; and the scalars
+none: a held or ramped sample), ``plate_amplitude_um`` (the plate's mean vibration
+amplitude over the sample), ``state`` (STATUS's codes, after the sample); and the scalars
 ``frames_ok``, ``frames_bad``, ``frames_rejected``, ``sequence_gaps``, ``underruns``,
 ``watchdog_trips``, ``faults`` (the counters since the last HELLO), ``envelope_hz`` (the
 last START's, 0 if none), ``full_scale_mv``, ``max_mv``, ``slew_mv_per_ms``, ``truncated``.
