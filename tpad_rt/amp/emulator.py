@@ -389,6 +389,7 @@ class Amplifier:
             if sample is None:
                 self.counters.underruns += 1  # A3: a missing index plays as 0 (through A2), one underrun
                 target_mv = 0.0
+                index = -1  # recorded: nothing came from the buffer
             else:
                 target_mv = max(sample, -32767) / 32767 * self.info.full_scale_mv
         elif self._ramp is not None:

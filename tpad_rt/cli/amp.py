@@ -16,15 +16,17 @@ at their due times on the monotonic clock; each drives the device's simulated pl
 (``--device``, default calibration/default.yaml, at a contact force of 0.5 N), whose
 circuit gives the measured current and phase. The watchdog trips 38 ms after the last
 frame the emulator read (A4's 40 ms less 2 ms for its own reading latency), so the output
-is 0 within 50 ms of the frame's arrival. Should the machine be too busy for it to keep
-time (a tick 20 ms late while playing), a note on stderr says so.
+is 0 within 50 ms of the frame's arrival. It asks for real-time scheduling (SCHED_FIFO),
+standing in for a microcontroller that nothing else delays; where the system refuses,
+a note on stderr says so. Should the machine be too busy for it to keep time (a tick
+20 ms late while playing), a note on stderr says so.
 
 It ends on SIGTERM or SIGINT (Ctrl-C), after ``--duration``, or at a ``disconnect`` fault:
 the output ramps to 0, ``--record FILE.npz`` is written (through a temporary file), and a
 one-line summary of the counters follows, with exit status 0. The recording holds one
 entry per applied envelope sample: ``t_s`` (time.monotonic() when applied), ``envelope_v``
 (signed volts, after clamp and slew), ``carrier_hz``, ``index`` (stream index, -1 for
-none: a held or ramped sample), ``plate_amplitude_um`` (the plate's mean vibration
+none: a held or ramped sample, or a missing one played as 0), ``plate_amplitude_um`` (the plate's mean vibration
 amplitude over the sample), ``state`` (STATUS's codes, after the sample); and the scalars
 ``frames_ok``, ``frames_bad``, ``frames_rejected``, ``sequence_gaps``, ``underruns``,
 ``watchdog_trips``, ``faults`` (the counters since the last HELLO), ``envelope_hz`` (the
@@ -41,6 +43,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import gc
+import os
 import signal
 import textwrap
 import threading
@@ -170,6 +173,21 @@ def _stop_signals() -> Iterator[threading.Event]:
             signal.signal(signum, handler)
 
 
+#: The SCHED_FIFO priority the emulator asks for: it stands in for a microcontroller, which nothing else on the
+#: machine delays (its loop sleeps in poll between ticks; the kernel's RT throttling still bounds it).
+REALTIME_PRIORITY = 10
+
+
+def _realtime_priority() -> None:
+    """Run at SCHED_FIFO REALTIME_PRIORITY when the system allows it, else say on stderr that the machine's
+    load may delay the emulator (then its own late reads show as the host's underruns)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
+    except (OSError, AttributeError):
+        print("tpad-rt amp: no real-time priority here (SCHED_FIFO refused): a busy machine can delay the "
+              "emulator, and frames it reads late count as underruns", file=sys.stderr, flush=True)
+
+
 _ENDINGS = {"stopped": "stopped by a signal", "duration": "ran for --duration", "disconnected": "disconnected"}
 
 
@@ -192,6 +210,7 @@ def run(args: argparse.Namespace) -> int:
             # The ~150k objects of the imports would make each full collection a 70 ms stall of the real-time
             # loop, past A4's watchdog: frozen, a collection scans only what the emulator makes.
             gc.freeze()
+            _realtime_priority()
             print(f"amplifier emulator on {port.name}", flush=True)
             ending = emulator.run(stop.is_set)
         finally:
