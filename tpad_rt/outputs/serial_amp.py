@@ -46,6 +46,9 @@ HELLO_TRIES = 3
 #: Seconds to wait for the ACK of SET_CARRIER, START and STOP.
 ACK_TIMEOUT_S = 0.5
 STOP_ACK_TIMEOUT_S = 0.2
+#: The SCHED_FIFO priority of the streamer thread where allowed (below a JACK server's, typically 70-90): like
+#: an audio callback, it sleeps between frames and must run as soon as one is due.
+STREAMER_PRIORITY = 20
 #: What the host calls itself in HELLO.
 HOST_NAME = b"tpad-rt"
 
@@ -155,6 +158,7 @@ class AmpLink:
         self.carrier_hz = float("nan")
         self.frame_samples = 0
         self.target_fill = 0
+        self.realtime = False  # whether the streamer thread got real-time scheduling
 
     # --- opening ----------------------------------------------------------------------
 
@@ -319,6 +323,7 @@ class AmpLink:
         self._thread.start()
 
     def _run(self, table: object) -> None:
+        self.realtime = _realtime_thread()
         try:
             amp_stream.stream(table.table, self.link, self._buffers, self._envelope)  # type: ignore[attr-defined]
         except BaseException as error:  # noqa: BLE001 - reported by failure()
@@ -395,7 +400,7 @@ class AmpLink:
         link, s = self.link, amp_stream
         info = self.info
         return {
-            "firmware": info.firmware if info else "", "carrier_hz": self.carrier_hz,
+            "firmware": info.firmware if info else "", "carrier_hz": self.carrier_hz, "realtime": self.realtime,
             "envelope_hz": self.target.envelope_hz, "frame_samples": self.frame_samples,
             "target_fill": self.target_fill, "frames_sent": int(link[s.LINK_FRAMES_SENT]),
             "statuses": int(link[s.LINK_STATUSES]), "rx_bad": int(link[s.LINK_RX_BAD]),
@@ -410,6 +415,16 @@ class AmpLink:
             "amp_current_a_rms": link[s.LINK_AMP_CURRENT_UA_RMS] / 1e6,
             "amp_phase_deg": link[s.LINK_AMP_PHASE_CDEG] / 100,
         }
+
+
+def _realtime_thread() -> bool:
+    """Give the calling thread SCHED_FIFO STREAMER_PRIORITY, as audio servers give their callbacks; False where
+    the system refuses (the stream then runs at normal priority: a loaded machine can delay it)."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(STREAMER_PRIORITY))  # 0: this thread (Linux)
+    except (OSError, AttributeError):
+        return False
+    return True
 
 
 def warm_up(table: object) -> None:

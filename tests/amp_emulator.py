@@ -1,0 +1,58 @@
+"""The amplifier emulator as a test component: ``tpad-rt amp emulate`` in its own process, on a new pty.
+
+``Emulator(tmp_path, *flags)`` starts it, reads its first line for the port, and
+``.finish()`` ends it with SIGTERM (by PID) and returns its recording (a dict of
+arrays). Used as a context manager it is killed on the way out whatever happened.
+"""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from types import TracebackType
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+#: Seconds the emulator may take to start (imports, numba cache loads) or to end.
+START_TIMEOUT_S = 120.0
+
+
+class Emulator:
+    """``tpad-rt amp emulate --record DIR/amp.npz FLAGS``; ``.port`` is the pty to give the host."""
+
+    def __init__(self, folder: Path, *flags: str):
+        self.record = folder / "amp.npz"
+        self.process = subprocess.Popen([sys.executable, "-m", "tpad_rt", "amp", "emulate", "--record",
+                                         str(self.record), *flags], cwd=REPO, stdin=subprocess.DEVNULL,
+                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert self.process.stdout is not None
+        first = self.process.stdout.readline()
+        prefix = "amplifier emulator on "
+        if not first.startswith(prefix):
+            self.process.kill()
+            _, err = self.process.communicate(timeout=START_TIMEOUT_S)
+            raise AssertionError(f"emulator did not start: {first!r} {err!r}")
+        self.port = first[len(prefix):].strip()
+        self.summary = ""
+
+    def finish(self, sig: int | None = signal.SIGTERM) -> dict[str, np.ndarray]:
+        """End it with ``sig`` (None: wait for it to end by itself), check it exited 0, return its recording."""
+        if sig is not None and self.process.poll() is None:
+            self.process.send_signal(sig)
+        out, err = self.process.communicate(timeout=START_TIMEOUT_S)
+        assert self.process.returncode == 0, (self.process.returncode, err)
+        self.summary = out
+        with np.load(self.record) as recording:
+            return {name: recording[name] for name in recording.files}
+
+    def __enter__(self) -> Emulator:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
+                 trace: TracebackType | None) -> None:
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.communicate(timeout=START_TIMEOUT_S)

@@ -1,0 +1,301 @@
+"""``serial://`` end to end: play and the Renderer against the amplifier emulator, each in its own process, over
+a real pty pair (tests/amp_emulator.py).
+
+What the emulator applied (its recording) is compared with what the host rendered, and
+mapped through the device's calibration and friction model back to the texture's
+levels. Faults are the emulator's own (``--fault``) or signals sent by PID to a real
+process. No assertion reads a wall clock: timings come from the emulator's recorded
+clock or are counts against a baseline measured in the same test.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from amp_emulator import REPO, START_TIMEOUT_S, Emulator
+from cli_run import tpad_rt
+from cobs import cobs
+from crc import Calculator, Crc16
+
+from tpad_rt.device import Device
+from tpad_rt.engine import Renderer
+from tpad_rt.errors import BackendError
+from tpad_rt.physics.friction import relative_friction
+from tpad_rt.recording import read_recording
+
+GRATING = REPO / "textures" / "grating.yaml"
+DEVICE = Device.default()
+SERIAL_HOST = Path(__file__).resolve().parent / "serial_host.py"
+PYTHON_WRITER = Path(__file__).resolve().parent / "python_serial_writer.py"
+#: Samples the streamer's amplifier may miss under GIL load beyond the idle run of the same test (10 ms at
+#: 16 kHz): a pty's bytes are moved by a kernel worker that the machine's load can delay.
+MISSED_MARGIN = 160
+
+
+def applied_by_index(recording: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """(stream index, envelope volts) of every sample the emulator played from its buffer."""
+    played = recording["index"] >= 0
+    return recording["index"][played].astype(np.int64), recording["envelope_v"][played]
+
+
+def achieved_friction(recording: dict[str, np.ndarray], speed_mm_s: float, force_n: float) -> np.ndarray:
+    """The friction the emulated plate's vibration gives a finger at ``speed_mm_s`` (paper Eqs. 2-3)."""
+    return relative_friction(recording["plate_amplitude_um"] * 1e-6, DEVICE.resonance_hz, speed_mm_s * 1e-3,
+                             DEVICE.mu0, DEVICE.poisson, DEVICE.psi_star)
+
+
+def test_play_through_serial_renders_the_grating_on_the_emulated_plate(tmp_path: Path) -> None:
+    levels = yaml.safe_load(GRATING.read_text())["friction"]
+    with Emulator(tmp_path) as amp:
+        done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}", "--duration", "3")
+        recording = amp.finish()
+    assert done.returncode == 0, done.stderr
+    assert recording["carrier_hz"].min() == recording["carrier_hz"].max() == pytest.approx(DEVICE.resonance_hz,
+                                                                                             abs=0.01)
+    assert recording["frames_bad"] == 0 and recording["sequence_gaps"] == 0
+    index, _ = applied_by_index(recording)
+    assert len(index) > 0.9 * 3 * recording["envelope_hz"]
+    # The default input swipes back and forth at 100 mm/s under 0.5 N; the middle 80 % of the run.
+    playing = np.flatnonzero(recording["index"] >= 0)
+    middle = playing[len(playing) // 10: -len(playing) // 10]
+    friction = achieved_friction({k: v[middle] for k, v in recording.items() if np.ndim(v)}, 100.0, 0.5)
+    assert np.percentile(friction, 1) == pytest.approx(levels["low"], rel=0.02)
+    assert np.percentile(friction, 99) == pytest.approx(levels["high"], rel=0.02)
+
+
+def live_swipe(renderer: Renderer, seconds: float) -> None:
+    """Push finger samples "now" every 2 ms for ``seconds``, sliding at 50 mm/s."""
+    started = time.monotonic()
+    while (elapsed_s := time.monotonic() - started) < seconds:
+        renderer.push_finger(20.0 + 50.0 * elapsed_s, 20.0, 0.5)
+        time.sleep(0.002)
+
+
+def unexplained(recording: dict[str, np.ndarray], host_path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(samples the emulator played from its buffer that the host sent, which of them match neither the host's
+    value nor a slew-limited step towards it (A2)). The host's values come from its recording."""
+    full_scale_v = float(recording["full_scale_mv"]) / 1e3
+    first, sent = host_volts(host_path, full_scale_v)
+    index, volts = recording["index"], recording["envelope_v"]
+    fed = np.flatnonzero((index >= first) & (index < first + len(sent)))
+    wanted = sent[index[fed] - first]
+    matched = np.abs(volts[fed] - wanted) <= full_scale_v / 32767
+    slew_v = float(recording["slew_mv_per_ms"]) / float(recording["envelope_hz"])  # V per sample
+    step = volts[fed] - volts[np.maximum(fed - 1, 0)]
+    slewing = (np.abs(np.abs(step) - slew_v) <= 1e-6 * slew_v) & (np.sign(step) == np.sign(wanted - volts[fed - 1]))
+    return fed, ~(matched | slewing)
+
+
+def host_volts(path: Path, full_scale_v: float) -> tuple[int, np.ndarray]:
+    """(first stream index, envelope volts) the host rendered, from its recording."""
+    recording = read_recording(path)
+    first = round(float(recording.blocks["t"][0]) * recording.fs_hz)
+    return first, recording.drive.astype(np.float64) * full_scale_v
+
+
+def test_the_amplifier_applies_what_the_renderer_rendered_at_its_index(tmp_path: Path) -> None:
+    with Emulator(tmp_path) as amp:
+        renderer = Renderer(output=f"serial://{amp.port}", texture=GRATING)
+        renderer.record(tmp_path / "host.npz")
+        with renderer:
+            live_swipe(renderer, 1.5)
+        stats = renderer.stats()["amplifier"]
+        recording = amp.finish()
+    fed, wrong = unexplained(recording, tmp_path / "host.npz")
+    assert len(fed) > 0.95 * 1.5 * recording["envelope_hz"]
+    assert not wrong.any(), f"{wrong.sum()} samples applied that the host did not send"
+    assert np.abs(recording["envelope_v"]).max() > 10.0, "the swipe must drive the plate"
+    assert stats["amp_frames_bad"] == 0 and stats["amp_sequence_gaps"] == 0 and stats["rx_bad"] == 0
+    assert stats["carrier_hz"] == pytest.approx(DEVICE.resonance_hz, abs=0.01)
+
+
+def test_corrupted_and_dropped_bytes_are_counted_never_applied_and_the_stream_recovers(tmp_path: Path) -> None:
+    with Emulator(tmp_path, "--fault", "corrupt:0.0005", "--fault", "drop:0.0005", "--seed", "3") as amp:
+        renderer = Renderer(output=f"serial://{amp.port}", texture=GRATING)
+        renderer.record(tmp_path / "host.npz")
+        with renderer:
+            live_swipe(renderer, 1.5)
+        recording = amp.finish()
+    assert recording["frames_bad"] > 0 and recording["sequence_gaps"] > 0
+    fed, wrong = unexplained(recording, tmp_path / "host.npz")
+    assert not wrong.any(), f"{wrong.sum()} samples applied that the host did not send"
+    fed_t_s = recording["t_s"][fed]
+    recent = np.count_nonzero(fed_t_s > fed_t_s[-1] - 0.5)
+    assert recent > 0.8 * 0.5 * recording["envelope_hz"], "the stream did not recover: its last 0.5 s lost samples"
+
+
+class Host:
+    """tests/serial_host.py in its own process: a Renderer streaming to PORT until stdin closes."""
+
+    def __init__(self, port: str, *args: str):
+        self.process = subprocess.Popen([sys.executable, str(SERIAL_HOST), port, *args], cwd=REPO,
+                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                        text=True)
+        assert self.process.stdout is not None
+        line = self.process.stdout.readline().strip()
+        assert line == "streaming", (line, self.process.stderr.read() if self.process.stderr else "")
+
+    def finish(self) -> tuple[int, str, str]:
+        """Close its stdin (it stops, STOP and all) and wait: (exit status, stdout, stderr)."""
+        out, err = self.process.communicate("", timeout=START_TIMEOUT_S)
+        return self.process.returncode, out, err
+
+
+def test_a_frozen_host_is_ramped_to_zero_by_the_watchdog_and_the_stream_restarts(tmp_path: Path) -> None:
+    with Emulator(tmp_path) as amp:
+        host = Host(amp.port)
+        t_stop = time.monotonic()
+        os.kill(host.process.pid, signal.SIGSTOP)
+        time.sleep(0.3)  # the stimulus: frozen for 0.3 s (six watchdogs)
+        os.kill(host.process.pid, signal.SIGCONT)
+        status, out, err = host.finish()
+        recording = amp.finish()
+    assert status == 0, err
+    assert recording["watchdog_trips"] >= 1
+    t_s, volts, index = recording["t_s"], np.abs(recording["envelope_v"]), recording["index"]
+    frozen = (t_s > t_stop) & (t_s < t_stop + 0.3)
+    last_fed = np.flatnonzero(frozen & (index >= 0))[-1]  # the last sample of the last frame that came
+    silent = np.flatnonzero((volts == 0.0) & (np.arange(len(t_s)) > last_fed))[0]
+    assert t_s[silent] - t_s[last_fed] <= 0.050, "A4: zero within 50 ms of the last valid frame"
+    assert np.all(volts[silent:np.flatnonzero(frozen)[-1]] == 0.0)
+    resumed = (t_s > t_stop + 0.3) & (index >= 0) & (volts > 1.0)
+    assert resumed.any(), "the stream did not restart after the watchdog"
+    assert "restarts 1" in out or "restarts 2" in out, out
+
+
+def test_the_host_ends_with_one_line_when_the_emulator_is_killed(tmp_path: Path) -> None:
+    with Emulator(tmp_path) as amp:
+        host = Host(amp.port)
+        amp.process.kill()
+        amp.process.wait(timeout=START_TIMEOUT_S)
+        status, out, err = host.finish()
+    assert status == 1, (out, err)
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert "serial: " in err and amp.port in err, err
+
+
+def test_play_ends_with_one_line_when_the_emulator_disconnects(tmp_path: Path) -> None:
+    with Emulator(tmp_path, "--fault", "disconnect:4") as amp:
+        done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}", "--duration", "30")
+        amp.finish(sig=None)  # it ends by itself after the disconnect
+    done.assert_one_line_error("serial: ")
+    assert amp.port in done.stderr
+
+
+def test_an_overcurrent_fault_ends_the_run_in_one_line(tmp_path: Path) -> None:
+    with Emulator(tmp_path, "--fault", "overcurrent:4") as amp:
+        done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}", "--duration", "30")
+        recording = amp.finish()
+    done.assert_one_line_error("reported a fault: overcurrent")
+    assert recording["faults"] & 1
+
+
+CRC = Calculator(Crc16.IBM_3740)
+
+
+def fake_amplifier(version: int) -> tuple[tuple[int, int], str]:
+    """A pty whose other end answers every frame with an ACK of protocol ``version`` (BAD_VERSION, its
+    version as the value): an amplifier of another version (rule A5). ((master, slave) fds, port)."""
+    master, slave = os.openpty()
+    port = os.ttyname(slave)
+
+    def answer() -> None:
+        pending = b""
+        while True:
+            try:
+                chunk = os.read(master, 4096)
+            except OSError:
+                return
+            pending += chunk
+            while b"\0" in pending:
+                frame, pending = pending.split(b"\0", 1)
+                body = cobs.decode(frame)
+                ack = bytes([version, 0x83, 0, 0]) + body[2:4] + bytes([body[1], 1]) + version.to_bytes(4, "little")
+                os.write(master, cobs.encode(ack + CRC.checksum(ack).to_bytes(2, "little")) + b"\0")
+
+    threading.Thread(target=answer, daemon=True).start()
+    return (master, slave), port  # the slave stays open: a pty whose slave is closed answers EIO
+
+
+def test_an_amplifier_of_another_protocol_version_is_refused(tmp_path: Path) -> None:
+    fds, port = fake_amplifier(2)
+    try:
+        done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{port}", "--duration", "1")
+    finally:
+        for fd in fds:
+            os.close(fd)
+    done.assert_one_line_error("the amplifier speaks protocol version 2; this tpad-rt speaks version 1")
+
+
+@pytest.mark.parametrize(("url", "expected"), [
+    ("serial:///dev/tpad-rt-missing", "cannot open /dev/tpad-rt-missing: No such file or directory"),
+    ("serial://", "no port"),
+    ("serial:///dev/null?envelope_hz=abc", "envelope_hz"),
+    ("serial:///dev/null?buffer_ms=0", "buffer_ms"),
+])
+def test_bad_serial_urls_end_in_one_line(url: str, expected: str) -> None:
+    tpad_rt("play", "textures/grating.yaml", "--output", url, "--duration", "1").assert_one_line_error(expected)
+
+
+#: The target fill of the GIL-load comparison (ms): deep enough that the machine's scheduling (2 shared cores, a
+#: pty whose bytes a kernel worker moves) does not show, shallow enough that a GIL-bound writer cannot keep it.
+GIL_TEST_BUFFER_MS = 4.0
+
+
+def missed(amplifier: dict) -> int:
+    """Samples the amplifier did not play from the streamer's frames: underruns, and refused frames' samples."""
+    return amplifier["amp_underruns"] + amplifier["amp_frames_rejected"] * amplifier["frame_samples"]
+
+
+def run_renderer(port: str, seconds: float, hog: bool) -> dict:
+    """The streamer's amplifier counters over a ``seconds`` run, with a Python thread hogging the GIL or not."""
+    stop = threading.Event()
+
+    def spin() -> None:
+        count = 0
+        while not stop.is_set():
+            count += 1
+
+    hogger = threading.Thread(target=spin, daemon=True)
+    with Renderer(output=f"serial://{port}?buffer_ms={GIL_TEST_BUFFER_MS:g}", texture=GRATING) as renderer:
+        if hog:
+            hogger.start()
+        live_swipe(renderer, seconds)
+        stop.set()
+    return renderer.stats()["amplifier"]
+
+
+def run_python_writer(port: str, seconds: float, gil_threads: int) -> tuple[int, int, int]:
+    """The control (tests/python_serial_writer.py, its own process): (frames, frames expected, samples missed)."""
+    done = subprocess.run([sys.executable, str(PYTHON_WRITER), f"serial://{port}?buffer_ms={GIL_TEST_BUFFER_MS:g}",
+                           str(seconds), "--gil-threads", str(gil_threads)], cwd=REPO, capture_output=True, text=True,
+                          timeout=seconds + 120)
+    assert done.returncode == 0, done.stderr
+    frames, expected, underruns = map(int, done.stdout.split()[-3:])
+    return frames, expected, underruns
+
+
+def test_gil_load_does_not_starve_the_streamer_while_a_python_writer_degrades(tmp_path: Path) -> None:
+    seconds = 1.5
+    with Emulator(tmp_path) as amp:
+        idle = run_renderer(amp.port, seconds, hog=False)
+        loaded = run_renderer(amp.port, seconds, hog=True)
+        control_idle = run_python_writer(amp.port, seconds, 0)
+        control_loaded = run_python_writer(amp.port, seconds, 1)
+        amp.finish()
+    print(f"streamer missed idle {missed(idle)}, under GIL load {missed(loaded)}; "
+          f"Python writer (frames, expected, missed) idle {control_idle}, under GIL load {control_loaded}")
+    expected_frames = seconds * idle["envelope_hz"] / idle["frame_samples"]
+    assert loaded["frames_sent"] == pytest.approx(expected_frames, rel=0.05)
+    assert missed(loaded) <= missed(idle) + MISSED_MARGIN
+    assert control_loaded[2] > control_idle[2] + 5 * MISSED_MARGIN, "the control must visibly degrade"
