@@ -293,14 +293,16 @@ class Session:
         """The end-of-play summary from the renderer's stats (and the friction samples, on sim://)."""
         stats = self.renderer.stats()
         blocks = max(stats["blocks"], 1)
+        amplifier = stats.get("amplifier")
+        block, output = ("frame", "amplifier") if amplifier else ("callback", "DAC")
         lines = [
             f"played {self.elapsed_s():.2f} s" + (" (stopped by Ctrl-C)" if interrupted else "")
-            + f": {stats['callbacks']} callbacks of {stats['block_frames']} frames at {stats['rate_hz']} Hz, "
-            f"{stats['underflows']} underflows",
-            f"callback compute: p50 {stats['compute_us_p50']:.1f} us, p99 {stats['compute_us_p99']:.1f} us "
-            f"({100 * stats['callback_load_p99']:.1f} % of a block)",
+            + f": {stats['callbacks']} {block}s of {stats['block_frames']} frames at {stats['rate_hz']} Hz, "
+            f"{stats['underflows']} " + ("sent late" if amplifier else "underflows"),
+            f"{block} compute: p50 {stats['compute_us_p50']:.1f} us, p99 {stats['compute_us_p99']:.1f} us "
+            f"({100 * stats['callback_load_p99']:.1f} % of a {block})",
             f"push-to-output latency: p50 {stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms"
-            + (f" (of which the host reports {stats['dac_delay_ms']:.2f} ms from callback to DAC)"
+            + (f" (of which {stats['dac_delay_ms']:.2f} ms from {block} to {output})"
                if stats["dac_delay_ms"] > 0 else ""),
             f"drive: peak {self.peak_v:.2f} V of {self.renderer.device.max_voltage_v:g} V max; saturated "
             f"{100 * stats['voltage_saturated'] / blocks:.1f} % of blocks (voltage), "
@@ -317,6 +319,13 @@ class Session:
         if device is not None and "JACK" in device.host_api and stats["dac_delay_ms"] > 1.5 * period_ms:
             lines.append(f"the JACK server buffers {stats['dac_delay_ms'] / period_ms:.0f} periods before the DAC: "
                          f"started with jackd -S (synchronous mode) it buffers one, {period_ms:.2f} ms less")
+        if amplifier:
+            lines.append(
+                f"amplifier: {amplifier['firmware']}, carrier {amplifier['carrier_hz']:.2f} Hz, envelope "
+                f"{amplifier['envelope_hz']} Hz; frames {amplifier['amp_frames_ok']} applied, {amplifier['amp_frames_bad']} "
+                f"bad, {amplifier['amp_frames_rejected']} refused, {amplifier['amp_sequence_gaps']} sequence gaps; "
+                f"{amplifier['amp_underruns']} samples underrun, {amplifier['amp_watchdog_trips']} watchdog trips"
+                + ("" if amplifier["realtime"] else " (no real-time priority for the streamer here)"))
         if self.friction_errors:
             errors = np.array(self.friction_errors)
             lines.append(f"friction |texture under the finger - simulated plate| at {len(errors)} status samples "

@@ -29,7 +29,9 @@ until a RUNNING STATUS says which sample (``play_index``, unwrapped from 32 bits
 played at its own time ``time_us``. That time is put on the host's clock by the
 smallest offset (receive time - ``time_us``) seen so far: the STATUS the line and the
 scheduler delayed least (allowed to grow by CLOCK_SKEW). So a STATUS read late does
-not make the estimate lag. The host sends while ``written < p + target_fill`` and never
+not make the estimate lag. Once the prefill is out, the host sends a frame whenever
+``written < p + target_fill + frame``, so that at least the target fill stays buffered
+between frames, and never
 more than the amplifier's buffer ahead; if ``p`` has passed what was sent (the host was
 held up), it skips the stream ahead, since samples for played indices are refused.
 A STATUS showing that the amplifier's watchdog tripped (it went IDLE) makes the host
@@ -88,7 +90,7 @@ stamp_cache(__file__, codec.__file__, *tab.COMPILED_SOURCES)
 LINK_FD = 0                   # the port's file descriptor (non-blocking)
 LINK_ENVELOPE_HZ = 1          # the envelope rate START agreed
 LINK_FRAME_SAMPLES = 2        # samples per ENVELOPE frame (<= the amplifier's max_frame_samples)
-LINK_TARGET_FILL = 3          # samples kept ahead of the amplifier's play position (also START's prefill)
+LINK_TARGET_FILL = 3          # samples kept buffered ahead of the amplifier's play position, at least (START's prefill)
 LINK_BUFFER_SAMPLES = 4       # the amplifier's buffer (INFO)
 LINK_STATUS_TIMEOUT_NS = 5    # no STATUS for this long: the amplifier is lost (H7)
 LINK_STOP = 6                 # the Python side sets it to 1 (release store) to end the run with STOP (H8)
@@ -303,8 +305,9 @@ def _queue_start(link: np.ndarray, buffers: np.ndarray, end: int) -> int:
 
 @numba.njit(**_KERNEL)
 def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buffers: np.ndarray,
-                    envelope: np.ndarray, delay_ns: int, late: bool, end: int) -> int:
+                    envelope: np.ndarray, delay_ns: int, late: bool, priming: bool, end: int) -> int:
     """Render the next frame's samples (one block of the table) and queue its ENVELOPE frame; the new end.
+    Its block record counts it as late (the stream skipped ahead before it) or priming (part of a prefill).
 
     The kernel's samples are in [-1, 1] of full scale (its output guard); each becomes
     round(32767 x sample), and anything else (never expected) is sent as 0.
@@ -320,7 +323,7 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
         level = np.int64(round(value * 32767.0)) if abs(value) <= 1.0 else 0  # NaN is not <= 1
         codec.put_i16(frame, PAYLOAD + ENVELOPE_SAMPLES + 2 * k, level)
     end = _queue(link, buffers, ENVELOPE_SAMPLES + 2 * count, MSG_ENVELOPE, end)
-    finish_block(stats, row, entry_ns, count, late, False)
+    finish_block(stats, row, entry_ns, count, late, priming)
     link[LINK_WRITTEN] = first + count
     link[LINK_FRAMES_SENT] += 1
     return end
@@ -366,6 +369,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
     first, end = 0, 0
     moved_ns = now_ns  # the last time the port took bytes
     exit_reason = EXIT_RUNNING
+    skipped = False  # the stream skipped ahead since the last frame
     while exit_reason == EXIT_RUNNING:
         if load_acquire(link, LINK_STOP) != 0:
             exit_reason = EXIT_STOPPED
@@ -405,11 +409,13 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
             # for those indices would be refused as already played: skip the stream ahead of it.
             link[LINK_LATE] += 1
             _skip_to(table, state, link, np.int64(play) + frame_samples)
-        while (link[LINK_WRITTEN] < play + link[LINK_TARGET_FILL]
+            skipped = True
+        while (link[LINK_WRITTEN] < play + link[LINK_TARGET_FILL] + frame_samples * primed
                and link[LINK_WRITTEN] + frame_samples <= play + link[LINK_BUFFER_SAMPLES]
                and end + frame_bytes + MAX_ENCODED <= tx.shape[0]):  # room left for a START or STOP
             delay_ns = np.int64((link[LINK_WRITTEN] - play) * 1e9 / rate_hz)
-            end = _queue_envelope(table, state, link, buffers, envelope, delay_ns, not primed, end)
+            end = _queue_envelope(table, state, link, buffers, envelope, delay_ns, skipped, not primed, end)
+            skipped = False
         if end > first:
             before = first
             first, end, exit_reason = _flush(link, tx, (first, end))
@@ -420,7 +426,8 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
         if not primed and end == 0 and link[LINK_WRITTEN] >= ref_index + link[LINK_TARGET_FILL]:
             primed = True  # the prefill is out: the amplifier starts playing about now
             ref_ns = monotonic_ns()
-        next_due_ns = ref_ns + np.int64((link[LINK_WRITTEN] - link[LINK_TARGET_FILL] - ref_index) * 1e9 / rate_hz)
+        next_due_ns = ref_ns + np.int64(
+            (link[LINK_WRITTEN] - link[LINK_TARGET_FILL] - frame_samples - ref_index) * 1e9 / rate_hz)
         sleep_until_ns(min(now_ns + WAKE_NS, max(next_due_ns, now_ns + 20_000)))
     link[LINK_STOP_SEQ] = -1
     if exit_reason == EXIT_STOPPED:  # H8: STOP right after the last envelope frame, then flush it all

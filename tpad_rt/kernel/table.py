@@ -101,7 +101,7 @@ TAB_SIZE = TAB_SLOTS + 2 * SLOT_SIZE
 # --- statistics: int64[STAT_SIZE], written by the driver -------------------------
 STAT_CALLBACKS = 0            # blocks so far (callbacks, or frames streamed; written last)
 STAT_FRAMES = 1               # frames written so far
-STAT_UNDERFLOWS = 2           # blocks that came late (paOutputUnderflow; the amplifier's underruns)
+STAT_UNDERFLOWS = 2           # blocks that came late (paOutputUnderflow; a frame after a skip ahead)
 STAT_PRIMING = 3              # blocks rendered before the output played (paPrimingOutput; prefill)
 STAT_SIZE = 4
 

@@ -126,6 +126,7 @@ def _read_info(body: np.ndarray) -> AmpInfo:
         (f"full scale {info.full_scale_v:g} V is 0", info.full_scale_v <= 0),
         (f"max {info.max_v:g} V is not in (0, full scale {info.full_scale_v:g} V]",
          not 0 < info.max_v <= info.full_scale_v),
+        (f"slew {info.slew_v_per_ms:g} V/ms is below max {info.max_v:g} V per ms (A2)", info.slew_v_per_ms < info.max_v),
         (f"max_frame_samples {info.max_frame_samples} is not in [1, {codec.MAX_FRAME_SAMPLES}]",
          not 1 <= info.max_frame_samples <= codec.MAX_FRAME_SAMPLES),
         (f"buffer of {info.buffer_samples} samples is smaller than two frames",
