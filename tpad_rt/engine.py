@@ -30,8 +30,10 @@ docs/realtime.md is the design: the audio callback is the native
 ``tpad_rt.kernel.callback.render_callback``; every state array is shared with it
 through a :class:`tpad_rt.realtime.CallbackTable`; a watcher thread drains
 telemetry and the drive for recordings and polls the stream (lost: inactive; stalled: no
-callback for ``stall_timeout_s``). With a non-audio output
-(``sim://``, ``null://``, ``wav://...``) a paced Python thread calls the same callback
+callback for ``stall_timeout_s``). On ``serial://`` the GIL-free streamer
+(``tpad_rt.kernel.amp_stream``, run by ``tpad_rt.outputs.serial_amp.AmpLink``) renders the
+same blocks from the same table, as the envelope, and the watcher polls it for failures.
+With ``sim://``, ``null://``, ``wav://...`` a paced Python thread calls the same callback
 and hands each block to the output (GIL-bound: a simulator, not a real-time path).
 """
 
@@ -106,8 +108,11 @@ class Renderer:
 
     ``device`` (None: ``Device.default()``); ``output`` an output URL: ``audio://[device
     name or index]?rate=&block=&channel=`` (rate and block, when written, override
-    ``rate_hz`` and ``block_frames``), or ``sim://``, ``null://``, ``wav://...`` run by a
-    paced thread; ``texture`` a compiled texture, a texture file, or None (silent until
+    ``rate_hz`` and ``block_frames``); ``serial://PORT?envelope_hz=&buffer_ms=&frame_ms=&baud=``
+    (a serial amplifier, docs/amplifiers.md: the kernel renders the envelope at
+    ``envelope_hz``, which replaces ``rate_hz``, in frames of ``frame_ms``, which replace
+    ``block_frames``; a default ``options.control_interval`` is scaled to keep its
+    control period); or ``sim://``, ``null://``, ``wav://...`` run by a paced thread; ``texture`` a compiled texture, a texture file, or None (silent until
     :meth:`set_texture`); ``rate_hz`` the sample rate (Hz), ``block_frames`` the frames
     per callback; ``options`` the render settings (power budget, ramps, watchdog...);
     ``stall_timeout_s`` how long (s) an audio stream may go without a callback before
@@ -116,7 +121,8 @@ class Renderer:
     Raises ConfigError for a bad URL, texture or option (``stall_timeout_s`` not in
     ``(0, MAX_STALL_TIMEOUT_S]``), or a carrier above 0.45 x the
     rate (naming the rate needed); BackendError (at :meth:`start`) when the audio
-    device cannot run the stream. Errors met later by the stream or the engine's
+    device cannot run the stream, or the serial amplifier cannot be opened or refuses the
+    handshake. Errors met later by the stream or the engine's
     thread are re-raised by :meth:`stop`, :meth:`check` and on leaving a ``with`` block.
     A lost audio device (a stream that stopped by itself, e.g. a JACK server that died)
     is a BackendError; so is a stalled one (a hung device or a stopped JACK server: no

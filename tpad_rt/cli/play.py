@@ -302,7 +302,7 @@ class Session:
             f"{block} compute: p50 {stats['compute_us_p50']:.1f} us, p99 {stats['compute_us_p99']:.1f} us "
             f"({100 * stats['callback_load_p99']:.1f} % of a {block})",
             f"push-to-output latency: p50 {stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms"
-            + (f" (of which {stats['dac_delay_ms']:.2f} ms from {block} to {output})"
+            + (f" (of which the host reports {stats['dac_delay_ms']:.2f} ms from {block} to {output})"
                if stats["dac_delay_ms"] > 0 else ""),
             f"drive: peak {self.peak_v:.2f} V of {self.renderer.device.max_voltage_v:g} V max; saturated "
             f"{100 * stats['voltage_saturated'] / blocks:.1f} % of blocks (voltage), "

@@ -18,9 +18,9 @@ thread of its own; numba releases the GIL for the whole call, so the frames keep
 cadence while the application's Python threads hold it. The loop wakes every
 ``WAKE_NS`` (or sooner when a frame is due): it reads what the amplifier sent (never
 blocking: the descriptor is non-blocking), keeps the amplifier's buffer at the target
-fill from its own clock, corrected by each STATUS, renders one frame at a time through
-the same block as the audio callback (:func:`tpad_rt.kernel.table.render_into`; the
-kernel renders the envelope: ``cfg[CFG_OUTPUT_ENVELOPE]``), and writes it; bytes a
+fill from its own clock, corrected by each STATUS, renders one frame at a time by
+calling the audio driver's compiled callback on the same pointer table (the kernel
+renders the envelope: ``cfg[CFG_OUTPUT_ENVELOPE]``), and writes it; bytes a
 full port refuses wait in a pending buffer. It allocates nothing.
 
 Play position: the host estimates the sample ``p`` the amplifier plays now as
@@ -44,6 +44,7 @@ import numba
 import numpy as np
 
 from tpad_rt.kernel import amp_codec as codec
+from tpad_rt.kernel import atomics, libc
 from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.amp_codec import (
     ACK_ACKED_TYPE,
@@ -81,10 +82,20 @@ from tpad_rt.kernel.amp_codec import (
 from tpad_rt.kernel.atomics import load_acquire
 from tpad_rt.kernel.cache_stamp import stamp_cache
 from tpad_rt.kernel.layout import STATE_NEXT_INDEX
-from tpad_rt.kernel.libc import EAGAIN, EINTR, errno, monotonic_ns, pointer, read_fd, sleep_until_ns, write_fd
-from tpad_rt.kernel.table import TAB_STATE, TAB_STATE_SIZE, begin_block, finish_block, render_into
+from tpad_rt.kernel.libc import (
+    EAGAIN,
+    EINTR,
+    call_stream_callback,
+    errno,
+    monotonic_ns,
+    pointer,
+    read_fd,
+    sleep_until_ns,
+    write_fd,
+)
+from tpad_rt.kernel.table import TAB_STATE, TAB_STATE_SIZE
 
-stamp_cache(__file__, codec.__file__, *tab.COMPILED_SOURCES)
+stamp_cache(__file__, codec.__file__, libc.__file__, atomics.__file__, tab.__file__)
 
 # --- link: int64[LINK_SIZE]; the Python side writes the first block before the run --------
 LINK_FD = 0                   # the port's file descriptor (non-blocking)
@@ -129,7 +140,8 @@ LINK_AMP_CARRIER_MHZ = 37
 LINK_AMP_TIME_US = 38         # the amplifier's clock when it sent the last STATUS (us, 32 bits)
 LINK_STOP_RAMP_MS = 39        # the STOP the run ends with: its ramp (ms), set before LINK_STOP
 LINK_STOP_SEQ = 40            # the seq that STOP went out with (-1 if it could not)
-LINK_SIZE = 41
+LINK_CALLBACK = 41            # the address of the compiled render callback (kernel.callback.render_callback)
+LINK_SIZE = 42
 
 # --- exit reasons -----------------------------------------------------------------------------
 EXIT_RUNNING = 0
@@ -151,6 +163,9 @@ BUF_ROWS = 4
 BUF_BYTES = 1 << 16
 #: Seconds between the loop's wake-ups when no frame is due sooner (ns).
 WAKE_NS = 250_000
+#: PortAudio's status flags the callback counts: paOutputUnderflow, paPrimingOutput.
+PA_OUTPUT_UNDERFLOW = 0x4
+PA_PRIMING_OUTPUT = 0x10
 #: How fast (s per s) the host lets the amplifier's clock offset grow: an amplifier clock up to this much
 #: slower than the host's is followed (a crystal is within 1e-4).
 CLOCK_SKEW = 1e-4
@@ -305,17 +320,26 @@ def _queue_start(link: np.ndarray, buffers: np.ndarray, end: int) -> int:
 
 @numba.njit(**_KERNEL)
 def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buffers: np.ndarray,
-                    envelope: np.ndarray, delay_ns: int, late: bool, priming: bool, end: int) -> int:
-    """Render the next frame's samples (one block of the table) and queue its ENVELOPE frame; the new end.
-    Its block record counts it as late (the stream skipped ahead before it) or priming (part of a prefill).
+                    envelope: np.ndarray, times: np.ndarray, delay_ns: int, late: bool, priming: bool,
+                    end: int) -> int:
+    """Render the next frame's samples and queue its ENVELOPE frame; the new end.
 
-    The kernel's samples are in [-1, 1] of full scale (its output guard); each becomes
-    round(32767 x sample), and anything else (never expected) is sent as 0.
+    The samples come from the audio driver's own compiled callback (LINK_CALLBACK), called
+    as PortAudio calls it: one block of the pointer table, its record and statistics
+    (the time info says its first sample plays ``delay_ns`` from now; the status flags
+    count it as late, the stream having skipped ahead before it, or priming, part of a
+    prefill). So the render kernel is compiled once, for both drivers. Its samples are in
+    [-1, 1] of full scale (the output guard); each becomes round(32767 x sample), and
+    anything else (never expected) is sent as 0.
     """
     count = link[LINK_FRAME_SAMPLES]
     first = np.int64(state[STATE_NEXT_INDEX])
-    stats, row, entry_ns = begin_block(table, first, count, delay_ns)
-    render_into(table, state, envelope, count, 1, 0)
+    times[0] = 0.0
+    times[1] = 0.0
+    times[2] = delay_ns * 1e-9
+    flags = (PA_OUTPUT_UNDERFLOW if late else 0) | (PA_PRIMING_OUTPUT if priming else 0)
+    call_stream_callback(link[LINK_CALLBACK], envelope.ctypes.data, count, times.ctypes.data, flags,
+                         table.ctypes.data)
     frame = buffers[BUF_FRAME]
     codec.put_u32(frame, PAYLOAD + ENVELOPE_FIRST_INDEX, first)
     for k in range(count):
@@ -323,7 +347,6 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
         level = np.int64(round(value * 32767.0)) if abs(value) <= 1.0 else 0  # NaN is not <= 1
         codec.put_i16(frame, PAYLOAD + ENVELOPE_SAMPLES + 2 * k, level)
     end = _queue(link, buffers, ENVELOPE_SAMPLES + 2 * count, MSG_ENVELOPE, end)
-    finish_block(stats, row, entry_ns, count, late, priming)
     link[LINK_WRITTEN] = first + count
     link[LINK_FRAMES_SENT] += 1
     return end
@@ -341,12 +364,14 @@ def _skip_to(table: np.ndarray, state: np.ndarray, link: np.ndarray, index: int)
 
 
 @numba.njit(**_KERNEL)
-def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: np.ndarray) -> int:
+def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: np.ndarray,
+           times: np.ndarray) -> int:
     """Stream until LINK_STOP or a failure (module docstring); the EXIT_* reason, also in LINK_EXIT.
 
     ``table`` is the pointer table (its kernel's cfg set for envelope output), ``link``
     the int64 LINK_* array, ``buffers`` uint8 ``[BUF_ROWS, BUF_BYTES]``, ``envelope``
-    float32 of at least LINK_FRAME_SAMPLES samples.
+    float32 of at least LINK_FRAME_SAMPLES samples, ``times`` float64[3] (the callback's
+    time info).
     """
     state = numba.carray(pointer(table[TAB_STATE]), table[TAB_STATE_SIZE], _F8)
     rate_hz = link[LINK_ENVELOPE_HZ]
@@ -414,7 +439,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
                and link[LINK_WRITTEN] + frame_samples <= play + link[LINK_BUFFER_SAMPLES]
                and end + frame_bytes + MAX_ENCODED <= tx.shape[0]):  # room left for a START or STOP
             delay_ns = np.int64((link[LINK_WRITTEN] - play) * 1e9 / rate_hz)
-            end = _queue_envelope(table, state, link, buffers, envelope, delay_ns, skipped, not primed, end)
+            end = _queue_envelope(table, state, link, buffers, envelope, times, delay_ns, skipped, not primed, end)
             skipped = False
         if end > first:
             before = first

@@ -12,6 +12,8 @@ read_fd(fd, address, count) -> int, write_fd(fd, address, count) -> int
     ``read(2)`` and ``write(2)``: bytes moved, or -1 with :func:`errno` set
 errno() -> int
     the calling thread's ``errno``
+call_stream_callback(address, output, frames, time_info, status_flags, user_data) -> int
+    call a PortAudio stream callback (a compiled ``@cfunc``) at an address, as PortAudio would
 EAGAIN, EINTR
     the error numbers a non-blocking descriptor returns when it would block, or a signal interrupted
 
@@ -122,5 +124,23 @@ def errno(typingctx):  # type: ignore[no-untyped-def]
         function = cgutils.get_or_insert_function(
             builder.module, ir.FunctionType(_I32.as_pointer(), []), "__errno_location")
         return builder.sext(builder.load(builder.call(function, [])), _I64)
+
+    return signature, codegen
+
+
+@intrinsic
+def call_stream_callback(typingctx, address, output, frames, time_info, status_flags, user_data):  # type: ignore[no-untyped-def]
+    """Call the PortAudio stream callback (``PaStreamCallback``: ``int(const void *input, void *output,
+    unsigned long frames, const PaStreamCallbackTimeInfo *time_info, PaStreamCallbackFlags flags,
+    void *user_data)``) at ``address``, with no input; the addresses are integers. Its return value."""
+    signature = types.int64(types.int64, types.int64, types.int64, types.int64, types.int64, types.int64)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        voidptr = cgutils.voidptr_t
+        function_type = ir.FunctionType(_I32, [voidptr, voidptr, _I64, voidptr, _I64, voidptr])
+        function = builder.inttoptr(args[0], function_type.as_pointer())
+        result = builder.call(function, [ir.Constant(voidptr, None), builder.inttoptr(args[1], voidptr), args[2],
+                                         builder.inttoptr(args[3], voidptr), args[4], builder.inttoptr(args[5], voidptr)])
+        return builder.sext(result, _I64)
 
     return signature, codegen

@@ -320,13 +320,15 @@ class AmpLink:
         link[amp_stream.LINK_BUFFER_SAMPLES] = info.buffer_samples
         link[amp_stream.LINK_STATUS_TIMEOUT_NS] = (4 * info.status_period_ms + 100) * 1_000_000
         link[amp_stream.LINK_START_INDEX] = index
+        link[amp_stream.LINK_CALLBACK] = render_callback_address()
         self._thread = threading.Thread(target=self._run, args=(table,), name="tpad-rt serial streamer", daemon=True)
         self._thread.start()
 
     def _run(self, table: object) -> None:
         self.realtime = _realtime_thread()
         try:
-            amp_stream.stream(table.table, self.link, self._buffers, self._envelope)  # type: ignore[attr-defined]
+            amp_stream.stream(table.table, self.link, self._buffers, self._envelope,  # type: ignore[attr-defined]
+                              np.zeros(3))
         except BaseException as error:  # noqa: BLE001 - reported by failure()
             self._crash = error
 
@@ -435,7 +437,15 @@ def warm_up(table: object) -> None:
     link[[amp_stream.LINK_FD, amp_stream.LINK_STOP]] = (-1, 1)
     link[[amp_stream.LINK_ENVELOPE_HZ, amp_stream.LINK_FRAME_SAMPLES]] = (1000, 1)
     buffers = np.zeros((amp_stream.BUF_ROWS, amp_stream.BUF_BYTES), dtype=np.uint8)
-    amp_stream.stream(table.table, link, buffers, np.zeros(amp_stream.ENVELOPE_SCRATCH, dtype=np.float32))  # type: ignore[attr-defined]
+    amp_stream.stream(table.table, link, buffers, np.zeros(amp_stream.ENVELOPE_SCRATCH, dtype=np.float32),  # type: ignore[attr-defined]
+                      np.zeros(3))
+
+
+def render_callback_address() -> int:
+    """The address of the compiled audio callback, which the streamer calls for each frame."""
+    from tpad_rt.kernel import callback
+
+    return int(callback.render_callback.address)
 
 
 def _version_error(version: int) -> BackendError:
