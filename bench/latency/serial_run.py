@@ -18,8 +18,9 @@ process per core). Figures, each next to its baseline of the same run:
    applied the first sample of the first frame rendered after the push, both on
    CLOCK_MONOTONIC (the emulator records each sample's time), next to the part the host
    planned (the target fill) and the host's own estimate;
-3. underruns (samples the amplifier played with nothing buffered), idle, under GIL load
-   and under CPU load, for the streamer and for the Python writer.
+3. samples the amplifier missed (played with nothing buffered: its underruns, and the
+   samples of frames it refused, late or after its watchdog tripped), idle, under GIL
+   load and under CPU load, for the streamer and for the Python writer.
 
 Nothing here is a pass/fail test (docs/testing.md).
 """
@@ -93,8 +94,8 @@ def run_once(writer: str, load: str, seconds: float, buffer_ms: float, envelope_
         if done.returncode != 0:
             raise SystemExit(f"{writer} under {load} failed: {done.stderr.strip()}")
         if writer == "python":
-            frames, expected, underruns = map(int, done.stdout.split()[-3:])
-            return {"rate_fraction": frames / expected, "underruns": underruns}
+            frames, expected, missed = map(int, done.stdout.split()[-3:])
+            return {"rate_fraction": frames / expected, "missed": missed}
         result = json.loads(done.stdout.splitlines()[-1])
         result.update(_applied_latency(Path(folder) / "pushes.npz", recording))
         return result
@@ -118,7 +119,7 @@ def summarise(runs: dict[str, dict[str, list[dict[str, Any]]]]) -> dict[str, Any
     for writer, by_load in runs.items():
         for load, results in by_load.items():
             row: dict[str, Any] = {
-                "underruns": [r["underruns"] for r in results],
+                "missed": [r["missed"] for r in results],
                 "rate_fraction": [r["rate_fraction"] for r in results],
             }
             if writer == "tpad":
@@ -138,13 +139,13 @@ def markdown(report: dict[str, Any]) -> str:
     lines = [f"Serial amplifier over a pty, emulator in its own process; envelope {p['envelope_hz']} Hz, "
              f"target fill {p['buffer_ms']:g} ms; {p['runs']} runs of {p['seconds']:g} s per row "
              f"(machine: {report['machine']['cpus']} CPUs, {report['machine']['python']}).", "",
-             "| writer | load | envelope rate achieved (min of runs) | underruns per run (samples) |",
+             "| writer | load | envelope rate achieved (min of runs) | samples the amplifier missed, per run |",
              "|---|---|---|---|"]
     for writer, title in WRITERS.items():
         for load in LOADS:
             row = s[f"{writer}/{load}"]
             lines.append(f"| {title} | {load} | {min(row['rate_fraction']) * 100:.1f} % | "
-                         f"{', '.join(str(u) for u in row['underruns'])} |")
+                         f"{', '.join(str(u) for u in row['missed'])} |")
     lines += ["", "| load | push-to-amplifier p50 | p99 | host's estimate p50 | target fill |", "|---|---|---|---|---|"]
     for load in LOADS:
         row = s[f"tpad/{load}"]
@@ -169,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
             for writer in (WRITERS if round_number % 2 == 0 else reversed(list(WRITERS))):
                 result = run_once(writer, load, seconds, args.buffer_ms, args.envelope_hz)
                 runs[writer][load].append(result)
-                print(f"round {round_number + 1}/{rounds} {writer:6s} {load:4s}: underruns {result['underruns']}, "
+                print(f"round {round_number + 1}/{rounds} {writer:6s} {load:4s}: missed {result['missed']}, "
                       f"rate {result['rate_fraction'] * 100:.1f} %", flush=True)
     report = {
         "parameters": {"seconds": seconds, "runs": rounds, "buffer_ms": args.buffer_ms,

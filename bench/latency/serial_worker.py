@@ -7,8 +7,9 @@ finger sample every 2 ms (a slow back-and-forth swipe) and copies the new per-fr
 records out of the streamer's record ring every 50 ms, for SECONDS, while N other
 Python threads spin a pure-Python loop. Writes each push's CLOCK_MONOTONIC time and the
 stream index of the first sample of the first frame rendered after it to FILE.npz, and
-prints one JSON line last: the envelope rate achieved, the amplifier's counters, the
-host's own latency estimate, the target fill.
+prints one JSON line last: the envelope rate achieved, the samples the amplifier missed
+(its underruns, and the samples of frames it refused), its other counters, the host's
+own latency estimate, the target fill.
 """
 
 from __future__ import annotations
@@ -62,7 +63,8 @@ def main(url: str, seconds: float, gil_threads: int, pushes_path: Path) -> None:
              first_index=rows[firsts[kept], tab.BLOCK_SAMPLE_INDEX])
     print(json.dumps({
         "rate_fraction": frames * amp["frame_samples"] / (seconds * amp["envelope_hz"]),
-        "underruns": amp["amp_underruns"], "late": amp["late"], "frames_bad": amp["amp_frames_bad"],
+        "missed": amp["amp_underruns"] + amp["amp_frames_rejected"] * amp["frame_samples"], "late": amp["late"],
+        "frames_bad": amp["amp_frames_bad"],
         "frames_rejected": amp["amp_frames_rejected"], "host_latency_ms_p50": stats["latency_ms_p50"],
         "target_fill_ms": amp["target_fill"] / amp["envelope_hz"] * 1e3,
     }), flush=True)
