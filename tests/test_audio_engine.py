@@ -44,10 +44,17 @@ PYTHON_CALLBACK = Path(__file__).resolve().parent / "python_callback.py"
 DRIVE_PORT = "PortAudio:out_"
 #: Seconds each timed stream runs.
 RUN_S = 1.5
-#: Underflows a native callback may show beyond the empty-callback baseline of the same test:
-#: the dummy driver logs a few xruns per 5 s by itself, in bursts from the machine's other
-#: work (a full CI run saw 7 against a baseline of 1 once); a starved callback shows hundreds.
+#: Underflows a native callback may show beyond twice the empty-callback baseline of the same test: the
+#: dummy driver logs xruns by itself, in bursts from the machine's other work, and as often as that work
+#: comes (full CI runs saw 7 against a baseline of 1, and 21 against 8, on a cold cache); a starved
+#: callback shows hundreds to thousands.
 UNDERFLOW_MARGIN = 10
+
+
+def underflows_allowed(baseline: int) -> int:
+    """The most underflows a native callback may show next to ``baseline``, the empty callback's in the same
+    test (UNDERFLOW_MARGIN)."""
+    return 2 * baseline + UNDERFLOW_MARGIN
 
 
 @pytest.fixture(scope="module")
@@ -146,7 +153,7 @@ def test_renderer_keeps_the_stream_clock(jack: str) -> None:
     print(stats)
     assert stats["callbacks_in_run"] == pytest.approx(expected, rel=0.03)
     assert stats["frames"] == stats["callbacks"] * BLOCK
-    assert stats["underflows"] <= baseline[tab.STAT_UNDERFLOWS] + UNDERFLOW_MARGIN
+    assert stats["underflows"] <= underflows_allowed(int(baseline[tab.STAT_UNDERFLOWS]))
     assert stats["compute_us_p50"] > 0 and stats["compute_us_max"] >= stats["compute_us_p99"]
     assert 0 < stats["callback_load_p99"] < 1
     assert stats["blocks"] > 0 and stats["power_peak_w"] <= stats["power_budget_w"]
@@ -194,7 +201,7 @@ def test_gil_load_does_not_starve_the_native_callback(jack: str) -> None:
           f"Python callback under GIL load: {python_callbacks} of {python_expected:.0f}, "
           f"{python_underflows} underflows")
     assert stats["callbacks_in_run"] == pytest.approx(expected, rel=0.03)
-    assert stats["underflows"] <= baseline[tab.STAT_UNDERFLOWS] + UNDERFLOW_MARGIN
+    assert stats["underflows"] <= underflows_allowed(int(baseline[tab.STAT_UNDERFLOWS]))
     collapsed = (python_callbacks < 0.5 * python_expected
                  or python_underflows > baseline[tab.STAT_UNDERFLOWS] + 5 * UNDERFLOW_MARGIN)
     assert collapsed, (python_callbacks, python_expected, python_underflows)
