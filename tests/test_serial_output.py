@@ -16,7 +16,6 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +28,6 @@ from crc import Calculator, Crc16
 
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
-from tpad_rt.errors import BackendError
 from tpad_rt.physics.friction import relative_friction
 from tpad_rt.recording import read_recording
 

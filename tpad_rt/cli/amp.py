@@ -45,6 +45,7 @@ import contextlib
 import gc
 import os
 import signal
+import sys
 import textwrap
 import threading
 import time
