@@ -336,7 +336,7 @@ def test_unknown_device_lists_the_devices(jack: str) -> None:
 def test_a_stream_that_stops_under_the_renderer_is_reported(jack: str) -> None:
     renderer = Renderer(output="audio://", texture=GRATING)
     renderer.start()
-    stream = renderer._stream
+    stream = renderer.driver.stream
     assert stream is not None
     _, lib = audio.portaudio()
     lib.Pa_AbortStream(stream._stream)  # what a lost device or a dead server looks like from here

@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from tpad_rt.device import Device
+from tpad_rt.drivers import open_driver
 from tpad_rt.errors import ConfigError
-from tpad_rt.outputs import open_output
+from tpad_rt.outputs import Consumes, Runs, open_output, output_forms, output_kind
 from tpad_rt.outputs.null import NullOutput
 from tpad_rt.outputs.sim import SimOutput
+from tpad_rt.pipeline import RenderOptions
 
 DEVICE = Device.default()
 
@@ -41,9 +43,53 @@ def test_sim_q_option() -> None:
         ("sim://plate", "unexpected 'plate' after sim://; expected sim://?q=device"),
         ("null://?count=1", "unknown option 'count' (options: none); expected null://"),
         ("null://x", "unexpected 'x' after null://; expected null://"),
+        ("audio://?rate=48000", "audio:// plays in real time only (tpad-rt play or a Renderer), not offline; "
+                                "expected sim://?q=device or wav:///path/out.wav or null://"),
+        ("serial:///dev/ttyACM0", "serial:// plays in real time only (tpad-rt play or a Renderer), not offline; "
+                                  "expected sim://?q=device or wav:///path/out.wav or null://"),
     ],
 )
 def test_url_errors(url: str, expected: str) -> None:
     with pytest.raises(ConfigError) as caught:
         open_output(url, device=DEVICE, fs_hz=192000)
     assert str(caught.value) == f"output URL '{url}': {expected}"
+
+
+@pytest.mark.parametrize(
+    ("url", "consumes", "runs", "driver"),
+    [
+        ("audio://", Consumes.DAC, Runs.CALLBACK, "AudioCallbackDriver"),
+        ("serial:///dev/ttyACM0", Consumes.ENVELOPE, Runs.STREAM, "SerialStreamDriver"),
+        ("sim://", Consumes.DAC, Runs.PACED, "PacedDriver"),
+        ("wav:///tmp/x.wav", Consumes.DAC, Runs.PACED, "PacedDriver"),
+        ("null://", Consumes.DAC, Runs.PACED, "PacedDriver"),
+    ],
+)
+def test_every_scheme_declares_what_it_consumes_and_gets_the_driver_for_it(
+        url: str, consumes: Consumes, runs: Runs, driver: str) -> None:
+    _, kind = output_kind(url)
+    assert (kind.consumes, kind.runs) == (consumes, runs)
+    made = open_driver(url, device=DEVICE, rate_hz=192000, block_frames=64, options=RenderOptions(),
+                       stall_timeout_s=0.5)
+    assert type(made).__name__ == driver and made.consumes is consumes
+    assert set(output_forms()) == {"audio", "serial", "sim", "wav", "null"}
+
+
+def test_an_envelope_output_renders_at_its_envelope_rate_in_its_frames_keeping_the_control_period() -> None:
+    made = open_driver("serial:///dev/ttyACM0?envelope_hz=8000&frame_ms=1", device=DEVICE, rate_hz=192000,
+                       block_frames=64, options=RenderOptions(), stall_timeout_s=0.5)
+    assert (made.rate_hz, made.block_frames) == (8000, 8)
+    control_period_s = RenderOptions().control_interval / 192000
+    assert made.options.control_interval == max(1, round(control_period_s * 8000))
+    chosen = open_driver("serial:///dev/ttyACM0?envelope_hz=8000", device=DEVICE, rate_hz=192000, block_frames=64,
+                         options=RenderOptions(control_interval=3), stall_timeout_s=0.5)
+    assert chosen.options.control_interval == 3  # one the caller chose is kept
+
+
+def test_an_audio_url_s_rate_and_block_replace_the_renderer_s_only_when_written() -> None:
+    written = open_driver("audio://?rate=48000&block=256", device=DEVICE, rate_hz=192000, block_frames=64,
+                          options=RenderOptions(), stall_timeout_s=0.5)
+    assert (written.rate_hz, written.block_frames) == (48000, 256)
+    default = open_driver("audio://", device=DEVICE, rate_hz=96000, block_frames=32, options=RenderOptions(),
+                          stall_timeout_s=0.5)
+    assert (default.rate_hz, default.block_frames) == (96000, 32)

@@ -116,7 +116,7 @@ from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError
 renderer = Renderer(output="audio://", texture={str(GRATING)!r})
 renderer.start()
-stream = renderer._stream
+stream = renderer.driver.stream
 stop_stream = stream.stop
 
 def stop_on_a_stopped_server():

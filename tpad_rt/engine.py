@@ -9,7 +9,7 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
     ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``iter_telemetry(period_s)``, ``record(path)``,
     ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``recent_fingers()``,
     ``texture_t0_s()``, ``.texture``, ``.audio_device``, ``.callback_table``, ``.rate_hz``,
-    ``.block_frames``, ``.running``
+    ``.block_frames``, ``.running``, ``.driver`` (what runs the output: :mod:`tpad_rt.drivers`)
 
 Example::
 
@@ -26,15 +26,14 @@ Example::
     # leaving the block ramps the drive to 0, closes the stream, and re-raises any
     # error the audio device or the engine's thread met
 
-docs/realtime.md is the design: the audio callback is the native
-``tpad_rt.kernel.callback.render_callback``; every state array is shared with it
-through a :class:`tpad_rt.realtime.CallbackTable`; a watcher thread drains
-telemetry and the drive for recordings and polls the stream (lost: inactive; stalled: no
-callback for ``stall_timeout_s``). On ``serial://`` the GIL-free streamer
-(``tpad_rt.kernel.amp_stream``, run by ``tpad_rt.outputs.serial_amp.AmpLink``) renders the
-same blocks from the same table, as the envelope, and the watcher polls it for failures.
-With ``sim://``, ``null://``, ``wav://...`` a paced Python thread calls the same callback
-and hands each block to the output (GIL-bound: a simulator, not a real-time path).
+docs/realtime.md is the design. The Renderer is a front over parts with one job each:
+the :class:`tpad_rt.pipeline.Pipeline` (the kernel's arrays, finger and texture
+checks); a :class:`tpad_rt.realtime.CallbackTable` sharing them with the native render
+callback ``tpad_rt.kernel.callback.render_callback``; the driver the output's scheme
+declares (:mod:`tpad_rt.drivers`: PortAudio calls the callback for ``audio://``, the
+GIL-free streamer for ``serial://``, a paced Python thread for ``sim://``, ``null://``,
+``wav://``); a :class:`tpad_rt.telemetry.TelemetryLog` (telemetry, totals, recording);
+and a watcher thread that drains telemetry and polls the driver for failures.
 """
 
 from __future__ import annotations
@@ -43,9 +42,8 @@ import math
 import numbers
 import threading
 import time
-from collections import deque
 from collections.abc import Iterator
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -54,40 +52,26 @@ import numpy as np
 
 from tpad_rt import __version__
 from tpad_rt.device import Device
-from tpad_rt.errors import BackendError, ConfigError, TpadError
+from tpad_rt.drivers import Driver, open_driver
+from tpad_rt.errors import ConfigError
 from tpad_rt.inputs.base import FINGER_DTYPE
-from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
-from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.layout import (
-    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, FLAG_FAULT,
-    FLAG_POWER, FLAG_VOLTAGE, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEL_NAMES, TEX_PROG_COLS,
+    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM,
+    OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEX_PROG_COLS,
 )
-from tpad_rt.outputs import Output, audio, open_output, output_forms, serial_amp
+from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_STALL_TIMEOUT_S
+from tpad_rt.outputs import Consumes
+from tpad_rt.outputs.audio import AudioDevice
 from tpad_rt.pipeline import Pipeline, RenderOptions, shown
 from tpad_rt.realtime import CallbackTable, monotonic_ns
-from tpad_rt.recording import Recording, write_recording
+from tpad_rt.telemetry import TelemetryLog
 from tpad_rt.texture import CompiledTexture, load_compiled
-from tpad_rt.urls import parse_url
 
-#: Seconds between two passes of the watcher thread (telemetry drain, stream poll).
+#: Seconds between two passes of the watcher thread (telemetry drain, driver poll).
 WATCH_PERIOD_S = 0.02
-#: Telemetry rows kept for :meth:`Renderer.telemetry` between calls (the oldest go first).
-MAX_PENDING_ROWS = 2**18
-#: A paced (non-audio) output further behind real time than this (s) skips ahead instead of catching
-#: up in a burst, and counts an underflow.
-PACED_MAX_BEHIND_S = 0.1
 #: The stop waits at most this many times the ramp's duration (plus a second) for the drive to reach 0.
 STOP_TIMEOUT_FACTOR = 20
-#: An audio stream counts as stalled after no fewer blocks' time than this without a callback (large blocks).
-STALL_MIN_BLOCKS = 4
-#: Stopping and closing an audio stream may take the stall limit plus this long (s; it takes tens of ms)
-#: before the stream counts as stalled and is abandoned.
-CLOSE_GRACE_S = 1.0
-
-#: The rate (Hz) at which RenderOptions' default control_interval gives the default control period; an
-#: envelope output (a serial amplifier, at its own rate) with the default interval keeps that period.
-DEFAULT_CONTROL_RATE_HZ = 192000
 
 #: Friction 1 everywhere: the drive stays silent (the texture before any is set).
 NO_TEXTURE = CompiledTexture(np.array([[OP_PUSH_ONE] + [0] * (TEX_PROG_COLS - 1)]), np.zeros(0), np.zeros(0), 1,
@@ -141,61 +125,45 @@ class Renderer:
                  block_frames: int = 64, options: RenderOptions = RenderOptions(), stall_timeout_s: float = 0.5):
         self.device = device if device is not None else Device.default()
         self.output_url = output
-        url = parse_url(output, "output", {**output_forms(), "audio": audio.FORMS, "serial": serial_amp.FORMS})
-        self._audio = audio.parse_audio_url(url) if url.scheme == "audio" else None
-        self._serial = serial_amp.parse_serial_url(url) if url.scheme == "serial" else None
-        if self._serial is not None:  # the amplifier makes the carrier: the kernel renders the envelope
-            rate_hz = self._serial.envelope_hz
-            block_frames = max(1, round(self._serial.frame_ms * 1e-3 * rate_hz))  # until INFO says more
-            if options.control_interval == RenderOptions.control_interval:  # the same control period
-                options = replace(options, control_interval=max(1, round(
-                    RenderOptions.control_interval * rate_hz / DEFAULT_CONTROL_RATE_HZ)))
-        if self._audio is not None:
-            rate_hz = self._audio.rate_hz if "rate" in self._audio.given else rate_hz
-            block_frames = self._audio.block_frames if "block" in self._audio.given else block_frames
-        if not (isinstance(block_frames, numbers.Integral) and 1 <= block_frames <= MAX_BLOCK_FRAMES):
-            raise ConfigError(f"block_frames: must be a whole number in [1, {MAX_BLOCK_FRAMES}], got "
-                              f"{shown(block_frames)}")
-        block_frames = int(block_frames)
         if not (isinstance(stall_timeout_s, (int, float)) and not isinstance(stall_timeout_s, bool)
                 and 0 < stall_timeout_s <= MAX_STALL_TIMEOUT_S):
             raise ConfigError(f"stall_timeout_s: must be a number of seconds in (0, {MAX_STALL_TIMEOUT_S:g}], "
                               f"got {stall_timeout_s!r}")
         self.stall_timeout_s = float(stall_timeout_s)
-        self.rate_hz = rate_hz
-        self.block_frames = block_frames
-        self.options = options
+        self._driver = open_driver(output, device=self.device, rate_hz=rate_hz, block_frames=block_frames,
+                                   options=options, stall_timeout_s=self.stall_timeout_s)
+        block_frames = self._driver.block_frames
+        if not (isinstance(block_frames, numbers.Integral) and 1 <= block_frames <= MAX_BLOCK_FRAMES):
+            raise ConfigError(f"block_frames: must be a whole number in [1, {MAX_BLOCK_FRAMES}], got "
+                              f"{shown(block_frames)}")
+        self._driver.block_frames = int(block_frames)
+        self.options = self._driver.options
         compiled, self._texture_path = _compiled(texture)
-        self._pipeline = Pipeline(self.device, compiled, fs_hz=rate_hz, options=options,
-                                  envelope_output=self._serial is not None)
+        self._pipeline = Pipeline(self.device, compiled, fs_hz=self._driver.rate_hz, options=self.options,
+                                  envelope_output=self._driver.consumes is Consumes.ENVELOPE)
+        self.rate_hz = self._driver.rate_hz
+        self._log = TelemetryLog(self._pipeline, self.rate_hz)
         self._table: CallbackTable | None = None  # while running
-        self._link: serial_amp.AmpLink | None = None  # the serial amplifier of the current run
-        self._last_link: serial_amp.AmpLink | None = None  # the last run's, for stats() after stop()
         self._last_table: CallbackTable | None = None  # the last run's, for stats() after stop()
-        self._stream: audio.AudioStream | None = None
-        self._paced: threading.Thread | None = None
         self._watcher: threading.Thread | None = None
         self._halt = threading.Event()
-        self._ended = threading.Event()  # set by stop() and by an error in the engine's threads
+        self._ended = threading.Event()  # set by stop() and by an error in the watcher
         self._error: BaseException | None = None
-        self._stalled = False  # set by the watcher when the audio stream stopped calling back
-        self._telemetry_lock = threading.Lock()
-        self._pending: deque[dict[str, np.ndarray]] = deque()
-        self._pending_rows = 0
-        self._totals = {"blocks": 0, "voltage_saturated": 0, "power_saturated": 0, "fault_blocks": 0,
-                        "energy_w": 0.0, "peak_w": 0.0}
-        self._push_ns = np.zeros(options.finger_ring, dtype=np.int64)
+        self._push_ns = np.zeros(self.options.finger_ring, dtype=np.int64)
         self._producer = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
-        self._output_latency_s = math.nan
-        self._audio_device: audio.AudioDevice | None = None
-        self._record_path: Path | None = None
-        self._recorded: list[dict[str, np.ndarray]] = []
-        self._drive_chunks: list[np.ndarray] = []
-        self._drive_from = 0  # next drive sample to copy out of the ring while recording
-        self._record_from = 0  # the recording's first drive sample
         self._texture = compiled
 
     # --- lifecycle -----------------------------------------------------------------
+
+    @property
+    def driver(self) -> Driver:
+        """What runs the render callback for this output (:mod:`tpad_rt.drivers`)."""
+        return self._driver
+
+    @property
+    def block_frames(self) -> int:
+        """Frames per callback (on ``serial://``, per envelope frame: set by the amplifier's INFO at start)."""
+        return self._driver.block_frames
 
     @property
     def running(self) -> bool:
@@ -208,67 +176,38 @@ class Renderer:
         return self._table
 
     def stream_time_s(self) -> float:
-        """The audio stream's own clock (s; PortAudio's stream time), NaN without a running audio stream."""
-        stream = self._stream
-        return stream.time_s() if stream is not None else math.nan
+        """The output's own clock (s; PortAudio's stream time on ``audio://``), NaN where there is none."""
+        return self._driver.stream_time_s() if self._table is not None else math.nan
 
     def start(self) -> None:
         """Warm the callback up, open and start the output; the drive ramps up while a finger slides.
 
-        Raises BackendError when the audio device cannot run the stream (missing
-        PortAudio, unknown device, a rate it does not accept), RuntimeError if running.
+        Raises BackendError when the output cannot run (missing PortAudio, unknown device, a rate it
+        does not accept; a serial port that does not open or an amplifier refusing the handshake),
+        ConfigError or BackendError when a paced output cannot open, RuntimeError if running.
         """
         if self.running:
             raise RuntimeError("Renderer.start: already running")
         self._error = None
-        self._stalled = False
         self._halt.clear()
         self._ended.clear()
-        channels, channel = 1, 0
-        device = None
-        if self._audio is not None:
-            device = audio.find_output_device(self._audio.device)
-            self._audio_device = device
-            if self._audio.channel > device.channels:
-                raise BackendError(f"audio: channel {self._audio.channel}: device {device} has "
-                                   f"{device.channels} output channel(s)")
-            channels, channel = device.channels, self._audio.channel - 1
-        table = CallbackTable(self._pipeline.arrays, self._texture, channels=channels, channel=channel)
+        driver = self._driver
+        driver.prepare()
+        table = CallbackTable(self._pipeline.arrays, self._texture, channels=driver.channels, channel=driver.channel)
         table.slot_t0_s[0] = self.now_s()
         self._last_table = table
-        warm = table.copy()
-        warm.call(np.zeros(self.block_frames * channels, dtype=np.float32))
-        if self._serial is not None:  # the kernel's arrays are the table's: the amplifier's scale goes in them
-            serial_amp.warm_up(warm)
-            self._link = self._last_link = serial_amp.AmpLink.open(self._serial, carrier_hz=self.device.resonance_hz)
-            info = self._link.info
-            assert info is not None
-            self._pipeline.set_drive_scale(info.full_scale_v, info.max_v, self._link.carrier_hz)
-            self.block_frames = self._link.frame_samples
-        self._pipeline.start()
+        driver.warm(table.copy())
         try:
-            if self._link is not None:
-                self._table = table
-                self._link.start(table)
-            elif device is not None:
-                self._stream = audio.AudioStream(device, self.rate_hz, self.block_frames, channels,
-                                                 cb.render_callback.address, table.user_data)
-                self._output_latency_s = self._stream.output_latency_s
-                self._table = table
-                self._stream.start()
-            else:
-                output = open_output(self.output_url, device=self.device, fs_hz=self.rate_hz)
-                self._table = table
-                self._paced = threading.Thread(target=self._guard, args=(self._pace, output),
-                                               name="tpad-rt paced output", daemon=True)
-                self._paced.start()
+            driver.open(self._pipeline)
+            self._pipeline.start()
+            self._table = table
+            driver.start(table)
         except BaseException:
             self._pipeline.stop()
-            self._close_stream()
-            self._close_link()
             self._table = None
+            driver.close(self.options.ramp_ms)
             raise
-        self._watcher = threading.Thread(target=self._guard, args=(self._watch,), name="tpad-rt watcher", daemon=True)
+        self._watcher = threading.Thread(target=self._watch, args=(table,), name="tpad-rt watcher", daemon=True)
         self._watcher.start()
 
     def stop(self) -> None:
@@ -278,7 +217,7 @@ class Renderer:
         control interval and one block past the stop: the kernel's gain is 0 from
         there on. A lost or stalled stream is abandoned instead (returns promptly:
         within ``stall_timeout_s`` plus a second of a stall). Re-raises an error the
-        stream or the engine's threads met, and writes the recording :meth:`record`
+        output or the engine's threads met, and writes the recording :meth:`record`
         asked for.
         """
         table = self._table
@@ -289,75 +228,25 @@ class Renderer:
         ramp_samples = max(1, round(self.options.ramp_ms * 1e-3 * self.rate_hz))
         target = table.next_sample + self.options.control_interval + ramp_samples + self.block_frames
         deadline = (time.monotonic() + STOP_TIMEOUT_FACTOR * (target - table.next_sample) / self.rate_hz + 1.0
-                    + self._stall_limit_s())  # a stall that begins now is reported (the watcher) before that
+                    + self._driver.stall_limit_s())  # a stall that begins now is reported (the watcher) before that
         while table.next_sample < target and not self._ended.is_set() and time.monotonic() < deadline:
             time.sleep(0.001)
         self._halt.set()
-        for thread in (self._paced, self._watcher):
-            if thread is not None:
-                thread.join()
-        self._paced = self._watcher = None
+        if self._watcher is not None:
+            self._watcher.join()
+            self._watcher = None
+        self._error = self._error or self._driver.close(self.options.ramp_ms)
         try:
-            self._close_stream()
-        except BackendError as error:
+            self._log.drain(table)
+        except BaseException as error:  # noqa: BLE001 - the recording's limits: re-raised by check()
             self._error = self._error or error
-        self._error = self._error or self._close_link()
-        self._drain(table)
         self._table = None
-        if self._record_path is not None:
-            self._write_recording()
+        if self._log.recording:
+            self._log.write_recording(self._metadata())
         if table.next_sample >= target and (table.arrays.state[STATE_GATE] or table.arrays.state[STATE_RAMP_START]):
             self._error = self._error or RuntimeError("Renderer.stop: the drive was not ramped to 0")
         self._ended.set()
         self.check()
-
-    def _close_stream(self) -> None:
-        """Stop and close the audio stream; abandon it instead if it stalled or its device or server went away.
-
-        The stop and close run in a helper thread (PortAudio's JACK host API blocks in them for minutes
-        when the server stops answering): if they take longer than the stall limit plus CLOSE_GRACE_S,
-        the stream is abandoned and a BackendError (stalled) raised; so is a stop or close failing.
-        """
-        stream, self._stream = self._stream, None
-        if stream is None:
-            return
-        if self._stalled or stream.lost():
-            stream.abandon()
-            return
-        errors: list[BaseException] = []
-
-        def shut() -> None:
-            try:
-                try:
-                    stream.stop()
-                finally:
-                    stream.close()
-            except BaseException as error:  # noqa: BLE001 - re-raised by the waiting thread
-                errors.append(error)
-
-        closer = threading.Thread(target=shut, name="tpad-rt stream close", daemon=True)
-        closer.start()
-        bound_s = self._stall_limit_s() + CLOSE_GRACE_S
-        closer.join(bound_s)
-        if closer.is_alive():
-            stream.abandon()
-            raise _stall_error(stream.device, f"stopping it took over {bound_s:.2f} s")
-        if errors:
-            raise errors[0]
-
-    def _close_link(self) -> BaseException | None:
-        """End the serial amplifier's stream (STOP with the run's ramp) and close its port; the error that
-        ended the stream, if one did."""
-        link, self._link = self._link, None
-        if link is None:
-            return None
-        failure = link.failure()
-        link.stop(self.options.ramp_ms)
-        return failure
-
-    def _stall_limit_s(self) -> float:
-        """Seconds without a callback after which the audio stream counts as stalled."""
-        return max(self.stall_timeout_s, STALL_MIN_BLOCKS * self.block_frames / self.rate_hz)
 
     def join(self, timeout_s: float | None = None) -> None:
         """Wait (at most ``timeout_s`` s; None: no limit) until another thread stops the renderer or an
@@ -366,7 +255,7 @@ class Renderer:
         self.check()
 
     def check(self) -> None:
-        """Re-raise (once) the error the stream or the engine's threads met, if any."""
+        """Re-raise (once) the error the output or the engine's threads met, if any."""
         error, self._error = self._error, None
         if error is not None:
             raise error
@@ -387,97 +276,19 @@ class Renderer:
         except Exception:  # the caller's exception is the one to see  # noqa: BLE001
             pass
 
-    # --- threads -----------------------------------------------------------------------
-
-    def _guard(self, work: Any, *args: Any) -> None:
-        """Run ``work(*args)`` in a thread; keep its exception for :meth:`check` and ramp the drive down."""
+    def _watch(self, table: CallbackTable) -> None:
+        """Until halted: drain telemetry (and the drive when recording) and poll the driver; an error either
+        meets is kept for :meth:`check`, and the drive ramps down."""
         try:
-            work(*args)
+            while not self._halt.wait(WATCH_PERIOD_S):
+                self._log.drain(table)
+                failure = self._driver.poll(table)
+                if failure is not None and not self._halt.is_set():
+                    raise failure
         except BaseException as error:  # noqa: BLE001 - re-raised in the caller's thread
             self._error = self._error or error
             self._pipeline.stop()
             self._ended.set()
-
-    def _pace(self, output: Output) -> None:
-        """Call the render callback one block at a time, no faster than real time; hand blocks to ``output``."""
-        table = self._table
-        assert table is not None
-        block = np.zeros(self.block_frames, dtype=np.float32)
-        most_behind = max(1, round(PACED_MAX_BEHIND_S * self.rate_hz / self.block_frames))
-        with output:
-            started = time.monotonic()
-            rendered = 0
-            while not self._halt.is_set():
-                due = int((time.monotonic() - started) * self.rate_hz / self.block_frames) + 1
-                if due - rendered > most_behind:  # stalled (e.g. compiling): skip ahead, count an underflow
-                    table.stats[tab.STAT_UNDERFLOWS] += 1
-                    rendered = due - 1
-                for _ in range(due - rendered):
-                    table.call(block)
-                    output.write(block, self._pipeline.last_telemetry_row())
-                rendered = max(rendered, due)
-                time.sleep(min(0.005, self.block_frames / self.rate_hz))
-
-    def _watch(self) -> None:
-        """Until halted: drain telemetry (and the drive when recording), and fail if the audio stream stopped
-        or stalled (its callback count did not advance for the stall limit, clocked with time.monotonic)."""
-        table = self._table
-        assert table is not None
-        seen, seen_at, limit_s = -1, time.monotonic(), self._stall_limit_s()
-        while not self._halt.wait(WATCH_PERIOD_S):
-            self._drain(table)
-            link = self._link
-            if link is not None and (failure := link.failure()) is not None:
-                raise failure
-            stream = self._stream
-            if stream is None or self._halt.is_set():
-                continue
-            if not stream.active():
-                raise BackendError(f"audio: the stream on device {stream.device} stopped (device lost or server gone)")
-            # The clock is read before the count, and after it on an advance: the gap measured never exceeds
-            # the time without a callback, however late this thread runs (GIL, load).
-            now = time.monotonic()
-            count = int(table.stats[tab.STAT_CALLBACKS])
-            if count != seen:
-                seen, seen_at = count, time.monotonic()
-            elif now - seen_at >= limit_s:
-                self._stalled = True
-                raise _stall_error(stream.device, f"no callback for {now - seen_at:.2f} s")
-
-    def _drain(self, table: CallbackTable) -> None:
-        """Move new telemetry rows (and drive samples, when recording) out of the shared rings."""
-        with self._telemetry_lock:
-            frames = table.next_sample
-            rows = self._pipeline.drain_telemetry()
-            count = len(rows["t"])
-            if count == 0:
-                return
-            flags = rows["saturated"]
-            totals = self._totals
-            totals["blocks"] += count
-            totals["voltage_saturated"] += int(np.count_nonzero(flags & FLAG_VOLTAGE))
-            totals["power_saturated"] += int(np.count_nonzero(flags & FLAG_POWER))
-            totals["fault_blocks"] += int(np.count_nonzero(flags & FLAG_FAULT))
-            totals["energy_w"] += float(rows["power_w"].sum())
-            totals["peak_w"] = max(totals["peak_w"], float(rows["power_w"].max()))
-            self._pending.append(rows)
-            self._pending_rows += count
-            while self._pending_rows > MAX_PENDING_ROWS:
-                self._pending_rows -= len(self._pending.popleft()["t"])
-            if self._record_path is not None:
-                if not self._recorded:
-                    self._drive_from = self._record_from = round(float(rows["t"][0]) * self.rate_hz)
-                self._recorded.append(rows)
-                if frames - self._drive_from > len(table.drive):
-                    raise TpadError(f"record: {frames - self._drive_from} drive samples were due but the ring "
-                                    f"holds {len(table.drive)}: the recording lost samples (the watcher thread "
-                                    "was held up for too long)")
-                if frames - self._record_from > MAX_RECORDING_SAMPLES:
-                    raise TpadError(f"record: longer than the {MAX_RECORDING_SAMPLES} drive samples a recording may "
-                                    f"keep in memory ({MAX_RECORDING_SAMPLES / self.rate_hz:.0f} s at {self.rate_hz} "
-                                    "Hz); record shorter runs")
-                self._drive_chunks.append(table.drive[np.arange(self._drive_from, frames) % len(table.drive)])
-                self._drive_from = max(self._drive_from, frames)
 
     # --- textures and fingers ------------------------------------------------------
 
@@ -496,9 +307,10 @@ class Renderer:
             self._pipeline.set_texture(compiled)
 
     @property
-    def audio_device(self) -> audio.AudioDevice | None:
+    def audio_device(self) -> AudioDevice | None:
         """The audio device of the current or last run (None before it, or on a non-audio output)."""
-        return self._audio_device
+        device = getattr(self._driver, "audio_device", None)
+        return device if isinstance(device, AudioDevice) else None
 
     @property
     def texture(self) -> CompiledTexture:
@@ -584,7 +396,7 @@ class Renderer:
         guard (docs/kernel.md "Faults"), since the renderer was made.
         """
         if self._table is not None:
-            self._drain(self._table)
+            self._log.drain(self._table)
         table = self._last_table
         result: dict[str, Any] = {"rate_hz": self.rate_hz, "block_frames": self.block_frames}
         if table is not None:
@@ -593,7 +405,8 @@ class Renderer:
         else:
             counters, blocks = np.zeros(tab.STAT_SIZE, dtype=np.int64), np.zeros((0, tab.BLOCK_COLS), dtype=np.int64)
         result.update(callbacks=int(counters[tab.STAT_CALLBACKS]), frames=int(counters[tab.STAT_FRAMES]),
-                      underflows=int(counters[tab.STAT_UNDERFLOWS]), output_latency_s=self._output_latency_s)
+                      underflows=int(counters[tab.STAT_UNDERFLOWS]))
+        result.update(self._driver.stats())
         compute_us = blocks[:, tab.BLOCK_COMPUTE_NS] * 1e-3
         for name, q in (("p50", 50), ("p99", 99), ("max", 100)):
             result[f"compute_us_{name}"] = float(np.percentile(compute_us, q)) if len(compute_us) else math.nan
@@ -603,8 +416,7 @@ class Renderer:
         latency_ms = self._latencies_ms(blocks)
         for name, q in (("p50", 50), ("p99", 99)):
             result[f"latency_ms_{name}"] = float(np.percentile(latency_ms, q)) if len(latency_ms) else math.nan
-        with self._telemetry_lock:
-            totals = dict(self._totals)
+        totals = self._log.totals()
         cfg = self._pipeline.arrays.cfg
         result.update(blocks=totals["blocks"], voltage_saturated=totals["voltage_saturated"],
                       power_saturated=totals["power_saturated"], fault_blocks=totals["fault_blocks"],
@@ -612,8 +424,6 @@ class Renderer:
                       power_peak_w=totals["peak_w"], power_budget_w=float(cfg[CFG_POWER_CAP_W]),
                       power_avg_w=float(cfg[CFG_POWER_AVG_W]))
         result.update(self._pipeline.faults())
-        if self._last_link is not None:
-            result["amplifier"] = self._last_link.stats()
         return result
 
     def _latencies_ms(self, blocks: np.ndarray) -> np.ndarray:
@@ -630,12 +440,10 @@ class Renderer:
         return (out_ns[kept] - self._push_ns[samples[kept] % len(self._push_ns)]) * 1e-6
 
     def telemetry(self) -> dict[str, np.ndarray]:
-        """The telemetry rows since the last call (at most MAX_PENDING_ROWS, the newest), by TEL_NAMES column."""
+        """The telemetry rows since the last call (at most tpad_rt.telemetry.MAX_PENDING_ROWS, the newest), by TEL_NAMES column."""
         if self._table is not None:
-            self._drain(self._table)
-        with self._telemetry_lock:
-            chunks, self._pending, self._pending_rows = list(self._pending), deque(), 0
-        return _joined(chunks)
+            self._log.drain(self._table)
+        return self._log.take()
 
     def iter_telemetry(self, period_s: float = 0.05) -> Iterator[dict[str, np.ndarray]]:
         """Yield the new telemetry rows (as :meth:`telemetry` gives them) every ``period_s`` (s) while the
@@ -658,38 +466,17 @@ class Renderer:
         format of ``tpad-rt render``). Raises ConfigError unless ``path`` ends in ``.npz``. A recording
         keeps at most ``tpad_rt.limits.MAX_RECORDING_SAMPLES`` drive samples in memory: past that the
         run ends with a TpadError (re-raised by :meth:`check`, :meth:`join`, :meth:`stop`)."""
-        path = Path(path)
-        if path.suffix.lower() != ".npz":
-            raise ConfigError(f"record: the path must end in .npz, got '{path}'")
-        with self._telemetry_lock:
-            self._record_path = path
-            self._recorded, self._drive_chunks = [], []
+        self._log.record(path)
 
-    def _write_recording(self) -> None:
-        path, self._record_path = self._record_path, None
-        assert path is not None
+    def _metadata(self) -> dict[str, Any]:
+        """The recording's metadata: what ran, on what, with which settings."""
         cfg = self._pipeline.arrays.cfg
-        metadata = {
+        return {
             "texture_path": self._texture_path, "texture_description": self._texture.description,
             "device_label": self.device.label, "carrier_hz": self.device.resonance_hz,
             "volts_per_full_scale": self.device.volts_per_full_scale, "max_voltage_v": self.device.max_voltage_v,
             "power_budget_w": float(cfg[CFG_POWER_CAP_W]), "power_avg_w": float(cfg[CFG_POWER_AVG_W]),
             "power_window_s": self.options.power_window_s, "block_frames": self.block_frames,
-            "input_url": "api", "output_url": self.output_url, "render_options": asdict(self.options),
-            "tpad_rt_version": __version__,
+            "input_url": "api", "output_url": self.output_url, "output_consumes": self._driver.consumes.value,
+            "render_options": asdict(self.options), "tpad_rt_version": __version__,
         }
-        drive = np.concatenate(self._drive_chunks) if self._drive_chunks else np.zeros(0, dtype=np.float32)
-        write_recording(path, Recording(self.rate_hz, drive, _joined(self._recorded), metadata))
-
-
-def _stall_error(device: audio.AudioDevice, what: str) -> BackendError:
-    """The error of a stream on ``device`` that stalled (``what`` says how it showed)."""
-    return BackendError(f"audio: the stream on device {device} stalled: {what} (device hung or server stopped); "
-                        "the stream is abandoned, not closed: restart the program to use audio again")
-
-
-def _joined(chunks: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    """Telemetry chunks concatenated column by column (empty columns when there are none)."""
-    if not chunks:
-        return {name: np.zeros(0, dtype=np.int64 if name == "saturated" else np.float64) for name in TEL_NAMES}
-    return {name: np.concatenate([chunk[name] for chunk in chunks]) for name in TEL_NAMES}

@@ -1,4 +1,10 @@
-"""What every output backend implements: take the drive, one block at a time.
+"""What every output declares (:class:`OutputKind`), and what a paced backend implements (:class:`Output`).
+
+Every scheme's module states what it consumes and how it is run (``KIND``): the
+Renderer picks the driver from it (:mod:`tpad_rt.drivers`), and the Pipeline renders
+DAC samples or the envelope accordingly (docs/kernel.md "Two stages").
+
+The rest of this module is the paced backends' interface: take the drive, one block at a time.
 
 A block is float32 DAC samples in ``[-1, 1]`` (sample ``1.0`` is the device's
 ``volts_per_full_scale``) at the output's sample rate, with the pipeline's telemetry
@@ -11,10 +17,45 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import Enum
 from types import TracebackType
 
 import numpy as np
 import numpy.typing as npt
+
+
+class Consumes(Enum):
+    """What an output takes from the render kernel."""
+
+    #: float32 DAC samples in [-1, 1] (1.0 = the device's volts_per_full_scale) at the output's sample rate,
+    #: which must exceed 2.2x the carrier: the kernel's modulation stage makes the carrier
+    DAC = "DAC samples"
+    #: the envelope, drive volts (signed: negative drives the carrier in anti-phase) at the output's envelope
+    #: rate, with the carrier's frequency given once: the output makes the carrier itself
+    ENVELOPE = "envelope"
+
+
+class Runs(Enum):
+    """What runs the render callback for an output (docs/realtime.md)."""
+
+    #: the output's own clock calls the native callback (PortAudio's audio thread): no Python per block
+    CALLBACK = "native callback"
+    #: a GIL-free native loop paces itself on the monotonic clock and pushes frames to the output
+    STREAM = "GIL-free streamer"
+    #: a Python thread calls the callback no faster than real time and hands each block to Output.write
+    #: (GIL-bound: simulators and files, not a real-time path)
+    PACED = "paced thread"
+
+
+@dataclass(frozen=True)
+class OutputKind:
+    """What a scheme's output consumes, what runs it, and whether it plays in real time only (no offline
+    ``tpad-rt render``, no :func:`tpad_rt.outputs.open_output`)."""
+
+    consumes: Consumes
+    runs: Runs
+    realtime_only: bool
 
 
 class Output(ABC):

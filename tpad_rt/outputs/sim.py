@@ -20,7 +20,7 @@ import numpy.typing as npt
 from tpad_rt.config.device_schema import MAX_Q, MIN_Q
 from tpad_rt.device import Device
 from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, resonate, resonator_coefficients
-from tpad_rt.outputs.base import Output
+from tpad_rt.outputs.base import Consumes, Output, OutputKind, Runs
 from tpad_rt.physics.friction import relative_friction_core
 from tpad_rt.urls import Option, Url, UrlForm, number
 
@@ -39,6 +39,8 @@ def _quality_factor(text: str) -> float | str:
 
 #: The accepted URL.
 FORMS = (UrlForm("sim", "", (Option("q", "device", _quality_factor),)),)
+#: What it consumes and what runs it.
+KIND = OutputKind(Consumes.DAC, Runs.PACED, realtime_only=False)
 
 
 class SimOutput(Output):

@@ -1,0 +1,140 @@
+"""The ``audio://`` driver: PortAudio's audio thread calls the native render callback.
+
+The callback is ``tpad_rt.kernel.callback.render_callback``, handed to PortAudio with
+the table's address as ``userData`` (:class:`tpad_rt.outputs.audio.AudioStream`): no
+Python runs per block (docs/realtime.md says why). A stream that stops by itself (its
+device or JACK server went away) or stops calling back for the stall limit is
+abandoned, not stopped or closed: PortAudio's JACK host API hangs or aborts then.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any
+
+from tpad_rt.device import Device
+from tpad_rt.drivers.base import Driver
+from tpad_rt.errors import BackendError
+from tpad_rt.kernel import callback as cb
+from tpad_rt.kernel import table as tab
+from tpad_rt.outputs import audio
+from tpad_rt.pipeline import RenderOptions
+from tpad_rt.realtime import CallbackTable
+from tpad_rt.urls import Url
+
+#: A stream counts as stalled after no fewer blocks' time than this without a callback (large blocks).
+STALL_MIN_BLOCKS = 4
+#: Stopping and closing a stream may take the stall limit plus this long (s; it takes tens of ms) before the
+#: stream counts as stalled and is abandoned.
+CLOSE_GRACE_S = 1.0
+
+
+class AudioCallbackDriver(Driver):
+    """An ``audio://`` output; its URL's ``rate`` and ``block``, when written, replace the renderer's.
+    ``stall_timeout_s``: how long (s) the stream may go without a callback before it counts as stalled
+    (at least STALL_MIN_BLOCKS blocks' time)."""
+
+    def __init__(self, url: Url, *, device: Device, rate_hz: int, block_frames: int, options: RenderOptions,
+                 stall_timeout_s: float):
+        target = audio.parse_audio_url(url)
+        super().__init__(url, device=device, options=options,
+                         rate_hz=target.rate_hz if "rate" in target.given else rate_hz,
+                         block_frames=target.block_frames if "block" in target.given else block_frames)
+        self.target = target
+        self.stall_timeout_s = stall_timeout_s
+        self.audio_device: audio.AudioDevice | None = None  # found by prepare()
+        self.stream: audio.AudioStream | None = None  # while started
+        self._output_latency_s = math.nan
+        self._stalled = False
+        self._seen_callbacks, self._seen_at = -1, 0.0
+
+    def stall_limit_s(self) -> float:
+        """Seconds without a callback after which the stream counts as stalled."""
+        return max(self.stall_timeout_s, STALL_MIN_BLOCKS * self.block_frames / self.rate_hz)
+
+    def prepare(self) -> None:
+        """Find the device; BackendError when it is missing or lacks the URL's channel."""
+        device = audio.find_output_device(self.target.device)
+        if self.target.channel > device.channels:
+            raise BackendError(f"audio: channel {self.target.channel}: device {device} has "
+                               f"{device.channels} output channel(s)")
+        self.audio_device = device
+        self.channels, self.channel = device.channels, self.target.channel - 1
+
+    def start(self, table: CallbackTable) -> None:
+        """Open the stream on the native callback and start it; BackendError when the device refuses."""
+        assert self.audio_device is not None, "prepare() first"
+        self._stalled = False
+        self._seen_callbacks, self._seen_at = -1, time.monotonic()
+        self.stream = audio.AudioStream(self.audio_device, self.rate_hz, self.block_frames, self.channels,
+                                        int(cb.render_callback.address), table.user_data)
+        self._output_latency_s = self.stream.output_latency_s
+        self.stream.start()
+
+    def poll(self, table: CallbackTable) -> BaseException | None:
+        """A BackendError when the stream stopped by itself, or made no callback for the stall limit (clocked
+        with time.monotonic, read before the count and again on an advance: the gap measured never exceeds
+        the time without a callback, however late the watcher runs)."""
+        stream = self.stream
+        if stream is None:
+            return None
+        if not stream.active():
+            return BackendError(f"audio: the stream on device {stream.device} stopped (device lost or server gone)")
+        now = time.monotonic()
+        count = int(table.stats[tab.STAT_CALLBACKS])
+        if count != self._seen_callbacks:
+            self._seen_callbacks, self._seen_at = count, time.monotonic()
+        elif now - self._seen_at >= self.stall_limit_s():
+            self._stalled = True
+            return _stall_error(stream.device, f"no callback for {now - self._seen_at:.2f} s")
+        return None
+
+    def close(self, ramp_ms: float) -> BaseException | None:
+        """Stop and close the stream; abandon it instead if it stalled or its device or server went away.
+
+        The stop and close run in a helper thread (PortAudio's JACK host API blocks in them for minutes
+        when the server stops answering): if they take longer than the stall limit plus CLOSE_GRACE_S,
+        the stream is abandoned and a BackendError (stalled) returned; so is a stop or close failing.
+        """
+        stream, self.stream = self.stream, None
+        if stream is None:
+            return None
+        if self._stalled or stream.lost():
+            stream.abandon()
+            return None
+        errors: list[BaseException] = []
+
+        def shut() -> None:
+            try:
+                try:
+                    stream.stop()
+                finally:
+                    stream.close()
+            except BaseException as error:  # noqa: BLE001 - returned by the waiting thread
+                errors.append(error)
+
+        closer = threading.Thread(target=shut, name="tpad-rt stream close", daemon=True)
+        closer.start()
+        bound_s = self.stall_limit_s() + CLOSE_GRACE_S
+        closer.join(bound_s)
+        if closer.is_alive():
+            stream.abandon()
+            return _stall_error(stream.device, f"stopping it took over {bound_s:.2f} s")
+        return errors[0] if errors else None
+
+    def stats(self) -> dict[str, Any]:
+        """``output_latency_s``: the stream's, as PortAudio reports it."""
+        return {"output_latency_s": self._output_latency_s}
+
+    def stream_time_s(self) -> float:
+        """PortAudio's stream time (s), NaN when no stream runs."""
+        stream = self.stream
+        return stream.time_s() if stream is not None else math.nan
+
+
+def _stall_error(device: audio.AudioDevice, what: str) -> BackendError:
+    """The error of a stream on ``device`` that stalled (``what`` says how it showed)."""
+    return BackendError(f"audio: the stream on device {device} stalled: {what} (device hung or server stopped); "
+                        "the stream is abandoned, not closed: restart the program to use audio again")

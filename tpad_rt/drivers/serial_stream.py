@@ -1,0 +1,86 @@
+"""The ``serial://`` driver: the GIL-free streamer renders the envelope and sends it to a serial amplifier.
+
+The amplifier makes the carrier, so the kernel renders the envelope (drive volts) at
+the amplifier's envelope rate, in frames of the URL's ``frame_ms`` (docs/kernel.md
+"Two stages"). The streamer (:mod:`tpad_rt.kernel.amp_stream`, run by
+:class:`tpad_rt.outputs.serial_amp.AmpLink`) calls the same compiled render callback
+as PortAudio does, once per frame, in one numba call that holds no GIL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+from tpad_rt.device import Device
+from tpad_rt.drivers.base import Driver
+from tpad_rt.outputs import serial_amp
+from tpad_rt.outputs.base import Consumes
+from tpad_rt.pipeline import Pipeline, RenderOptions
+from tpad_rt.realtime import CallbackTable
+from tpad_rt.urls import Url
+
+#: The rate (Hz) at which RenderOptions' default control_interval gives the default control period; at an
+#: envelope rate the default interval is scaled to keep that period.
+DEFAULT_CONTROL_RATE_HZ = 192000
+
+
+class SerialStreamDriver(Driver):
+    """A ``serial://`` amplifier: ``envelope_hz`` replaces the renderer's rate, ``frame_ms`` its block (until
+    the amplifier's INFO says how many samples a frame may hold); a default ``options.control_interval``
+    is scaled to keep its control period."""
+
+    consumes = Consumes.ENVELOPE
+
+    def __init__(self, url: Url, *, device: Device, rate_hz: int, block_frames: int, options: RenderOptions):
+        target = serial_amp.parse_serial_url(url)
+        rate_hz = target.envelope_hz
+        if options.control_interval == RenderOptions.control_interval:
+            options = replace(options, control_interval=max(1, round(
+                RenderOptions.control_interval * rate_hz / DEFAULT_CONTROL_RATE_HZ)))
+        super().__init__(url, device=device, rate_hz=rate_hz, options=options,
+                         block_frames=max(1, round(target.frame_ms * 1e-3 * rate_hz)))
+        self.target = target
+        self.link: serial_amp.AmpLink | None = None  # open between open() and close()
+        self._last_link: serial_amp.AmpLink | None = None  # for stats() after close()
+
+    def warm(self, table: CallbackTable) -> None:
+        """Compile the render callback and the streamer before the port opens (the amplifier's watchdog never
+        waits for a compile)."""
+        super().warm(table)
+        serial_amp.warm_up(table)
+
+    def open(self, pipeline: Pipeline) -> None:
+        """Open the port, make the handshake, set the carrier to the device's resonance; the amplifier's full
+        scale, clamp and achieved carrier go into the pipeline. BackendError as AmpLink.open says."""
+        link = self.link = self._last_link = serial_amp.AmpLink.open(self.target, carrier_hz=self.device.resonance_hz)
+        assert link.info is not None
+        pipeline.set_drive_scale(link.info.full_scale_v, link.info.max_v, link.carrier_hz)
+        self.block_frames = link.frame_samples
+
+    def start(self, table: CallbackTable) -> None:
+        """START the amplifier at the table's next sample and stream in a thread of its own."""
+        assert self.link is not None, "open() first"
+        self.link.start(table)
+
+    def poll(self, table: CallbackTable) -> BaseException | None:
+        """The error that ended the stream (a BackendError: port lost, amplifier fault, silence...), or None."""
+        link = self.link
+        return link.failure() if link is not None else None
+
+    def close(self, ramp_ms: float) -> BaseException | None:
+        """End the stream with STOP and ``ramp_ms`` and close the port; the error that ended the stream, if any."""
+        link, self.link = self.link, None
+        if link is None:
+            return None
+        failure = link.failure()
+        link.stop(ramp_ms)
+        return failure
+
+    def stats(self) -> dict[str, Any]:
+        """``output_latency_s`` (NaN: the amplifier reports none) and ``amplifier``: the link's and the
+        amplifier's counters (AmpLink.stats), once it was opened."""
+        result = super().stats()
+        if self._last_link is not None:
+            result["amplifier"] = self._last_link.stats()
+        return result
