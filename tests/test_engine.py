@@ -112,6 +112,36 @@ def test_output_that_cannot_open_fails_start(tmp_path: Path) -> None:
     assert not renderer.running
 
 
+#: A Renderer writing a WAV under a file-size limit (RLIMIT_FSIZE; SIGXFSZ ignored, so a write past it fails with
+#: EFBIG, as on a full disk): the paced driver's error must end the run, the drive ramped, in the app's thread.
+FAILING_OUTPUT_APP = """
+import resource, signal, sys
+from tpad_rt.engine import Renderer
+from tpad_rt.errors import BackendError
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+renderer = Renderer(output="wav://" + sys.argv[1], texture=sys.argv[2], rate_hz=96000, block_frames=256)
+renderer.start()
+resource.setrlimit(resource.RLIMIT_FSIZE, (65536, resource.RLIM_INFINITY))
+try:
+    renderer.join(timeout_s=60)
+    print("join: no error")
+except BackendError as error:
+    print("join:", error)
+print("running:", renderer.running)
+renderer.stop()
+print("stopped:", renderer.running)
+"""
+
+
+def test_an_output_failing_mid_run_ends_it_with_the_output_s_error(tmp_path: Path) -> None:
+    done = subprocess.run([sys.executable, "-c", FAILING_OUTPUT_APP, str(tmp_path / "out.wav"), str(GRATING)],
+                          capture_output=True, text=True, timeout=120)
+    lines = done.stdout.splitlines()
+    assert lines[0].startswith("join: wav: cannot ") and "(File too large)" in lines[0], done.stdout + done.stderr
+    assert lines[1:] == ["running: True", "stopped: False"], done.stdout + done.stderr
+    assert done.returncode == 0, done.stderr
+
+
 def test_record_needs_npz() -> None:
     with pytest.raises(ConfigError, match="must end in .npz"):
         Renderer(output="null://").record("out.wav")

@@ -261,7 +261,9 @@ def test_file_input(tmp_path: Path) -> None:
         (["--input", "scripted://circle?turns=0"], "tpad-rt render: the input never ends (an endless pattern); "
                                                    "give a duration (--duration SECONDS)"),
         (["--output", "sim://?q=-1"], "output URL 'sim://?q=-1': option q: must be device or a number in (0.5, 1e+06]"),
-        (["--output", "audio://"], "unknown scheme 'audio' (known: sim://, wav://, null://)"),
+        (["--output", "audio://"], "audio:// plays in real time only (tpad-rt play or a Renderer), not offline"),
+        (["--output", "serial:///dev/ttyACM0"], "serial:// plays in real time only"),
+        (["--output", "nul://"], "unknown scheme 'nul'; did you mean 'null'? (known: sim://, wav://, null://)"),
         (["--rate", "48000"], "fs_hz: device SLG_0.56's carrier (31360 Hz) needs a sample rate of at least 69689 Hz"),
         (["--device", "nowhere.yaml"], "nowhere.yaml"),
     ],

@@ -149,6 +149,7 @@ class Renderer:
         self._halt = threading.Event()
         self._ended = threading.Event()  # set by stop() and by an error in the watcher
         self._error: BaseException | None = None
+        self._reported: BaseException | None = None  # the driver's failure the watcher raised
         self._push_ns = np.zeros(self.options.finger_ring, dtype=np.int64)
         self._producer = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
         self._texture = compiled
@@ -188,7 +189,7 @@ class Renderer:
         """
         if self.running:
             raise RuntimeError("Renderer.start: already running")
-        self._error = None
+        self._error = self._reported = None
         self._halt.clear()
         self._ended.clear()
         driver = self._driver
@@ -235,7 +236,9 @@ class Renderer:
         if self._watcher is not None:
             self._watcher.join()
             self._watcher = None
-        self._error = self._error or self._driver.close(self.options.ramp_ms)
+        closing = self._driver.close(self.options.ramp_ms)
+        if closing is not None and closing is not self._reported:  # the watcher's failure is reported once
+            self._error = self._error or closing
         try:
             self._log.drain(table)
         except BaseException as error:  # noqa: BLE001 - the recording's limits: re-raised by check()
@@ -284,6 +287,7 @@ class Renderer:
                 self._log.drain(table)
                 failure = self._driver.poll(table)
                 if failure is not None and not self._halt.is_set():
+                    self._reported = failure
                     raise failure
         except BaseException as error:  # noqa: BLE001 - re-raised in the caller's thread
             self._error = self._error or error

@@ -97,18 +97,24 @@ class WavOutput(Output):
         self.data_bytes += len(data)
 
     def close(self) -> None:
-        """Fill in the header's sizes and close the file (again: nothing)."""
+        """Fill in the header's sizes and close the file (again: nothing); BackendError when that fails (a full
+        disk, a file-size limit): the file is closed all the same."""
         if self._file.closed:
             return
+        problem: OSError | None = None
         try:
             header = _header(self.fs_hz, self.data_bytes)
             for offset in (_RIFF_SIZE_AT, _FACT_FRAMES_AT, _DATA_SIZE_AT):
                 self._file.seek(offset)
                 self._file.write(header[offset:offset + 4])
         except OSError as error:
-            raise BackendError(f"wav: cannot finish {self.path} ({error.strerror})") from None
-        finally:
-            self._file.close()
+            problem = error
+        try:
+            self._file.close()  # flushes what is buffered: a full disk may show only here
+        except OSError as error:
+            problem = problem or error
+        if problem is not None:
+            raise BackendError(f"wav: cannot finish {self.path} ({problem.strerror})")
 
 
 def open_url(url: Url, *, device: Device, fs_hz: int) -> WavOutput:
