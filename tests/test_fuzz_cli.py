@@ -18,8 +18,10 @@ files when not root), random input and output URLs (unknown schemes, bad options
 values, percent escapes, over-long), random flag values, and mutated recordings for plot.
 
 Play never runs long: it always gets ``--input`` (never ``auto``), an ``--output`` of
-``null://``, ``sim://`` or a broken URL (never ``auto`` or ``audio://``) and ``--duration
-0.2`` unless the duration itself is fuzzed from values that are all refused. Renders get
+``null://``, ``sim://`` or a broken URL (never ``auto`` or ``audio://``; ``serial://`` only to
+what is not an amplifier) and ``--duration 0.2`` unless the duration itself is fuzzed from
+values that are all refused. ``amp emulate`` always ends: ``--duration 0.2`` unless that is
+fuzzed from refused values. Renders get
 ``--duration 0.05`` unless it is fuzzed, show ``--resolution-mm 2``.
 
 The examples are derandomized (the same on every run, so CI is reproducible); a failure
@@ -307,9 +309,11 @@ def input_url(folder_csv: bool = True) -> st.SearchStrategy[str]:
 
 
 def output_url() -> st.SearchStrategy[str]:
-    """Outputs, never audio:// (nor auto): null://, sim:// with bad options, wav:// to bad places, junk."""
-    return url(["null://", "sim://", "wav://", "wave://", "nul://", "", "file://"],
-               ["", "/dev/zero", "/tmp", "/nonexistent/dir/x.wav", "x"], ["q", "rate", "block", "bogus"])
+    """Outputs, never audio:// (nor auto): null://, sim:// with bad options, wav:// to bad places, serial:// to
+    things that are not serial ports (or with absurd options), junk."""
+    return url(["null://", "sim://", "wav://", "wave://", "nul://", "", "file://", "serial://", "serial://"],
+               ["", "/dev/zero", "/tmp", "/nonexistent/dir/x.wav", "x", "/dev/null", "/tmp/f.npz"],
+               ["q", "rate", "block", "bogus", "envelope_hz", "buffer_ms", "frame_ms", "baud"])
 
 
 def flags(names: list[str]) -> st.SearchStrategy[list[str]]:
@@ -586,6 +590,60 @@ def test_fuzz_schema_design_devices_and_unknown_commands() -> None:
                 assert done.returncode == 1 and done.stderr.count("\n") == 1, done.stderr
                 assert done.stderr.startswith("tpad-rt: error: ") and "Traceback" not in done.stderr
                 outcomes.add(1)
+
+    run()
+    outcomes.assert_mostly_errors()
+
+
+@st.composite
+def amp_case(draw: st.DrawFn) -> Callable[[Path], tuple[list[str], list[str]]]:
+    """``amp emulate`` with a bad device file, a port that is not a serial port, a bad recording path, or absurd
+    flags and fault specs; it ends by itself (``--duration 0.2``) when nothing is refused."""
+    part = draw(st.sampled_from(["device", "port", "record", "flags", "fault"]))
+    device = draw(bad_file(DEVICES)) if part == "device" else None
+    port = draw(special_path()) if part == "port" else None
+    record = draw(st.sampled_from(["d.npz", "f.npz", "z.npz", "missing/x.npz", "x.wav", ""])) \
+        if part == "record" else None
+    extra = draw(flags(["--duration", "--seed"])) if part == "flags" else []
+    if "--duration" in extra:  # only refused durations: a fuzzed emulator must not run long
+        index = extra.index("--duration") + 1
+        if extra[index] not in ("nan", "inf", "-inf", "-1", "0", "-0", "1e308", "abc", "", "1e9",
+                                "99999999999999999999", "0x10"):
+            extra[index] = "-1"
+    if part == "fault":
+        kind = draw(st.sampled_from(["drop", "corrupt", "delay", "stall", "overcurrent", "disconnect", "jam", ""]))
+        values = draw(st.lists(st.sampled_from(FLAG_VALUES), min_size=0, max_size=3))
+        extra = ["--fault", ":".join([kind, *values])]
+
+    def make(folder: Path) -> tuple[list[str], list[str]]:
+        files = []
+        argv = ["amp", "emulate"]
+        if device:
+            files.append(device(folder))
+            argv += ["--device", files[-1]]
+        if port:
+            argv += ["--port", port(folder)]
+        (folder / "d.npz").mkdir()
+        os.mkfifo(folder / "f.npz")
+        (folder / "z.npz").symlink_to("/dev/zero")
+        if record is not None:
+            argv += ["--record", str(folder / record) if record else ""]
+        if "--duration" not in extra:
+            argv += ["--duration", "0.2"]
+        return [*argv, *extra], files
+
+    return make
+
+
+def test_fuzz_amp_emulate() -> None:
+    outcomes = Outcomes()
+
+    @FUZZ_FEW
+    @given(make=amp_case())
+    def run(make: Callable[[Path], tuple[list[str], list[str]]]) -> None:
+        with workdir() as folder:
+            argv, files = make(folder)
+            outcomes.add(run_cli(argv, "amp emulate", files, timeout_s=60))
 
     run()
     outcomes.assert_mostly_errors()

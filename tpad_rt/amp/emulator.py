@@ -625,7 +625,7 @@ class Recorder:
         keep = min(total, self.limit - self.count)
         if keep < total and not self.truncated:
             self.truncated = True
-            print(f"tpad-rt amp: the recording is full ({self.limit:,} samples); later samples are not recorded",
+            print(f"tpad-rt amp emulate: the recording is full ({self.limit:,} samples); later samples are not recorded",
                   file=sys.stderr, flush=True)
         done = 0
         while done < keep:
@@ -827,7 +827,7 @@ class Emulator:
                 break
             if self.amplifier.playing and now - previous_s > LATE_TICK_S and now - noted_s > 1.0:
                 noted_s = now
-                print(f"tpad-rt amp: the emulator ran {(now - previous_s) * 1000:.0f} ms late (a busy machine?): "
+                print(f"tpad-rt amp emulate: the emulator ran {(now - previous_s) * 1000:.0f} ms late (a busy machine?): "
                       "frames waiting meanwhile were read late, and may have let the watchdog trip", file=sys.stderr,
                       flush=True)
             previous_s = now

@@ -45,13 +45,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``tpad-rt`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit status."""
     args = build_parser().parse_args(argv)
+    command = " ".join(name for name in (args.command, getattr(args, "action", None)) if name)  # "amp emulate"
     try:
         return int(args.func(args) or 0)
     except TpadError as err:
-        print(f"tpad-rt {args.command}: {err}", file=sys.stderr)
+        print(f"tpad-rt {command}: {err}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"tpad-rt {args.command}: interrupted", file=sys.stderr)
+        print(f"tpad-rt {command}: interrupted", file=sys.stderr)
         return 130
 
 

@@ -185,7 +185,7 @@ def _realtime_priority() -> None:
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
     except (OSError, AttributeError):
-        print("tpad-rt amp: no real-time priority here (SCHED_FIFO refused): a busy machine can delay the "
+        print("tpad-rt amp emulate: no real-time priority here (SCHED_FIFO refused): a busy machine can delay the "
               "emulator, and frames it reads late count as underruns", file=sys.stderr, flush=True)
 
 
