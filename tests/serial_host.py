@@ -4,8 +4,8 @@
 
 Starts a Renderer with the grating on PORT and pushes a slow swipe every 2 ms. Prints
 ``streaming`` once the amplifier reports RUNNING, and runs until its stdin closes; then
-stops (STOP and all) and prints ``restarts N`` (STARTs sent again after the amplifier's
-watchdog). An error ends it with one line on stderr and exit status 1, as tpad-rt's
+stops (STOP and all) and prints ``restarts N start_index I`` (STARTs sent again after the
+amplifier's watchdog, and the stream index the last START named). An error ends it with one line on stderr and exit status 1, as tpad-rt's
 commands do.
 """
 
@@ -36,7 +36,8 @@ def main(port: str) -> int:
                     print("streaming", flush=True)
                     announced = True
                 time.sleep(0.002)
-        print(f"restarts {renderer.stats()['amplifier']['restarts']}", flush=True)
+        amplifier = renderer.stats()["amplifier"]
+        print(f"restarts {amplifier['restarts']} start_index {amplifier['start_index']}", flush=True)
     except TpadError as error:
         print(f"serial_host: {error}", file=sys.stderr)
         return 1

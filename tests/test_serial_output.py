@@ -11,6 +11,7 @@ clock or are counts against a baseline measured in the same test.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -168,7 +169,11 @@ def test_a_frozen_host_is_ramped_to_zero_by_the_watchdog_and_the_stream_restarts
     assert np.all(volts[silent:np.flatnonzero(frozen)[-1]] == 0.0)
     resumed = (t_s > t_stop + 0.3) & (index >= 0) & (volts > 1.0)
     assert resumed.any(), "the stream did not restart after the watchdog"
-    assert "restarts 1" in out or "restarts 2" in out, out
+    restarts, start_index = (int(word) for word in re.fullmatch(r"restarts (\d+) start_index (\d+)\n", out).groups())
+    assert restarts in (1, 2), out
+    assert start_index in index[t_s > t_stop], "the amplifier placed the restart's samples at the index START named"
+    if restarts == 1:  # the first sample played after the watchdog is the one that START named
+        assert index[silent:][index[silent:] >= 0][0] == start_index
 
 
 def test_the_host_ends_with_one_line_when_the_emulator_is_killed(tmp_path: Path) -> None:

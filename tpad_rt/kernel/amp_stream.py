@@ -106,7 +106,7 @@ LINK_BUFFER_SAMPLES = 4       # the amplifier's buffer (INFO)
 LINK_STATUS_TIMEOUT_NS = 5    # no STATUS for this long: the amplifier is lost (H7)
 LINK_STOP = 6                 # the Python side sets it to 1 (release store) to end the run with STOP (H8)
 LINK_SEQ = 7                  # the host's next frame seq: the run continues the handshake's numbering
-LINK_START_INDEX = 8          # the stream index START named (the kernel's next sample)
+LINK_START_INDEX = 8          # the stream index the last START named (the host's first; a restart's)
 # --- written by the streamer -------------------------------------------------------------
 LINK_WRITTEN = 9              # the next stream index to send
 LINK_EXIT = 10                # why the run ended (EXIT_*)
@@ -314,6 +314,7 @@ def _queue_start(link: np.ndarray, buffers: np.ndarray, end: int) -> int:
     frame = buffers[BUF_FRAME]
     codec.put_u32(frame, PAYLOAD + START_ENVELOPE_HZ, link[LINK_ENVELOPE_HZ])
     codec.put_u32(frame, PAYLOAD + START_INDEX, link[LINK_WRITTEN])
+    link[LINK_START_INDEX] = link[LINK_WRITTEN]
     codec.put_u16(frame, PAYLOAD + START_PREFILL, min(link[LINK_TARGET_FILL], link[LINK_BUFFER_SAMPLES]))
     return _queue(link, buffers, START_BYTES, MSG_START, end)
 
