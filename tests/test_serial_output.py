@@ -34,6 +34,7 @@ from tpad_rt.recording import read_recording
 
 GRATING = REPO / "textures" / "grating.yaml"
 DEVICE = Device.default()
+DEFAULT_DEVICE = REPO / "calibration" / "default.yaml"
 SERIAL_HOST = Path(__file__).resolve().parent / "serial_host.py"
 PYTHON_WRITER = Path(__file__).resolve().parent / "python_serial_writer.py"
 #: Samples the streamer's amplifier may miss under GIL load beyond the idle run of the same test (10 ms at
@@ -96,14 +97,20 @@ def unexplained(recording: dict[str, np.ndarray], host_path: Path) -> tuple[np.n
 
 
 def host_volts(path: Path, full_scale_v: float) -> tuple[int, np.ndarray]:
-    """(first stream index, envelope volts) the host rendered, from its recording."""
+    """(first stream index, envelope volts) the host rendered, from its recording, whose metadata must give the
+    amplifier's ``full_scale_v`` (V) as its volts per full scale."""
     recording = read_recording(path)
+    assert recording.metadata["volts_per_full_scale"] == pytest.approx(full_scale_v)
     first = round(float(recording.blocks["t"][0]) * recording.fs_hz)
-    return first, recording.drive.astype(np.float64) * full_scale_v
+    return first, recording.drive.astype(np.float64) * recording.metadata["volts_per_full_scale"]
 
 
 def test_the_amplifier_applies_what_the_renderer_rendered_at_its_index(tmp_path: Path) -> None:
-    with Emulator(tmp_path) as amp:
+    # An amplifier of another full scale and clamp than the host's device file (32 V max: 40 V full scale, where
+    # the device says 50 V and 40 V): the host scales and caps by what INFO said, and records that scale.
+    amplifier_device = tmp_path / "amplifier.yaml"
+    amplifier_device.write_text(DEFAULT_DEVICE.read_text().replace("max_voltage_v: 40.0", "max_voltage_v: 32.0"))
+    with Emulator(tmp_path, "--device", str(amplifier_device)) as amp:
         renderer = Renderer(output=f"serial://{amp.port}", texture=GRATING)
         renderer.record(tmp_path / "host.npz")
         with renderer:
@@ -113,7 +120,8 @@ def test_the_amplifier_applies_what_the_renderer_rendered_at_its_index(tmp_path:
     fed, wrong = unexplained(recording, tmp_path / "host.npz")
     assert len(fed) > 0.95 * 1.5 * recording["envelope_hz"]
     assert not wrong.any(), f"{wrong.sum()} samples applied that the host did not send"
-    assert np.abs(recording["envelope_v"]).max() > 10.0, "the swipe must drive the plate"
+    assert 10.0 < np.abs(recording["envelope_v"]).max() <= 32.0, "the swipe must drive the plate, within its clamp"
+    assert float(recording["full_scale_mv"]) == 40000.0 != DEVICE.volts_per_full_scale * 1000
     assert stats["amp_frames_bad"] == 0 and stats["amp_sequence_gaps"] == 0 and stats["rx_bad"] == 0
     assert stats["carrier_hz"] == pytest.approx(DEVICE.resonance_hz, abs=0.01)
 

@@ -57,8 +57,8 @@ from tpad_rt.errors import ConfigError
 from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.layout import (
-    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM,
-    OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEX_PROG_COLS,
+    CFG_CARRIER_HZ, CFG_MAX_VOLTAGE_V, CFG_POWER_AVG_W, CFG_POWER_CAP_W, CFG_VOLTS_PER_FS, FINGER_DOWN,
+    FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEX_PROG_COLS,
 )
 from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_STALL_TIMEOUT_S
 from tpad_rt.outputs import Consumes
@@ -473,12 +473,13 @@ class Renderer:
         self._log.record(path)
 
     def _metadata(self) -> dict[str, Any]:
-        """The recording's metadata: what ran, on what, with which settings."""
+        """The recording's metadata: what ran, on what, with which settings (the carrier, full scale and voltage
+    cap the run had: on ``serial://`` the amplifier's, as the handshake set them)."""
         cfg = self._pipeline.arrays.cfg
         return {
             "texture_path": self._texture_path, "texture_description": self._texture.description,
-            "device_label": self.device.label, "carrier_hz": self.device.resonance_hz,
-            "volts_per_full_scale": self.device.volts_per_full_scale, "max_voltage_v": self.device.max_voltage_v,
+            "device_label": self.device.label, "carrier_hz": float(cfg[CFG_CARRIER_HZ]),
+            "volts_per_full_scale": float(cfg[CFG_VOLTS_PER_FS]), "max_voltage_v": float(cfg[CFG_MAX_VOLTAGE_V]),
             "power_budget_w": float(cfg[CFG_POWER_CAP_W]), "power_avg_w": float(cfg[CFG_POWER_AVG_W]),
             "power_window_s": self.options.power_window_s, "block_frames": self.block_frames,
             "input_url": "api", "output_url": self.output_url, "output_consumes": self._driver.consumes.value,

@@ -132,8 +132,8 @@ def _read_info(body: np.ndarray) -> AmpInfo:
         (f"slew {info.slew_v_per_ms:g} V/ms is below max {info.max_v:g} V per ms (A2)", info.slew_v_per_ms < info.max_v),
         (f"max_frame_samples {info.max_frame_samples} is not in [1, {codec.MAX_FRAME_SAMPLES}]",
          not 1 <= info.max_frame_samples <= codec.MAX_FRAME_SAMPLES),
-        (f"buffer of {info.buffer_samples} samples is smaller than two frames",
-         info.buffer_samples < 2 * info.max_frame_samples and info.buffer_samples < 2),
+        (f"a buffer of {info.buffer_samples} sample(s) cannot hold one frame and the start of the next",
+         info.buffer_samples < 2),
         (f"watchdog {info.watchdog_ms} ms is not in [1, 50]", not 1 <= info.watchdog_ms <= 50),
         (f"status period {info.status_period_ms} ms is not in [1, 100]", not 1 <= info.status_period_ms <= 100),
     ):
