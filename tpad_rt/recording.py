@@ -5,7 +5,10 @@ reads every one):
 
 - ``format`` (0-d str, ``"tpad-rt recording"``) and ``format_version`` (0-d int);
 - ``fs`` (0-d int): sample rate (Hz) of ``drive``;
-- ``drive`` (float32 ``[samples]``): the DAC samples, in ``[-1, 1]``;
+- ``drive`` (float32 ``[samples]``): the DAC samples, in ``[-1, 1]`` (1.0 is the
+  metadata's ``volts_per_full_scale``); from a Renderer on an envelope output (a serial
+  amplifier: metadata ``output_consumes`` is ``"envelope"``) the envelope at the
+  envelope rate, in the amplifier's full scale;
 - one 1-D array per block, all the same length: the telemetry columns ``t, x_mm, y_mm,
   speed_mm_s, force_n, target_mu, amplitude_um, voltage_v, power_w, saturated``
   (``tpad_rt.kernel.layout.TEL_NAMES``), plus ``achieved_mu`` and
