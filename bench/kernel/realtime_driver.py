@@ -1,12 +1,15 @@
-"""Drive render_block the way the real-time engine does: a numba @cfunc on raw pointers.
+"""Drive render_block the way the real-time engine does: a numba @cfunc on the callback's pointer table.
 
-``render_stream(arrays, trajectory, block, blocks, out, driver=RENDER_STREAM) -> samples``
-rebuilds every array from its address inside a ``@cfunc`` (views without reference
-counts, as in the audio callback), then, per block, pushes the finger samples due by the
-block's end into the ring (row first, then count: the producer's protocol) and calls
-``render_block``. Nothing crosses into Python between blocks, so the time measured is
-the kernel's. ``compile_driver(render_block)`` makes such a ``@cfunc`` around another
-``render_block`` (bench/kernel/unguarded.py: the kernel before its fault guard).
+``render_stream(table, trajectory, block, blocks, out, driver=RENDER_STREAM) -> samples``
+takes a :class:`tpad_rt.realtime.CallbackTable` (the pointer table the audio callback and
+the serial streamer read, over a stream's kernel arrays and texture) and, inside a
+``@cfunc``, rebuilds every array from it with :func:`tpad_rt.kernel.table.kernel_views`
+and ``texture_views`` (views without reference counts, as in the audio callback); then,
+per block, pushes the finger samples due by the block's end into the ring (row first, then
+count: the producer's protocol) and calls ``render_block``. Nothing crosses into Python
+between blocks, so the time measured is the kernel's. ``compile_driver(render_block)``
+makes such a ``@cfunc`` around another ``render_block`` (bench/kernel/unguarded.py: the
+kernel before its fault guard).
 
 The ``@cfunc`` is compiled at import (about 20 s: ``render_block`` is inlined into it)
 and not cached: numba's cache would not notice a change to ``render.py``.
@@ -21,16 +24,13 @@ import numba
 import numpy as np
 from numba import types
 
+from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.layout import FINGER_COLS, FINGER_T_S
 from tpad_rt.kernel.render import render_block
-from tpad_rt.pipeline import KernelArrays
+from tpad_rt.realtime import CallbackTable
 
-_F8 = np.float64
-_I8 = np.int64
-#: Shapes are passed as (rows, columns) per array, in KernelArrays order.
 _SIGNATURE = types.int64(
-    types.CPointer(types.voidptr),  # array addresses
-    types.CPointer(types.int64),  # shapes
+    types.CPointer(types.int64),  # the pointer table (tpad_rt.kernel.table's layout)
     types.CPointer(types.float64),  # trajectory rows (t_s, x_mm, y_mm, force_n, down)
     types.int64,  # trajectory rows
     types.int64,  # block (samples)
@@ -44,21 +44,10 @@ def compile_driver(kernel: Any) -> Any:
     """A ``@cfunc`` of signature _SIGNATURE that renders with ``kernel`` (a ``render_block``)."""
 
     @numba.cfunc(_SIGNATURE, nopython=True)
-    def render_stream_cfunc(addresses, shapes, trajectory, rows, block, blocks, out, keep):  # type: ignore[no-untyped-def]
-        p = numba.carray(addresses, 12)
-        s = numba.carray(shapes, 24)
-        cfg = numba.carray(p[0], s[0], _F8)
-        dev = numba.carray(p[1], (s[2], s[3]), _F8)
-        state = numba.carray(p[2], s[4], _F8)
-        power_ring = numba.carray(p[3], s[6], _F8)
-        finger = numba.carray(p[4], (s[8], s[9]), _F8)
-        finger_count = numba.carray(p[5], s[10], _I8)
-        prog = numba.carray(p[6], (s[12], s[13]), _I8)
-        params = numba.carray(p[7], s[14], _F8)
-        img = numba.carray(p[8], s[16], _F8)
-        stack = numba.carray(p[9], s[18], _F8)
-        telem = numba.carray(p[10], (s[20], s[21]), _F8)
-        telem_count = numba.carray(p[11], s[22], _I8)
+    def render_stream_cfunc(table_address, trajectory, rows, block, blocks, out, keep):  # type: ignore[no-untyped-def]
+        table = numba.carray(table_address, tab.TAB_SIZE)
+        cfg, dev, state, power_ring, finger, finger_count, telem, telem_count = tab.kernel_views(table)
+        prog, params, img, stack = tab.texture_views(table, table[tab.TAB_ACTIVE_SLOT])
         path = numba.carray(trajectory, (rows, FINGER_COLS))
         samples = numba.carray(out, block * (blocks if keep else 1))
         fs_hz = cfg[0]
@@ -85,25 +74,20 @@ def compile_driver(kernel: Any) -> Any:
 RENDER_STREAM = compile_driver(render_block)
 
 
-def render_stream(arrays: KernelArrays, trajectory: np.ndarray, block: int, blocks: int, out: np.ndarray,
+def render_stream(table: CallbackTable, trajectory: np.ndarray, block: int, blocks: int, out: np.ndarray,
                   driver: Any = RENDER_STREAM) -> int:
     """Render ``blocks`` blocks of ``block`` samples from sample 0; returns the samples rendered.
 
     ``out`` (float32) holds one block (each block overwrites it, as an audio buffer is
-    reused) or all of them (kept in order). ``arrays`` are used in place (pass fresh
-    copies for a fresh stream); ``trajectory`` rows ``(t_s, x_mm, y_mm, force_n, down)``
-    are pushed as their time comes. ``driver``: a :func:`compile_driver` cfunc.
+    reused) or all of them (kept in order). ``table``'s arrays are used in place (pass a
+    table over fresh arrays for a fresh stream); ``trajectory`` rows ``(t_s, x_mm, y_mm,
+    force_n, down)`` are pushed as their time comes. ``driver``: a :func:`compile_driver` cfunc.
     """
     if out.dtype != np.float32 or out.size not in (block, block * blocks):
         raise ValueError("out must be float32 with one block or all of them")
-    if any(array.ndim > 2 or not array.flags.c_contiguous for array in arrays):
-        raise ValueError("arrays must be C-contiguous, 1-D or 2-D")
     path = np.ascontiguousarray(trajectory, dtype=np.float64)
-    addresses = (ctypes.c_void_p * len(arrays))(*(array.ctypes.data for array in arrays))
-    shapes = np.array([(array.shape + (0,))[:2] for array in arrays], dtype=np.int64).ravel()
     return driver.ctypes(
-        addresses,
-        shapes.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)),
+        table.table.ctypes.data_as(ctypes.POINTER(ctypes.c_int64)),
         path.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
         len(path), block, blocks,
         out.ctypes.data_as(ctypes.POINTER(ctypes.c_float)),

@@ -50,7 +50,8 @@ from unguarded import PRE_GUARD_REVISION, load_render_block  # noqa: E402
 
 from tpad_rt.config import load_texture  # noqa: E402
 from tpad_rt.device import Device  # noqa: E402
-from tpad_rt.pipeline import KernelArrays, Pipeline, RenderOptions  # noqa: E402
+from tpad_rt.pipeline import Pipeline, RenderOptions  # noqa: E402
+from tpad_rt.realtime import CallbackTable  # noqa: E402
 from tpad_rt.texture import compile_texture  # noqa: E402
 
 FS_HZ = 192000
@@ -128,11 +129,11 @@ class Case:
 
     def kernel(self, block: int, seconds: float, out: np.ndarray | None = None, driver: object = RENDER_STREAM) -> Run:
         """A fresh stream through the @cfunc ``driver`` (``out``: keep every sample there)."""
-        arrays = self._pipeline().arrays
+        table = CallbackTable(self._pipeline().arrays, self.compiled)
         path = finger_path(seconds)
         blocks = round(seconds * FS_HZ / block)
         buffer = np.zeros(block, dtype=np.float32) if out is None else out
-        return lambda: render_stream(arrays, path, block, blocks, buffer, driver)
+        return lambda: render_stream(table, path, block, blocks, buffer, driver)
 
     def python_calls(self, block: int, seconds: float, out: np.ndarray | None = None) -> Run:
         """A fresh stream through Pipeline.render, finger samples pushed as the offline loop does."""

@@ -10,6 +10,9 @@ render_into(table, state, out, frames, channels, channel)
 finish_block(stats, row, entry_ns, frames, underflow, priming)
     one block, as every driver renders it: record its start, render it from the
     table's arrays (the texture slot it finds active), close its record
+kernel_views(table) -> (cfg, dev, state, power_ring, finger, finger_count, telem, telem_count)
+texture_views(table, slot) -> (prog, params, img, stack)
+    views of the arrays the table points to (render_into's, and the kernel bench's driver)
 
 Both drivers use them: the PortAudio callback (:mod:`tpad_rt.kernel.callback`) and the
 serial amplifier's streamer (:mod:`tpad_rt.kernel.amp_stream`). docs/realtime.md is the
@@ -152,23 +155,41 @@ def finish_block(stats, row, entry_ns, frames, underflow, priming):  # type: ign
 
 
 @numba.njit(inline="always", nogil=True, error_model="numpy")
+def kernel_views(table):  # type: ignore[no-untyped-def]
+    """Views of the render kernel's arrays the table points to, except the texture: ``(cfg, dev, state,
+    power_ring, finger, finger_count, telem, telem_count)``; ``finger_count`` is the live count (a driver
+    running beside producers passes the one it acquired, ``TAB_FINGER_SEEN``, instead)."""
+    cfg = numba.carray(pointer(table[TAB_CFG]), table[TAB_CFG_SIZE], _F8)
+    dev = numba.carray(pointer(table[TAB_DEV]), (table[TAB_DEV_ROWS], table[TAB_DEV_COLS]), _F8)
+    state = numba.carray(pointer(table[TAB_STATE]), table[TAB_STATE_SIZE], _F8)
+    power_ring = numba.carray(pointer(table[TAB_POWER_RING]), table[TAB_POWER_RING_SIZE], _F8)
+    finger = numba.carray(pointer(table[TAB_FINGER]), (table[TAB_FINGER_ROWS], FINGER_COLS), _F8)
+    finger_count = numba.carray(pointer(table[TAB_FINGER_COUNT]), 1, _I8)
+    telem = numba.carray(pointer(table[TAB_TELEM]), (table[TAB_TELEM_ROWS], TEL_COLS), _F8)
+    telem_count = numba.carray(pointer(table[TAB_TELEM_COUNT]), 1, _I8)
+    return cfg, dev, state, power_ring, finger, finger_count, telem, telem_count
+
+
+@numba.njit(inline="always", nogil=True, error_model="numpy")
+def texture_views(table, slot):  # type: ignore[no-untyped-def]
+    """Views of texture slot ``slot``'s arrays (0 or 1): ``(prog, params, img, stack)``."""
+    entries = table[TAB_SLOTS + slot * SLOT_SIZE: TAB_SLOTS + (slot + 1) * SLOT_SIZE]
+    prog = numba.carray(pointer(entries[SLOT_PROG]), (entries[SLOT_PROG_ROWS], TEX_PROG_COLS), _I8)
+    params = numba.carray(pointer(entries[SLOT_PARAMS]), entries[SLOT_PARAMS_SIZE], _F8)
+    img = numba.carray(pointer(entries[SLOT_IMG]), entries[SLOT_IMG_SIZE], _F8)
+    stack = numba.carray(pointer(entries[SLOT_STACK]), entries[SLOT_STACK_SIZE], _F8)
+    return prog, params, img, stack
+
+
+@numba.njit(inline="always", nogil=True, error_model="numpy")
 def render_into(table, state, out, frames, channels, channel):  # type: ignore[no-untyped-def]
     """Render ``frames`` samples with the table's arrays into ``out[k * channels + channel]`` (other
     channels untouched) and the drive ring, in pieces of at most the scratch's length. Call it after
     :func:`begin_block` (which acquires the finger count the kernel reads)."""
-    cfg = numba.carray(pointer(table[TAB_CFG]), table[TAB_CFG_SIZE], _F8)
-    dev = numba.carray(pointer(table[TAB_DEV]), (table[TAB_DEV_ROWS], table[TAB_DEV_COLS]), _F8)
-    power_ring = numba.carray(pointer(table[TAB_POWER_RING]), table[TAB_POWER_RING_SIZE], _F8)
-    finger = numba.carray(pointer(table[TAB_FINGER]), (table[TAB_FINGER_ROWS], FINGER_COLS), _F8)
+    cfg, dev, _, power_ring, finger, _, telem, telem_count = kernel_views(table)
     finger_count = table[TAB_FINGER_SEEN:TAB_FINGER_SEEN + 1]  # acquired in begin_block
-    telem = numba.carray(pointer(table[TAB_TELEM]), (table[TAB_TELEM_ROWS], TEL_COLS), _F8)
-    telem_count = numba.carray(pointer(table[TAB_TELEM_COUNT]), 1, _I8)
     active = load_acquire(table, TAB_ACTIVE_SLOT)  # the slot's contents were written before it
-    slot = table[TAB_SLOTS + active * SLOT_SIZE: TAB_SLOTS + (active + 1) * SLOT_SIZE]
-    prog = numba.carray(pointer(slot[SLOT_PROG]), (slot[SLOT_PROG_ROWS], TEX_PROG_COLS), _I8)
-    params = numba.carray(pointer(slot[SLOT_PARAMS]), slot[SLOT_PARAMS_SIZE], _F8)
-    img = numba.carray(pointer(slot[SLOT_IMG]), slot[SLOT_IMG_SIZE], _F8)
-    stack = numba.carray(pointer(slot[SLOT_STACK]), slot[SLOT_STACK_SIZE], _F8)
+    prog, params, img, stack = texture_views(table, active)
     cfg[CFG_TEXTURE_T0_S] = numba.carray(pointer(table[TAB_SLOT_T0]), 2, _F8)[active]
     scratch = numba.carray(pointer(table[TAB_SCRATCH]), table[TAB_SCRATCH_FRAMES], _F4)
     drive = numba.carray(pointer(table[TAB_DRIVE]), table[TAB_DRIVE_FRAMES], _F4)
