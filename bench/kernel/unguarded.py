@@ -11,7 +11,9 @@ then times both in the same run. Raises RuntimeError when git or the revision is
 
 from __future__ import annotations
 
+import atexit
 import importlib.util
+import shutil
 import subprocess
 import tempfile
 from pathlib import Path
@@ -30,6 +32,7 @@ def load_render_block() -> Any:
     except (OSError, subprocess.CalledProcessError) as error:
         raise RuntimeError(f"cannot read the kernel at {PRE_GUARD_REVISION} from git ({error})") from None
     folder = Path(tempfile.mkdtemp(prefix="tpad-rt-unguarded-"))
+    atexit.register(shutil.rmtree, folder, True)  # numba may read the source while it compiles: kept until exit
     path = folder / "render_unguarded.py"
     path.write_text(source.replace("cache=True", "cache=False"))
     spec = importlib.util.spec_from_file_location("render_unguarded", path)
