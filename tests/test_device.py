@@ -173,6 +173,70 @@ def test_envelope_time_constant_is_q_over_pi_f0(slg056):
     assert slg056.envelope_time_constant_s(2.0) < slg056.envelope_time_constant_s(0.0)
 
 
+def _plate_held_exactly(device, drive_v, rate_hz, force_n, initial_m):
+    """Reference: each held sample solves tau dp/dt = G u - p over 1 / rate_hz from where the last one left p."""
+    gain = float(device.amplitude_m_per_v(force_n))
+    tau = float(device.envelope_time_constant_s(force_n))
+    p, out = initial_m, []
+    for u in drive_v:
+        p = gain * u + (p - gain * u) * math.exp(-1.0 / (rate_hz * tau))
+        out.append(p)
+    return np.array(out)
+
+
+def _plate_euler(device, drive_v, rate_hz, force_n, initial_m, substeps):
+    """Reference: forward Euler on tau dp/dt = G u - p, ``substeps`` steps per held sample."""
+    gain = float(device.amplitude_m_per_v(force_n))
+    h = 1.0 / (rate_hz * substeps * float(device.envelope_time_constant_s(force_n)))  # step in time constants
+    p, out = initial_m, []
+    for u in drive_v:
+        for _ in range(substeps):
+            p += (gain * u - p) * h
+        out.append(p)
+    return np.array(out)
+
+
+@pytest.mark.parametrize(("rate_hz", "force_n"), [(16000, 0.5), (8000, 0.0), (192000, 1.7), (1000, 3.0)])
+def test_plate_amplitude_is_the_first_order_envelope_model(slg056, rate_hz, force_n):
+    rng = np.random.default_rng(7)
+    drive_v = rng.uniform(-10.0, 40.0, 120)  # negative: the carrier in anti-phase
+    initial_m = 0.3e-6
+    got = slg056.plate_amplitude_m(drive_v, rate_hz, force_n, initial_m)
+    assert got.shape == drive_v.shape and got.dtype == np.float64
+    np.testing.assert_allclose(got, _plate_held_exactly(slg056, drive_v, rate_hz, force_n, initial_m),
+                               rtol=1e-12, atol=1e-20)
+    euler = _plate_euler(slg056, drive_v, rate_hz, force_n, initial_m, substeps=400)
+    np.testing.assert_allclose(got, euler, rtol=0, atol=1e-3 * np.abs(euler).max())
+
+
+def test_plate_amplitude_settles_at_gain_times_drive_with_tau(slg056):
+    rate_hz, tau = 16000, float(slg056.envelope_time_constant_s(0.5))
+    level = float(slg056.amplitude_m_per_v(0.5)) * 30.0
+    got = slg056.plate_amplitude_m(np.full(round(20 * tau * rate_hz), 30.0), rate_hz, 0.5)
+    assert got[-1] == pytest.approx(level, rel=1e-8)
+    one_tau = round(tau * rate_hz) - 1  # the end of sample k is (k + 1) / rate_hz
+    assert got[one_tau] == pytest.approx(level * (1 - math.exp(-(one_tau + 1) / (tau * rate_hz))), rel=1e-12)
+    assert slg056.plate_amplitude_m([], rate_hz, 0.5).shape == (0,)
+    assert slg056.plate_amplitude_m([0.0, 0.0], rate_hz, 0.5, 1e-6)[1] == pytest.approx(
+        1e-6 * math.exp(-2 / (tau * rate_hz)))
+
+
+@pytest.mark.parametrize(("arguments", "message"), [
+    (([1.0, math.nan], 16000, 0.5), "drive_v must be finite, got nan"),
+    (([[1.0]], 16000, 0.5), r"drive_v must be one-dimensional, got shape \(1, 1\)"),
+    ((1.0, 16000, 0.5), r"drive_v must be one-dimensional, got shape \(\)"),
+    (([1.0], 0, 0.5), "rate_hz must be > 0, got 0"),
+    (([1.0], math.inf, 0.5), "rate_hz must be > 0, got inf"),
+    (([1.0], [16000, 8000], 0.5), r"rate_hz must be a scalar, got shape \(2,\)"),
+    (([1.0], 16000, -0.1), "force_n must be >= 0, got -0.1"),
+    (([1.0], 16000, [0.5]), r"force_n must be a scalar, got shape \(1,\)"),
+    (([1.0], 16000, 0.5, math.nan), "initial_m must be finite, got nan"),
+])
+def test_plate_amplitude_refuses_bad_arguments(slg056, arguments, message):
+    with pytest.raises(ValueError, match=message):
+        slg056.plate_amplitude_m(*arguments)
+
+
 def test_amplitudes_at_0n_and_40v_follow_the_paper(devices):
     amplitude_um = {label: float(d.amplitude_m_per_v(0.0)) * 40 * 1e6 for label, d in devices.items()}
     assert amplitude_um["SLG_0.4"] == pytest.approx(6.0)  # paper: about 6 um, the highest

@@ -78,3 +78,53 @@ def test_preemphasis_makes_the_plate_reach_a_step_well_under_its_time_constant(t
     # both settle at the same amplitude: pre-emphasis changes the speed, not the level
     settled = (t_on > 0.030) & (t_on < 0.045)
     assert plate_on[settled].mean() == pytest.approx(plate_off[settled].mean(), rel=0.01)
+
+
+#: An amplifier's envelope rate (serial://'s default) and the control interval the serial driver scales to there.
+ENVELOPE_HZ = 16000
+ENVELOPE_CONTROL_INTERVAL = 3
+ENVELOPE_BLOCK = 8
+
+
+def test_the_plate_model_maps_the_preemphasised_envelope_of_a_step_back_to_the_commanded_level(tmp_path: Path) -> None:
+    """The kernel's envelope output (as serial:// streams it) through Device.plate_amplitude_m: the overshoot
+    pre-emphasis adds is gone, the level is the commanded one, and the rise is the smoothing's."""
+    texture_file = tmp_path / "pulses.yaml"
+    texture_file.write_text(
+        "description: 10 Hz friction steps\nkind: temporal\nwaveform: square\n"
+        f"frequency_hz: {PULSE_HZ}\nduty: 0.5\nfriction: {{low: 0.85, high: 1.0}}\n"
+    )
+    device = Device.default()
+    options = RenderOptions(control_interval=ENVELOPE_CONTROL_INTERVAL, default_force_n=FORCE_N)
+    pipeline = Pipeline(device, load_compiled(texture_file), fs_hz=ENVELOPE_HZ, options=options, envelope_output=True)
+    full_scale_v = 50.0
+    pipeline.set_drive_scale(full_scale_v, device.max_voltage_v, device.resonance_hz)
+    pipeline.start()
+    block = np.zeros(ENVELOPE_BLOCK, dtype=np.float32)
+    drive, commanded, flags = [], [], 0
+    for _ in range(int(0.095 * ENVELOPE_HZ / ENVELOPE_BLOCK)):  # the high half, then the low one up to its end
+        t_s = pipeline.time_s
+        pipeline.push_finger(t_s, 10 + SPEED_MM_S * t_s, 30.0, force_n=FORCE_N)
+        pipeline.render(block)
+        drive.append(block.astype(np.float64) * full_scale_v)
+        row = pipeline.drain_telemetry()
+        commanded.append(row["amplitude_um"][-1] * 1e-6)
+        flags |= int(np.bitwise_or.reduce(row["saturated"]))
+    drive_v = np.concatenate(drive)
+    assert not flags & (FLAG_VOLTAGE | FLAG_POWER)
+    assert drive_v.max() < device.max_voltage_v  # pre-emphasis not clipped: the mapping must be exact
+    level_m = commanded[-1]
+    first = np.flatnonzero(drive_v > 0)[0]  # the step's first sample (the high half drives nothing)
+    assert first == pytest.approx(ENVELOPE_HZ / PULSE_HZ / 2, abs=ENVELOPE_CONTROL_INTERVAL + 1)
+    gain = float(device.amplitude_m_per_v(FORCE_N))
+    settled = slice(first + round(0.03 * ENVELOPE_HZ), None)
+    assert gain * drive_v.max() > 2 * level_m  # the drive overshoots: a static mapping would more than double the level
+    assert gain * drive_v[settled].mean() == pytest.approx(level_m, rel=1e-3)
+
+    plate_m = device.plate_amplitude_m(drive_v, ENVELOPE_HZ, FORCE_N)
+    assert plate_m.max() <= level_m * 1.001  # no overshoot
+    assert plate_m[settled] == pytest.approx(np.full(len(drive_v) - settled.start, level_m), rel=1e-3)
+    # it follows the command's one-pole smoothing (1 ms), not the plate's tau (~2.8 ms)
+    k = np.arange(len(drive_v) - first)
+    smoothed_m = level_m * -np.expm1(-(k + 1) / (options.smoothing_ms * 1e-3 * ENVELOPE_HZ))
+    assert np.abs(plate_m[first:] - smoothed_m).max() < 0.02 * level_m

@@ -27,8 +27,10 @@ from cli_run import tpad_rt
 from cobs import cobs
 from crc import Calculator, Crc16
 
+from tpad_rt.cli.play import AUTO_SWIPE
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
+from tpad_rt.inputs import open_input
 from tpad_rt.physics.friction import relative_friction
 from tpad_rt.recording import read_recording
 
@@ -54,12 +56,31 @@ def achieved_friction(recording: dict[str, np.ndarray], speed_mm_s: float, force
                              DEVICE.mu0, DEVICE.poisson, DEVICE.psi_star)
 
 
+def envelope_friction(recording: dict[str, np.ndarray], speed_mm_s: float, force_n: float) -> np.ndarray:
+    """The friction the recorded drive envelope gives through the device's calibrated amplitude model
+    (Device.plate_amplitude_m: the plate's first-order envelope, which undoes the pre-emphasis) and the friction
+    model (paper Eqs. 2-3), for a finger at ``speed_mm_s`` pressing with ``force_n``; one value per sample."""
+    amplitude_m = DEVICE.plate_amplitude_m(recording["envelope_v"], float(recording["envelope_hz"]), force_n)
+    return relative_friction(np.abs(amplitude_m), DEVICE.resonance_hz, speed_mm_s * 1e-3, DEVICE.mu0, DEVICE.poisson,
+                             DEVICE.psi_star)
+
+
+def unsaturated(recording: dict[str, np.ndarray], force_n: float) -> np.ndarray:
+    """Per sample: True unless the drive was at the amplifier's clamp (where the plate cannot follow what the
+    kernel shaped) within the last 5 plate time constants (the model's memory: exp(-5), under 1 %)."""
+    clamped = np.abs(recording["envelope_v"]) >= float(recording["max_mv"]) / 1e3 - 1e-9
+    memory = round(5 * float(DEVICE.envelope_time_constant_s(force_n)) * float(recording["envelope_hz"]))
+    return np.convolve(clamped, np.ones(memory + 1), mode="full")[:len(clamped)] == 0
+
+
 def test_play_through_serial_renders_the_grating_on_the_emulated_plate(tmp_path: Path) -> None:
     levels = yaml.safe_load(GRATING.read_text())["friction"]
     with Emulator(tmp_path) as amp:
         done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}", "--duration", "3")
         recording = amp.finish()
     assert done.returncode == 0, done.stderr
+    assert f"input {AUTO_SWIPE} (no display)" in done.stdout, done.stdout  # the finger the levels are checked at
+    swipe = open_input(AUTO_SWIPE)
     assert recording["carrier_hz"].min() == recording["carrier_hz"].max() == pytest.approx(DEVICE.resonance_hz,
                                                                                              abs=0.01)
     assert recording["frames_bad"] == 0 and recording["sequence_gaps"] == 0
@@ -71,6 +92,13 @@ def test_play_through_serial_renders_the_grating_on_the_emulated_plate(tmp_path:
     friction = achieved_friction({k: v[middle] for k, v in recording.items() if np.ndim(v)}, 100.0, 0.5)
     assert np.percentile(friction, 1) == pytest.approx(levels["low"], rel=0.02)
     assert np.percentile(friction, 99) == pytest.approx(levels["high"], rel=0.02)
+    # The envelope the amplifier applied, mapped back through the calibration (the whole recording: the model
+    # starts from the plate at rest, as the emulator's plate does), where the drive was not at the clamp.
+    mapped = envelope_friction(recording, swipe.speed_mm_s, swipe.force_n)
+    kept = middle[unsaturated(recording, swipe.force_n)[middle]]
+    assert len(kept) > 0.9 * len(middle)
+    assert mapped[kept].min() == pytest.approx(levels["low"], rel=0.02)
+    assert mapped[kept].max() == pytest.approx(levels["high"], rel=0.02)
 
 
 def live_swipe(renderer: Renderer, seconds: float) -> None:

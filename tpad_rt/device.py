@@ -5,7 +5,9 @@ A :class:`Device` is built from a device file (docs/formats.md "Device files") b
 by :meth:`Device.from_spec`, or from ``calibration/default.yaml`` by
 :meth:`Device.default`. Its methods evaluate the force-dependent tables (linear
 interpolation, clamped at the table ends; vectorised over ``force_n``): these are
-what the real-time kernel tabulates.
+what the real-time kernel tabulates. :meth:`Device.plate_amplitude_m` runs a drive
+envelope through them: the amplitude it gives the plate (a pre-emphasised drive maps
+back to the level it was shaped for).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from tpad_rt.config import DeviceFile, load_device
 from tpad_rt.config.breadcrumb import breadcrumb
 from tpad_rt.errors import ConfigError
 from tpad_rt.physics import electromech
-from tpad_rt.physics._validate import FloatOrArray, non_negative
+from tpad_rt.physics._validate import FloatOrArray, checked, finite, non_negative
 
 #: Where the device files of the paper's TPaDs live (in the source tree).
 CALIBRATION_DIR = Path(__file__).resolve().parents[1] / "calibration"
@@ -193,6 +195,51 @@ class Device:
     def envelope_time_constant_s(self, force_n: npt.ArrayLike) -> FloatOrArray:
         """Time constant (s) of the vibration envelope, ``Q / (pi f0)`` with ``f0 = resonance_hz``."""
         return self.quality_factor(force_n) / (math.pi * self.resonance_hz)
+
+    def plate_amplitude_m(
+        self, drive_v: npt.ArrayLike, rate_hz: float, force_n: float, initial_m: float = 0.0
+    ) -> npt.NDArray[np.float64]:
+        """Plate vibration amplitude (m) that the drive envelope ``drive_v`` gives: the calibrated amplitude model.
+
+        The model the kernel's pre-emphasis assumes (docs/kernel.md "Per sample"): at
+        contact force ``force_n`` the plate's envelope ``p`` follows the drive envelope
+        ``u`` (peak volts at the carrier, the resonance) as ``tau dp/dt = G u - p``, with
+        ``G = amplitude_m_per_v(force_n)`` and ``tau = envelope_time_constant_s(force_n)``.
+        So the steady amplitude is ``G u``, and a pre-emphasised drive, which overshoots at
+        every change, maps back to the level it was shaped for. Sample ``k`` of
+        ``drive_v`` is held for ``1 / rate_hz`` s (zero-order hold, as an amplifier
+        applies its envelope samples; docs/amplifiers.md); element ``k`` of the result is
+        the amplitude at the end of that hold (exact discretisation,
+        ``p_k = b p_(k-1) + (1 - b) G u_k``, ``b = exp(-1 / (rate_hz tau))``), starting
+        from ``initial_m`` (m; 0: the plate at rest). A negative drive is the carrier in
+        anti-phase: the result is signed the same way, and the vibration amplitude a
+        finger feels is its magnitude (the input of
+        :func:`tpad_rt.physics.friction.relative_friction`).
+
+        ``drive_v`` (V) is one-dimensional, every value finite; ``rate_hz`` (Hz) finite
+        and > 0; ``force_n`` (N) a finite scalar >= 0 (one force for the whole span: the
+        model is time-invariant only at a fixed force); ``initial_m`` finite. Raises
+        ValueError, naming the argument, otherwise.
+        """
+        drive = finite("drive_v", drive_v)
+        if drive.ndim != 1:
+            raise ValueError(f"drive_v must be one-dimensional, got shape {drive.shape}")
+        for name, value in (("rate_hz", rate_hz), ("force_n", force_n), ("initial_m", initial_m)):
+            if np.ndim(value) != 0:
+                raise ValueError(f"{name} must be a scalar, got shape {np.shape(value)}")
+        rate = float(checked("rate_hz", rate_hz, 0.0))
+        force = float(non_negative("force_n", force_n))
+        initial = float(finite("initial_m", initial_m))
+        gain_m_per_v = float(self.amplitude_m_per_v(force))
+        step = 1.0 / (rate * float(self.envelope_time_constant_s(force)))  # one sample, in time constants
+        decay = math.exp(-step)
+        if drive.size == 0:
+            return drive.copy()
+        # Imported here: importing scipy.signal at the top would cost every command a few hundred ms.
+        from scipy.signal import lfilter  # type: ignore[import-untyped]
+
+        amplitude, _ = lfilter([-math.expm1(-step) * gain_m_per_v], [1.0, -decay], drive, zi=[decay * initial])
+        return np.asarray(amplitude, dtype=np.float64)
 
     def derived_problems(self) -> list[str]:
         """One ``key: what is wrong`` line per derived table not finite and > 0 at some force; empty if fine.

@@ -51,3 +51,12 @@ def positive(**values: npt.ArrayLike) -> list[npt.NDArray[np.float64]]:
 def non_negative(name: str, value: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """``value`` as a float64 array checked finite and >= 0."""
     return checked(name, value, 0.0, low_closed=True)
+
+
+def finite(name: str, value: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """``value`` as a float64 array, or ValueError naming ``name`` and the first value that is not finite."""
+    array = np.asarray(value, dtype=np.float64)
+    bad = ~np.isfinite(array)
+    if bad.any():
+        raise ValueError(f"{name} must be finite, got {array[bad].flat[0]:g}")
+    return array
