@@ -114,15 +114,9 @@ def test_envelope_period_is_period_over_speed(swipes: Callable[[int], tuple[Reco
 
 
 def _plate_m(recording: Recording, force_n: float) -> np.ndarray:
-    """Plate amplitude (m) per sample from the drive: its envelope through ``tau dp/dt = G u - p``.
-
-    That envelope equation (docs/kernel.md) is the plate model the kernel's pre-emphasis
-    is designed for; ``tau`` and ``G`` are the device's at ``force_n``.
-    """
-    tau_s = float(DEVICE.envelope_time_constant_s(force_n))
-    decay = math.exp(-1 / (recording.fs_hz * tau_s))
-    drive_m = float(DEVICE.amplitude_m_per_v(force_n)) * _envelope_v(recording)
-    return lfilter([1 - decay], [1, -decay], drive_m)
+    """Plate amplitude (m) per sample from the drive's envelope, through the device's calibrated amplitude model
+    (``tau dp/dt = G u - p``, the model the kernel's pre-emphasis is designed for) at ``force_n``."""
+    return DEVICE.plate_amplitude_m(_envelope_v(recording), recording.fs_hz, force_n)
 
 
 def _friction(amplitude_m: np.ndarray, speed_m_s: float) -> np.ndarray:
