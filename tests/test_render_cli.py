@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.io import wavfile
-from scipy.signal import hilbert, lfilter
+from scipy.signal import hilbert
 
 from tpad_rt.cli import main
 from tpad_rt.config import load_texture
