@@ -100,7 +100,7 @@ class Renderer:
     :meth:`set_texture`); ``rate_hz`` the sample rate (Hz), ``block_frames`` the frames
     per callback; ``options`` the render settings (power budget, ramps, watchdog...);
     ``stall_timeout_s`` how long (s) an audio stream may go without a callback before
-    it counts as stalled (at least STALL_MIN_BLOCKS blocks' time).
+    it counts as stalled (at least 4 blocks' time: tpad_rt.drivers.audio_callback.STALL_MIN_BLOCKS).
 
     Raises ConfigError for a bad URL, texture or option (``stall_timeout_s`` not in
     ``(0, MAX_STALL_TIMEOUT_S]``), or a carrier above 0.45 x the
