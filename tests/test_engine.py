@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 import tpad_rt
+import tpad_rt.telemetry
 from tpad_rt.engine import Renderer
-from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.errors import BackendError, ConfigError, TpadError
 from tpad_rt.recording import read_recording
 
 GRATING = Path(__file__).resolve().parents[1] / "textures" / "grating.yaml"
@@ -113,7 +114,7 @@ def test_output_that_cannot_open_fails_start(tmp_path: Path) -> None:
 
 
 #: A Renderer writing a WAV under a file-size limit (RLIMIT_FSIZE; SIGXFSZ ignored, so a write past it fails with
-#: EFBIG, as on a full disk): the paced driver's error must end the run, the drive ramped, in the app's thread.
+#: EFBIG, as on a full disk): the paced driver's error must end the run, in the app's thread, once.
 FAILING_OUTPUT_APP = """
 import resource, signal, sys
 from tpad_rt.engine import Renderer
@@ -140,6 +141,23 @@ def test_an_output_failing_mid_run_ends_it_with_the_output_s_error(tmp_path: Pat
     assert lines[0].startswith("join: wav: cannot ") and "(File too large)" in lines[0], done.stdout + done.stderr
     assert lines[1:] == ["running: True", "stopped: False"], done.stdout + done.stderr
     assert done.returncode == 0, done.stderr
+
+
+def test_a_recording_past_its_limit_ends_the_run_once_and_keeps_what_came_before(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(tpad_rt.telemetry, "MAX_RECORDING_SAMPLES", 20000)
+    renderer = Renderer(output="null://", texture=GRATING)
+    renderer.record(tmp_path / "r.npz")
+    renderer.start()
+    with pytest.raises(TpadError, match="longer than the 20000 drive samples a recording may keep"):
+        renderer.join(timeout_s=60)
+    renderer.stop()  # reported once: stop() does not raise it again
+    assert not renderer.running
+    recording = read_recording(tmp_path / "r.npz")
+    assert recording.metadata["truncated"].startswith("longer than the 20000 drive samples")
+    blocks = len(recording.blocks["t"])
+    assert 0 < len(recording.drive) <= 20000
+    assert abs(len(recording.drive) - blocks * renderer.block_frames) <= renderer.block_frames  # drive and rows agree
 
 
 def test_record_needs_npz() -> None:

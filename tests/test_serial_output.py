@@ -30,6 +30,7 @@ from crc import Calculator, Crc16
 from tpad_rt.cli.play import AUTO_SWIPE
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
+from tpad_rt.errors import BackendError
 from tpad_rt.inputs import open_input
 from tpad_rt.physics.friction import relative_friction
 from tpad_rt.recording import read_recording
@@ -221,6 +222,19 @@ def test_the_host_ends_with_one_line_when_the_emulator_is_killed(tmp_path: Path)
     assert status == 1, (out, err)
     assert err.count("\n") == 1 and "Traceback" not in err, err
     assert "serial: " in err and amp.port in err, err
+
+
+def test_a_renderer_reports_a_killed_amplifier_once(tmp_path: Path) -> None:
+    with Emulator(tmp_path) as amp:
+        renderer = Renderer(output=f"serial://{amp.port}", texture=GRATING)
+        renderer.start()
+        renderer.push_finger(20.0, 20.0, 0.5)
+        amp.process.kill()
+        amp.process.wait(timeout=START_TIMEOUT_S)
+        with pytest.raises(BackendError, match=f"serial: lost the amplifier on {amp.port}"):
+            renderer.join(timeout_s=START_TIMEOUT_S)
+        renderer.stop()  # the error was reported by join(): stop() closes without raising it again
+        assert not renderer.running
 
 
 def test_play_ends_with_one_line_when_the_emulator_disconnects(tmp_path: Path) -> None:

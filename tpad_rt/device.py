@@ -227,8 +227,8 @@ class Device:
         for name, value in (("rate_hz", rate_hz), ("force_n", force_n), ("initial_m", initial_m)):
             if np.ndim(value) != 0:
                 raise ValueError(f"{name} must be a scalar, got shape {np.shape(value)}")
-        rate = float(checked("rate_hz", rate_hz, 0.0))
-        force = float(non_negative("force_n", force_n))
+        rate = float(checked("rate_hz", finite("rate_hz", rate_hz), 0.0))
+        force = float(non_negative("force_n", finite("force_n", force_n)))
         initial = float(finite("initial_m", initial_m))
         gain_m_per_v = float(self.amplitude_m_per_v(force))
         step = 1.0 / (rate * float(self.envelope_time_constant_s(force)))  # one sample, in time constants

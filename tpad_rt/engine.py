@@ -185,7 +185,8 @@ class Renderer:
 
         Raises BackendError when the output cannot run (missing PortAudio, unknown device, a rate it
         does not accept; a serial port that does not open or an amplifier refusing the handshake),
-        ConfigError or BackendError when a paced output cannot open, RuntimeError if running.
+        ConfigError for a ``serial://`` ``buffer_ms`` more than the amplifier holds, ConfigError or
+        BackendError when a paced output cannot open, RuntimeError if running.
         """
         if self.running:
             raise RuntimeError("Renderer.start: already running")
@@ -206,7 +207,10 @@ class Renderer:
         except BaseException:
             self._pipeline.stop()
             self._table = None
-            driver.close(self.options.ramp_ms)
+            try:
+                driver.close(self.options.ramp_ms)
+            except Exception:  # noqa: BLE001 - the error that stopped the start is the one to see
+                pass
             raise
         self._watcher = threading.Thread(target=self._watch, args=(table,), name="tpad-rt watcher", daemon=True)
         self._watcher.start()
@@ -236,19 +240,21 @@ class Renderer:
         if self._watcher is not None:
             self._watcher.join()
             self._watcher = None
-        closing = self._driver.close(self.options.ramp_ms)
-        if closing is not None and closing is not self._reported:  # the watcher's failure is reported once
-            self._error = self._error or closing
         try:
+            closing = self._driver.close(self.options.ramp_ms)
             self._log.drain(table)
-        except BaseException as error:  # noqa: BLE001 - the recording's limits: re-raised by check()
+            for failure in (closing, self._log.failure):
+                if failure is not None and failure is not self._reported:  # the watcher's is reported once
+                    self._error = self._error or failure
+            if self._log.recording:
+                self._log.write_recording(self._metadata())
+        except BaseException as error:  # noqa: BLE001 - re-raised by check() below
             self._error = self._error or error
-        self._table = None
-        if self._log.recording:
-            self._log.write_recording(self._metadata())
+        finally:
+            self._table = None
+            self._ended.set()  # whatever failed: join() and iter_telemetry() return
         if table.next_sample >= target and (table.arrays.state[STATE_GATE] or table.arrays.state[STATE_RAMP_START]):
             self._error = self._error or RuntimeError("Renderer.stop: the drive was not ramped to 0")
-        self._ended.set()
         self.check()
 
     def join(self, timeout_s: float | None = None) -> None:
@@ -285,7 +291,7 @@ class Renderer:
         try:
             while not self._halt.wait(WATCH_PERIOD_S):
                 self._log.drain(table)
-                failure = self._driver.poll(table)
+                failure = self._log.failure or self._driver.poll(table)
                 if failure is not None and not self._halt.is_set():
                     self._reported = failure
                     raise failure
@@ -469,12 +475,13 @@ class Renderer:
         """Record the drive and telemetry from now on; :meth:`stop` writes them to ``path`` (.npz, the
         format of ``tpad-rt render``). Raises ConfigError unless ``path`` ends in ``.npz``. A recording
         keeps at most ``tpad_rt.limits.MAX_RECORDING_SAMPLES`` drive samples in memory: past that the
-        run ends with a TpadError (re-raised by :meth:`check`, :meth:`join`, :meth:`stop`)."""
+        run ends with a TpadError (re-raised once, by :meth:`check`, :meth:`join` or :meth:`stop`), and
+        :meth:`stop` writes what came before it, its metadata's ``truncated`` saying why."""
         self._log.record(path)
 
     def _metadata(self) -> dict[str, Any]:
-        """The recording's metadata: what ran, on what, with which settings (the carrier, full scale and voltage
-    cap the run had: on ``serial://`` the amplifier's, as the handshake set them)."""
+        """The recording's metadata: what ran, on what, with which settings (the carrier, full scale and
+        voltage cap the run had: on ``serial://`` the amplifier's, as the handshake set them)."""
         cfg = self._pipeline.arrays.cfg
         return {
             "texture_path": self._texture_path, "texture_description": self._texture.description,

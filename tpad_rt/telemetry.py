@@ -5,7 +5,7 @@ API map
 TelemetryLog(pipeline, rate_hz)
     ``drain(table)`` (the watcher, and readers, call it), ``take()`` (the rows since the
     last take, by TEL_NAMES column), ``totals()``, ``record(path)``, ``recording``,
-    ``write_recording(metadata)``
+    ``failure`` (a recording's limit error), ``write_recording(metadata)``
 joined(chunks) -> dict[str, ndarray]
     telemetry chunks concatenated column by column
 
@@ -48,12 +48,16 @@ class TelemetryLog:
         self._drive_chunks: list[np.ndarray] = []
         self._drive_from = 0  # next drive sample to copy out of the ring while recording
         self._record_from = 0  # the recording's first drive sample
+        self._truncated: str | None = None  # why the recording ended early, if it did
+        #: The recording's limit error (see :meth:`drain`), or None.
+        self.failure: TpadError | None = None
 
     def drain(self, table: CallbackTable) -> None:
         """Move new telemetry rows (and drive samples, when recording) out of ``table``'s rings.
 
-        Raises TpadError when recording and the drive ring wrapped past samples not yet copied, or the
-        recording grew past MAX_RECORDING_SAMPLES.
+        When recording and the drive ring wrapped past samples not yet copied, or the recording grew past
+        MAX_RECORDING_SAMPLES, the recording ends where it was whole and :attr:`failure` holds a TpadError
+        saying so (for the renderer's watcher to end the run with; drain itself never raises).
         """
         with self._lock:
             frames = table.next_sample
@@ -77,18 +81,25 @@ class TelemetryLog:
                 self._record(rows, table, frames)
 
     def _record(self, rows: dict[str, np.ndarray], table: CallbackTable, frames: int) -> None:
-        """Keep ``rows`` and the drive samples up to ``frames`` for the recording (under the lock)."""
+        """Keep ``rows`` and the drive samples up to ``frames`` for the recording (under the lock). Past a limit
+        the recording ends where it was whole (the metadata says why: ``truncated``) and :attr:`failure` says
+        so."""
+        if self._truncated is not None:
+            return
         if not self._recorded:
             self._drive_from = self._record_from = round(float(rows["t"][0]) * self.rate_hz)
-        self._recorded.append(rows)
+        problem = None
         if frames - self._drive_from > len(table.drive):
-            raise TpadError(f"record: {frames - self._drive_from} drive samples were due but the ring "
-                            f"holds {len(table.drive)}: the recording lost samples (the watcher thread "
-                            "was held up for too long)")
-        if frames - self._record_from > MAX_RECORDING_SAMPLES:
-            raise TpadError(f"record: longer than the {MAX_RECORDING_SAMPLES} drive samples a recording may "
-                            f"keep in memory ({MAX_RECORDING_SAMPLES / self.rate_hz:.0f} s at {self.rate_hz} "
-                            "Hz); record shorter runs")
+            problem = (f"{frames - self._drive_from} drive samples were due but the ring holds {len(table.drive)}: "
+                       "the recording lost samples (the watcher thread was held up for too long)")
+        elif frames - self._record_from > MAX_RECORDING_SAMPLES:
+            problem = (f"longer than the {MAX_RECORDING_SAMPLES} drive samples a recording may keep in memory "
+                       f"({MAX_RECORDING_SAMPLES / self.rate_hz:.0f} s at {self.rate_hz} Hz); record shorter runs")
+        if problem is not None:
+            self._truncated = problem
+            self.failure = TpadError(f"record: {problem}; the recording ends before it (written on stop)")
+            return
+        self._recorded.append(rows)
         self._drive_chunks.append(table.drive[np.arange(self._drive_from, frames) % len(table.drive)])
         self._drive_from = max(self._drive_from, frames)
 
@@ -112,7 +123,8 @@ class TelemetryLog:
             raise ConfigError(f"record: the path must end in .npz, got '{path}'")
         with self._lock:
             self._record_path = path
-            self._recorded, self._drive_chunks = [], []
+            self._recorded, self._drive_chunks, self._truncated = [], [], None
+            self.failure = None
 
     @property
     def recording(self) -> bool:
@@ -120,15 +132,16 @@ class TelemetryLog:
         return self._record_path is not None
 
     def write_recording(self, metadata: dict[str, Any]) -> None:
-        """Write what was recorded, with ``metadata``, to the path :meth:`record` named (the format of
-        ``tpad-rt render``, :mod:`tpad_rt.recording`), and stop recording."""
+        """Write what was recorded, with ``metadata`` and ``truncated`` (None, or why the recording ended
+        early), to the path :meth:`record` named (the format of ``tpad-rt render``,
+        :mod:`tpad_rt.recording`), and stop recording."""
         with self._lock:
             path, self._record_path = self._record_path, None
-            recorded, drive_chunks = self._recorded, self._drive_chunks
-            self._recorded, self._drive_chunks = [], []
+            recorded, drive_chunks, truncated = self._recorded, self._drive_chunks, self._truncated
+            self._recorded, self._drive_chunks, self._truncated = [], [], None
         assert path is not None, "record() first"
         drive = np.concatenate(drive_chunks) if drive_chunks else np.zeros(0, dtype=np.float32)
-        write_recording(path, Recording(self.rate_hz, drive, joined(recorded), metadata))
+        write_recording(path, Recording(self.rate_hz, drive, joined(recorded), {**metadata, "truncated": truncated}))
 
 
 def joined(chunks: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:

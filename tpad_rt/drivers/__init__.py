@@ -29,18 +29,25 @@ def open_driver(url: str, *, device: Device, rate_hz: int, block_frames: int, op
     """The driver of the output ``url`` names, for ``device`` at ``rate_hz`` (Hz) in blocks of ``block_frames``
     (either may be replaced by what the URL asks for); ConfigError for a bad URL."""
     parsed, kind = output_kind(url)
+    driver: Driver
     if kind.runs is Runs.CALLBACK:
         from tpad_rt.drivers.audio_callback import AudioCallbackDriver
 
-        return AudioCallbackDriver(parsed, device=device, rate_hz=rate_hz, block_frames=block_frames,
-                                   options=options, stall_timeout_s=stall_timeout_s)
-    if kind.runs is Runs.STREAM:
+        driver = AudioCallbackDriver(parsed, device=device, rate_hz=rate_hz, block_frames=block_frames,
+                                     options=options, stall_timeout_s=stall_timeout_s)
+    elif kind.runs is Runs.STREAM:
         from tpad_rt.drivers.serial_stream import SerialStreamDriver
 
-        return SerialStreamDriver(parsed, device=device, rate_hz=rate_hz, block_frames=block_frames, options=options)
-    from tpad_rt.drivers.paced import PacedDriver
+        driver = SerialStreamDriver(parsed, device=device, rate_hz=rate_hz, block_frames=block_frames,
+                                    options=options)
+    else:
+        from tpad_rt.drivers.paced import PacedDriver
 
-    return PacedDriver(parsed, device=device, rate_hz=rate_hz, block_frames=block_frames, options=options)
+        driver = PacedDriver(parsed, device=device, rate_hz=rate_hz, block_frames=block_frames, options=options)
+    if driver.consumes is not kind.consumes:  # the pipeline renders what the driver says: they must agree
+        raise TypeError(f"{parsed.scheme}:// consumes {kind.consumes.value}, but its driver "
+                        f"{type(driver).__name__} renders {driver.consumes.value}")
+    return driver
 
 
 __all__ = ["Driver", "open_driver"]

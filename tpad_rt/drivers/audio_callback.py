@@ -48,6 +48,7 @@ class AudioCallbackDriver(Driver):
         self.stream: audio.AudioStream | None = None  # while started
         self._output_latency_s = math.nan
         self._stalled = False
+        self._failure: BackendError | None = None  # what poll() found, returned again by close()
         self._seen_callbacks, self._seen_at = -1, 0.0
 
     def stall_limit_s(self) -> float:
@@ -67,9 +68,12 @@ class AudioCallbackDriver(Driver):
         """Open the stream on the native callback and start it; BackendError when the device refuses."""
         assert self.audio_device is not None, "prepare() first"
         self._stalled = False
+        self._failure = None
         self._seen_callbacks, self._seen_at = -1, time.monotonic()
+        address = cb.render_callback.address
+        assert address is not None
         self.stream = audio.AudioStream(self.audio_device, self.rate_hz, self.block_frames, self.channels,
-                                        int(cb.render_callback.address), table.user_data)
+                                        address, table.user_data)
         self._output_latency_s = self.stream.output_latency_s
         self.stream.start()
 
@@ -78,21 +82,23 @@ class AudioCallbackDriver(Driver):
         with time.monotonic, read before the count and again on an advance: the gap measured never exceeds
         the time without a callback, however late the watcher runs)."""
         stream = self.stream
-        if stream is None:
-            return None
+        if stream is None or self._failure is not None:
+            return self._failure
         if not stream.active():
-            return BackendError(f"audio: the stream on device {stream.device} stopped (device lost or server gone)")
+            self._failure = _lost_error(stream.device)
+            return self._failure
         now = time.monotonic()
         count = int(table.stats[tab.STAT_CALLBACKS])
         if count != self._seen_callbacks:
             self._seen_callbacks, self._seen_at = count, time.monotonic()
         elif now - self._seen_at >= self.stall_limit_s():
             self._stalled = True
-            return _stall_error(stream.device, f"no callback for {now - self._seen_at:.2f} s")
-        return None
+            self._failure = _stall_error(stream.device, f"no callback for {now - self._seen_at:.2f} s")
+        return self._failure
 
     def close(self, ramp_ms: float) -> BaseException | None:
-        """Stop and close the stream; abandon it instead if it stalled or its device or server went away.
+        """Stop and close the stream; abandon it instead if it stalled or its device or server went away (and
+        return the error that said so: the one :meth:`poll` returned, the same object).
 
         The stop and close run in a helper thread (PortAudio's JACK host API blocks in them for minutes
         when the server stops answering): if they take longer than the stall limit plus CLOSE_GRACE_S,
@@ -100,10 +106,10 @@ class AudioCallbackDriver(Driver):
         """
         stream, self.stream = self.stream, None
         if stream is None:
-            return None
+            return self._failure
         if self._stalled or stream.lost():
             stream.abandon()
-            return None
+            return self._failure or _lost_error(stream.device)
         errors: list[BaseException] = []
 
         def shut() -> None:
@@ -132,6 +138,11 @@ class AudioCallbackDriver(Driver):
         """PortAudio's stream time (s), NaN when no stream runs."""
         stream = self.stream
         return stream.time_s() if stream is not None else math.nan
+
+
+def _lost_error(device: audio.AudioDevice) -> BackendError:
+    """The error of a stream on ``device`` that stopped by itself."""
+    return BackendError(f"audio: the stream on device {device} stopped (device lost or server gone)")
 
 
 def _stall_error(device: audio.AudioDevice, what: str) -> BackendError:

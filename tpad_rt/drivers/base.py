@@ -4,7 +4,7 @@ The Renderer (tpad_rt.engine) calls, in order: :meth:`Driver.prepare` (find the
 hardware), :meth:`Driver.warm` (compile what the driver runs, on a copy of the
 table), :meth:`Driver.open` (open the hardware; it may tell the pipeline its drive
 scale), :meth:`Driver.start`; then its watcher thread calls :meth:`Driver.poll` every
-few ms until :meth:`Driver.close`. A driver may be started again after a close.
+20 ms (``tpad_rt.engine.WATCH_PERIOD_S``) until :meth:`Driver.close`. A driver may be started again after a close.
 """
 
 from __future__ import annotations
@@ -58,8 +58,9 @@ class Driver(ABC):
 
     @abstractmethod
     def poll(self, table: CallbackTable) -> BaseException | None:
-        """The error that ended the output (lost, stalled, failed), or None while it runs (cheap: called every
-        few ms by the renderer's watcher)."""
+        """The error that ended the output (lost, stalled, failed), or None while it runs; once there is one,
+        the same object at every call and from :meth:`close` (so it is reported once). Cheap: the watcher
+        calls it every 20 ms."""
 
     @abstractmethod
     def close(self, ramp_ms: float) -> BaseException | None:

@@ -47,9 +47,10 @@ class PacedDriver(Driver):
         assert self._output is not None, "open() first"
         self._halt.clear()
         self._error = None
-        self._thread = threading.Thread(target=self._run, args=(table, self._output), name="tpad-rt paced output",
-                                        daemon=True)
-        self._thread.start()
+        thread = threading.Thread(target=self._run, args=(table, self._output), name="tpad-rt paced output",
+                                  daemon=True)
+        thread.start()
+        self._thread = thread  # only once it runs: close() joins it
 
     def _run(self, table: CallbackTable, output: Output) -> None:
         try:

@@ -156,8 +156,11 @@ class AmpLink:
         self.link = np.zeros(amp_stream.LINK_SIZE, dtype=np.int64)
         self._buffers = np.zeros((amp_stream.BUF_ROWS, amp_stream.BUF_BYTES), dtype=np.uint8)
         self._envelope = np.zeros(amp_stream.ENVELOPE_SCRATCH, dtype=np.float32)
+        self.link[amp_stream.LINK_STOP_SEQ] = -1  # no STOP sent yet
         self._thread: threading.Thread | None = None
         self._crash: BaseException | None = None
+        self._failure: BackendError | None = None  # the error that ended the stream, made once
+        self._start_sent = False  # a START went out: the amplifier may be streaming
         self.info: AmpInfo | None = None
         self.carrier_hz = float("nan")
         self.frame_samples = 0
@@ -315,6 +318,7 @@ class AmpLink:
         index = int(table.next_sample)  # type: ignore[attr-defined]
         payload = (self.target.envelope_hz.to_bytes(4, "little") + (index & 0xFFFFFFFF).to_bytes(4, "little")
                    + min(self.target_fill, info.buffer_samples).to_bytes(2, "little"))
+        self._start_sent = True  # even if its ACK never comes, the amplifier may have started
         self._command(payload, codec.MSG_START, f"START at {self.target.envelope_hz} Hz")
         link[amp_stream.LINK_FD] = self._fd
         link[amp_stream.LINK_ENVELOPE_HZ] = self.target.envelope_hz
@@ -336,13 +340,16 @@ class AmpLink:
             self._crash = error
 
     def failure(self) -> BaseException | None:
-        """The error that ended the stream (a BackendError), or None while it runs or after a requested stop."""
+        """The error that ended the stream (a BackendError, the same object at every call), or None while it runs
+        or after a requested stop."""
         if self._crash is not None:
             return self._crash
-        reason = int(self.link[amp_stream.LINK_EXIT])
-        if reason in (amp_stream.EXIT_RUNNING, amp_stream.EXIT_STOPPED):
-            return None
-        return BackendError(self._describe(reason))
+        if self._failure is None:
+            reason = int(self.link[amp_stream.LINK_EXIT])
+            if reason in (amp_stream.EXIT_RUNNING, amp_stream.EXIT_STOPPED):
+                return None
+            self._failure = BackendError(self._describe(reason))
+        return self._failure
 
     def _describe(self, reason: int) -> str:
         """The one-line message for an exit reason."""
@@ -375,13 +382,21 @@ class AmpLink:
 
     def stop(self, ramp_ms: float) -> None:
         """End the stream with STOP and ``ramp_ms`` (H8: the streamer sends it right after the last envelope
-        frame), wait (STOP_ACK_TIMEOUT_S at most) for its ACK, and close the port. A missing ACK is not an
-        error: the amplifier's watchdog ramps to 0 anyway (A4)."""
+        frame; after a START that no stream followed, this does), wait (STOP_ACK_TIMEOUT_S at most) for its
+        ACK, and close the port. A missing ACK is not an error: the amplifier's watchdog ramps to 0 anyway
+        (A4)."""
+        ramp = min(0xFFFF, max(1, round(ramp_ms)))
         if self._thread is not None:
-            self.link[amp_stream.LINK_STOP_RAMP_MS] = min(0xFFFF, max(1, round(ramp_ms)))
+            self.link[amp_stream.LINK_STOP_RAMP_MS] = ramp
             publish(self.link, amp_stream.LINK_STOP, 1)
             self._thread.join()
             self._thread = None
+        elif self._start_sent:  # START went out, no stream followed (its ACK lost, or refused): STOP all the same
+            try:
+                self.link[amp_stream.LINK_STOP_SEQ] = self._send(ramp.to_bytes(2, "little"), codec.MSG_STOP)
+            except BackendError:
+                pass  # the port is gone: the amplifier's watchdog ramps to 0 (A4)
+        self._start_sent = False
         try:
             seq = int(self.link[amp_stream.LINK_STOP_SEQ])
             if self.failure() is None and seq >= 0:
@@ -399,7 +414,10 @@ class AmpLink:
         """Close the port (safe twice)."""
         port, self._port = self._port, None
         if port is not None:
-            port.close()  # type: ignore[attr-defined]
+            try:
+                port.close()  # type: ignore[attr-defined]
+            except OSError:
+                pass  # a device that vanished: its descriptor is released all the same
 
     def stats(self) -> dict[str, float | int | str]:
         """The link's and the amplifier's counters (the last STATUS), by name."""

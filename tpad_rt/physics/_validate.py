@@ -54,8 +54,12 @@ def non_negative(name: str, value: npt.ArrayLike) -> npt.NDArray[np.float64]:
 
 
 def finite(name: str, value: npt.ArrayLike) -> npt.NDArray[np.float64]:
-    """``value`` as a float64 array, or ValueError naming ``name`` and the first value that is not finite."""
-    array = np.asarray(value, dtype=np.float64)
+    """``value`` as a float64 array, or ValueError naming ``name`` and the first value that is not finite, or
+    saying that ``value`` holds something other than real numbers (text, booleans, complex numbers)."""
+    raw = np.asarray(value)
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(f"{name} must hold real numbers, got {raw.dtype} values")
+    array = raw.astype(np.float64)
     bad = ~np.isfinite(array)
     if bad.any():
         raise ValueError(f"{name} must be finite, got {array[bad].flat[0]:g}")
