@@ -9,8 +9,9 @@ Every run starts the amplifier emulator (``tpad-rt amp emulate``) on a new pty i
 process of its own, then a host in another process: either tpad-rt's Renderer on
 ``serial://`` (its GIL-free streamer, bench/latency/serial_worker.py) or the control, a
 plain-Python writer (tests/python_serial_writer.py), for the same time, idle, under GIL
-load (one Python thread spinning in the host's process) or under CPU load (one spinning
-process per core). Figures, each next to its baseline of the same run:
+load (one Python thread spinning in the host's process), under the same CPU load without
+the GIL (one spinning process: the baseline of GIL load, since the GIL thread also takes a
+core) or under CPU load (one spinning process per core). Figures, each next to its baseline of the same run:
 
 1. envelope rate achieved: samples the host sent per second of its run, against the
    rate START agreed;
@@ -49,7 +50,9 @@ from jack import cpu_hogs  # noqa: E402
 
 WORKER = HERE / "serial_worker.py"
 WRITER = ROOT / "tests" / "python_serial_writer.py"
-LOADS = ("idle", "gil", "cpu")
+#: Load -> what it is. "cpu1" is the GIL thread's CPU load without the GIL: what GIL load costs beyond it is the GIL's.
+LOADS = {"idle": "idle", "gil": "one Python thread holding the GIL in the host's process",
+         "cpu1": "one spinning process (the GIL thread's CPU load, no GIL)", "cpu": "one spinning process per core"}
 WRITERS = {"tpad": "tpad-rt streamer (numba, no GIL)", "python": "plain-Python writer (control)"}
 
 
@@ -79,8 +82,8 @@ def run_once(writer: str, load: str, seconds: float, buffer_ms: float, envelope_
         emulator, port, record = _emulator(Path(folder))
         try:
             with contextlib.ExitStack() as load_on:
-                if load == "cpu":
-                    load_on.enter_context(cpu_hogs(os.cpu_count() or 2))
+                if load in ("cpu", "cpu1"):
+                    load_on.enter_context(cpu_hogs(1 if load == "cpu1" else os.cpu_count() or 2))
                 gil = "1" if load == "gil" else "0"
                 url = f"serial://{port}?buffer_ms={buffer_ms:g}&envelope_hz={envelope_hz}"
                 if writer == "tpad":
@@ -139,13 +142,14 @@ def markdown(report: dict[str, Any]) -> str:
     lines = [f"Serial amplifier over a pty, emulator in its own process; envelope {p['envelope_hz']} Hz, "
              f"target fill {p['buffer_ms']:g} ms; {p['runs']} runs of {p['seconds']:g} s per row "
              f"(machine: {report['machine']['cpus']} CPUs, {report['machine']['python']}).", "",
-             "| writer | load | envelope rate achieved (min of runs) | samples the amplifier missed, per run |",
-             "|---|---|---|---|"]
+             "Loads: " + "; ".join(f"{name}: {text}" for name, text in LOADS.items()) + ".", "",
+             "| writer | load | envelope rate achieved (min of runs) | samples the amplifier missed, per run | in all |",
+             "|---|---|---|---|---:|"]
     for writer, title in WRITERS.items():
         for load in LOADS:
             row = s[f"{writer}/{load}"]
             lines.append(f"| {title} | {load} | {min(row['rate_fraction']) * 100:.1f} % | "
-                         f"{', '.join(str(u) for u in row['missed'])} |")
+                         f"{', '.join(str(u) for u in row['missed'])} | {sum(row['missed'])} |")
     lines += ["", "| load | push-to-amplifier p50 | p99 | host's estimate p50 | target fill |", "|---|---|---|---|---|"]
     for load in LOADS:
         row = s[f"tpad/{load}"]
