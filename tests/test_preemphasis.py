@@ -17,7 +17,7 @@ from tpad_rt.device import Device
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE
 from tpad_rt.outputs.sim import SimOutput
 from tpad_rt.pipeline import Pipeline, RenderOptions
-from tpad_rt.texture import load_compiled
+from tpad_rt.texture import CompiledTexture, load_compiled
 
 FS_HZ = 192000
 BLOCK = 16
@@ -26,16 +26,21 @@ SPEED_MM_S = 50.0
 PULSE_HZ = 10.0  # square pulses: friction steps every 50 ms
 
 
-def _plate_after_step(tmp_path: Path, preemphasis: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Block times (s since the first friction step), plate amplitude (um), flags, for a square temporal texture."""
-    texture_file = tmp_path / "pulses.yaml"
+def _pulses(folder: Path, low: float) -> CompiledTexture:
+    """A temporal texture of square friction steps between ``low`` and 1.0 at PULSE_HZ, compiled."""
+    texture_file = folder / "pulses.yaml"
     texture_file.write_text(
         "description: 10 Hz friction steps\nkind: temporal\nwaveform: square\n"
-        f"frequency_hz: {PULSE_HZ}\nduty: 0.5\nfriction: {{low: 0.8, high: 1.0}}\n"
+        f"frequency_hz: {PULSE_HZ}\nduty: 0.5\nfriction: {{low: {low}, high: 1.0}}\n"
     )
+    return load_compiled(texture_file)
+
+
+def _plate_after_step(tmp_path: Path, preemphasis: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Block times (s since the first friction step), plate amplitude (um), flags, for a square temporal texture."""
     device = Device.default()
     options = RenderOptions(preemphasis=preemphasis, default_force_n=FORCE_N)
-    pipeline = Pipeline(device, load_compiled(texture_file), fs_hz=FS_HZ, options=options)
+    pipeline = Pipeline(device, _pulses(tmp_path, 0.8), fs_hz=FS_HZ, options=options)
     sim = SimOutput(device, FS_HZ)
     pipeline.start()
     block = np.zeros(BLOCK, dtype=np.float32)
@@ -89,14 +94,9 @@ ENVELOPE_BLOCK = 8
 def test_the_plate_model_maps_the_preemphasised_envelope_of_a_step_back_to_the_commanded_level(tmp_path: Path) -> None:
     """The kernel's envelope output (as serial:// streams it) through Device.plate_amplitude_m: the overshoot
     pre-emphasis adds is gone, the level is the commanded one, and the rise is the smoothing's."""
-    texture_file = tmp_path / "pulses.yaml"
-    texture_file.write_text(
-        "description: 10 Hz friction steps\nkind: temporal\nwaveform: square\n"
-        f"frequency_hz: {PULSE_HZ}\nduty: 0.5\nfriction: {{low: 0.85, high: 1.0}}\n"
-    )
     device = Device.default()
     options = RenderOptions(control_interval=ENVELOPE_CONTROL_INTERVAL, default_force_n=FORCE_N)
-    pipeline = Pipeline(device, load_compiled(texture_file), fs_hz=ENVELOPE_HZ, options=options, envelope_output=True)
+    pipeline = Pipeline(device, _pulses(tmp_path, 0.85), fs_hz=ENVELOPE_HZ, options=options, envelope_output=True)
     full_scale_v = 50.0
     pipeline.set_drive_scale(full_scale_v, device.max_voltage_v, device.resonance_hz)
     pipeline.start()
