@@ -297,7 +297,8 @@ class Session:
         block, output = ("frame", "amplifier") if amplifier else ("callback", "DAC")
         lines = [
             f"played {self.elapsed_s():.2f} s" + (" (stopped by Ctrl-C)" if interrupted else "")
-            + f": {stats['callbacks']} {block}s of {stats['block_frames']} frames at {stats['rate_hz']} Hz, "
+            + f": {stats['callbacks']} {block}s of {stats['block_frames']} {'samples' if amplifier else 'frames'} "
+            f"at {stats['rate_hz']} Hz, "
             f"{stats['underflows']} " + ("sent late" if amplifier else "underflows"),
             f"{block} compute: p50 {stats['compute_us_p50']:.1f} us, p99 {stats['compute_us_p99']:.1f} us "
             f"({100 * stats['callback_load_p99']:.1f} % of a {block})",
