@@ -33,13 +33,15 @@ def test_render_options_defaults() -> None:
     assert (options.power_budget_w, options.power_avg_w, options.preemphasis) == (None, None, None)
     assert options.power_window_s == 1.0 and options.control_interval == 32
     assert (options.ramp_ms, options.watchdog_ms, options.velocity_window_ms) == (5.0, 50.0, 10.0)
-    assert (options.default_force_n, options.mu_floor, options.horizon_ms) == (0.5, 0.01, 1.0)
+    assert (options.default_force_n, options.mu_floor, options.horizon_ms) == (0.5, 0.01, 0.25)
+    assert (options.smoothing_ms, options.braking) == (0.25, True)
 
 
 def test_bad_options_are_one_config_error_naming_every_field() -> None:
     with pytest.raises(ConfigError) as caught:
         RenderOptions(smoothing_ms=-1.0, control_interval=300, power_avg_w=math.nan, mu_floor=1.5,
-                      finger_ring=1, telemetry_ring=2.5, preemphasis="yes", horizon_ms=-2.0)  # type: ignore[arg-type]
+                      finger_ring=1, telemetry_ring=2.5, preemphasis="yes", horizon_ms=-2.0,  # type: ignore[arg-type]
+                      braking=1)  # type: ignore[arg-type]
     assert caught.value.errors == [
         "RenderOptions.power_avg_w: must be a finite number in [0.001, 1000], got nan",
         "RenderOptions.smoothing_ms: must be in [0.01, 1000], got -1",
@@ -49,6 +51,7 @@ def test_bad_options_are_one_config_error_naming_every_field() -> None:
         "RenderOptions.finger_ring: must be in [2, 1048576], got 1",
         "RenderOptions.telemetry_ring: must be a whole number in [1, 4194304], got 2.5",
         "RenderOptions.preemphasis: must be true, false or None, got 'yes'",
+        "RenderOptions.braking: must be true or false, got 1",
     ]
 
 
@@ -62,15 +65,16 @@ def test_options_that_would_allocate_without_bound_or_overflow_are_refused(optio
         RenderOptions(**{option: value})
 
 
-@pytest.mark.parametrize("name", [f.name for f in fields(RenderOptions) if f.name not in ("preemphasis",)])
+@pytest.mark.parametrize("name", [f.name for f in fields(RenderOptions) if f.name not in ("preemphasis", "braking")])
 def test_every_numeric_option_refuses_text(name: str) -> None:
     with pytest.raises(ConfigError, match=f"RenderOptions.{name}: must be a (finite|whole) number"):
         RenderOptions(**{name: "1"})  # type: ignore[arg-type]
 
 
 def test_options_override_the_device_defaults() -> None:
-    cfg = pipeline(power_budget_w=0.3, power_avg_w=0.1, preemphasis=False, power_window_s=0.5).arrays.cfg
+    cfg = pipeline(power_budget_w=0.3, power_avg_w=0.1, preemphasis=False, power_window_s=0.5, braking=False).arrays.cfg
     assert (cfg[layout.CFG_POWER_CAP_W], cfg[layout.CFG_POWER_AVG_W], cfg[layout.CFG_PREEMPHASIS]) == (0.3, 0.1, 0.0)
+    assert cfg[layout.CFG_BRAKING] == 0.0 and pipeline().arrays.cfg[layout.CFG_BRAKING] == 1.0
     assert cfg[layout.CFG_WINDOW_STEPS] == round(0.5 * FS_HZ / 32)
     defaults = pipeline().arrays.cfg
     assert defaults[layout.CFG_POWER_CAP_W] == defaults[layout.CFG_POWER_AVG_W] == device().power_budget_w

@@ -1,20 +1,25 @@
 """Envelope pre-emphasis speeds up the simulated plate (issue 3, item 2).
 
 The plate's amplitude follows the drive envelope with time constant tau = Q / (pi f0)
-(about 3.4 ms on the default device at 0.5 N). With pre-emphasis the drive is shaped
-so the plate follows the command's 1 ms smoothing instead. Measured on the simulated
-plate (``sim://``, a resonator driven by the DAC samples), in simulated time.
+(about 2.8 ms on the default device at 0.5 N). With pre-emphasis the shaper drives a
+model of that envelope onto the command's smoothing (0.25 ms by default), as hard as
+the volt and power caps allow, braking in anti-phase when the command falls. Measured
+on the simulated plate (``sim://``, a resonator driven by the DAC samples), in
+simulated time.
 """
 
 from __future__ import annotations
 
+import importlib.util
+import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from tpad_rt.device import Device
-from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE
+from tpad_rt.kernel.layout import FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE
 from tpad_rt.outputs.sim import SimOutput
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.texture import CompiledTexture, load_compiled
@@ -95,7 +100,9 @@ def test_the_plate_model_maps_the_preemphasised_envelope_of_a_step_back_to_the_c
     """The kernel's envelope output (as serial:// streams it) through Device.plate_amplitude_m: the overshoot
     pre-emphasis adds is gone, the level is the commanded one, and the rise is the smoothing's."""
     device = Device.default()
-    options = RenderOptions(control_interval=ENVELOPE_CONTROL_INTERVAL, default_force_n=FORCE_N)
+    # A 1 ms smoothing keeps the step's drive under the cap (at the default 0.25 ms it is clipped:
+    # the plate then rises as fast as the cap allows, test_steps_rise_and_fall_at_the_floor...).
+    options = RenderOptions(control_interval=ENVELOPE_CONTROL_INTERVAL, default_force_n=FORCE_N, smoothing_ms=1.0)
     pipeline = Pipeline(device, _pulses(tmp_path, 0.85), fs_hz=ENVELOPE_HZ, options=options, envelope_output=True)
     full_scale_v = 50.0
     pipeline.set_drive_scale(full_scale_v, device.max_voltage_v, device.resonance_hz)
@@ -111,8 +118,8 @@ def test_the_plate_model_maps_the_preemphasised_envelope_of_a_step_back_to_the_c
         commanded.append(row["amplitude_um"][-1] * 1e-6)
         flags |= int(np.bitwise_or.reduce(row["saturated"]))
     drive_v = np.concatenate(drive)
-    assert not flags & (FLAG_VOLTAGE | FLAG_POWER)
-    assert drive_v.max() < device.max_voltage_v  # pre-emphasis not clipped: the mapping must be exact
+    assert not flags & (FLAG_VOLTAGE | FLAG_POWER | FLAG_SHAPER_LIMIT)  # the shaper's drive was never clipped
+    assert drive_v.max() < device.max_voltage_v
     level_m = commanded[-1]
     first = np.flatnonzero(drive_v > 0)[0]  # the step's first sample (the high half drives nothing)
     assert first == pytest.approx(ENVELOPE_HZ / PULSE_HZ / 2, abs=ENVELOPE_CONTROL_INTERVAL + 1)
@@ -124,7 +131,64 @@ def test_the_plate_model_maps_the_preemphasised_envelope_of_a_step_back_to_the_c
     plate_m = device.plate_amplitude_m(drive_v, ENVELOPE_HZ, FORCE_N)
     assert plate_m.max() <= level_m * 1.001  # no overshoot
     assert plate_m[settled] == pytest.approx(np.full(len(drive_v) - settled.start, level_m), rel=1e-3)
-    # it follows the command's one-pole smoothing (1 ms), not the plate's tau (~2.8 ms)
+    # it follows the command's one-pole smoothing (1 ms here), not the plate's tau (~2.8 ms)
     k = np.arange(len(drive_v) - first)
     smoothed_m = level_m * -np.expm1(-(k + 1) / (options.smoothing_ms * 1e-3 * ENVELOPE_HZ))
     assert np.abs(plate_m[first:] - smoothed_m).max() < 0.02 * level_m
+
+
+def _step_response_bench() -> Any:
+    """bench/fidelity/step_response.py, the bench these tests share their measurement with."""
+    path = Path(__file__).resolve().parents[1] / "bench" / "fidelity" / "step_response.py"
+    spec = importlib.util.spec_from_file_location("step_response", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("k", [0.3, 0.75])
+def test_steps_rise_and_fall_at_the_floor_the_volt_limit_allows(tmp_path: Path, k: float) -> None:
+    """Issue 10: on sim://, a step to a level needing k x max volts rises and falls (10-90 %) within
+    max(1 ms, 1.25 x the floor of a first-order envelope driven at +-Vmax), and no faster than the floor."""
+    row = _step_response_bench().measure(k, tmp_path)
+    assert row["floor_rise_ms"] * 0.97 <= row["rise_ms"] <= row["bound_rise_ms"]
+    assert row["floor_fall_ms"] * 0.97 <= row["fall_ms"] <= row["bound_fall_ms"]
+    assert row["peak_drive_v"] <= Device.default().max_voltage_v
+
+
+def _envelope_of_a_fall(tmp_path: Path, braking: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Drive envelope (V, signed) and plate amplitude (um) per sample of a step down, at an amplifier's rate."""
+    device = Device.default()
+    options = RenderOptions(control_interval=ENVELOPE_CONTROL_INTERVAL, default_force_n=FORCE_N, braking=braking)
+    pipeline = Pipeline(device, _pulses(tmp_path, 0.85), fs_hz=ENVELOPE_HZ, options=options, envelope_output=True)
+    pipeline.set_drive_scale(device.max_voltage_v, device.max_voltage_v, device.resonance_hz)
+    pipeline.start()
+    block = np.zeros(ENVELOPE_BLOCK, dtype=np.float32)
+    drive = []
+    for _ in range(int(0.13 * ENVELOPE_HZ / ENVELOPE_BLOCK)):  # high (off), low (on), and into the next high
+        t_s = pipeline.time_s
+        pipeline.push_finger(t_s, 10 + SPEED_MM_S * t_s, 30.0, force_n=FORCE_N)
+        pipeline.render(block)
+        drive.append(block.astype(np.float64) * device.max_voltage_v)
+    drive_v = np.concatenate(drive)
+    return drive_v, device.plate_amplitude_m(drive_v, ENVELOPE_HZ, FORCE_N) * 1e6
+
+
+def test_braking_drives_in_antiphase_within_the_cap_and_beats_the_ring_down(tmp_path: Path, tau_s: float) -> None:
+    braked_v, braked_um = _envelope_of_a_fall(tmp_path, braking=True)
+    passive_v, passive_um = _envelope_of_a_fall(tmp_path, braking=False)
+    fall = round(0.1 * ENVELOPE_HZ)  # the second half period's end: the step down
+    level_um = braked_um[fall - 1]
+    assert level_um == pytest.approx(passive_um[fall - 1], rel=1e-6)  # the same level before the fall
+
+    def fall_ms(plate_um: np.ndarray) -> float:
+        after = plate_um[fall:]
+        return 1e3 * (np.argmax(after <= 0.1 * level_um) - np.argmax(after <= 0.9 * level_um)) / ENVELOPE_HZ
+
+    assert braked_v.min() < -0.5 * Device.default().max_voltage_v  # anti-phase drive, hard
+    assert np.abs(braked_v).max() <= Device.default().max_voltage_v
+    assert passive_v.min() >= 0.0  # without braking the drive never reverses
+    assert fall_ms(passive_um) == pytest.approx(1e3 * tau_s * math.log(9), rel=0.1)  # passive ring-down
+    assert fall_ms(braked_um) < 0.4 * fall_ms(passive_um)
+    assert braked_um[fall:].min() >= -1e-3 * level_um  # braking stops at zero: no ring-up in anti-phase

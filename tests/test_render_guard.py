@@ -123,9 +123,10 @@ def test_a_finger_time_that_is_not_finite_is_never_read() -> None:
 STATE_SLOTS = (
     layout.STATE_SMOOTH_START_V, layout.STATE_COMMAND_V, layout.STATE_CAP_V, layout.STATE_RAMP_START,
     layout.STATE_RAMP_SAMPLES, layout.STATE_RING_SLOT, layout.STATE_STEP_SAMPLES, layout.STATE_NEXT_PHASE,
-    layout.STATE_WINDOW_SUM_W, layout.STATE_PREEMPHASIS_GAIN, layout.STATE_FINGER_SAMPLE,
+    layout.STATE_WINDOW_SUM_W, layout.STATE_FOLLOW_GAIN, layout.STATE_FINGER_SAMPLE,
     layout.STATE_CARRIER_COS, layout.STATE_STEP_FLAGS, layout.STATE_FAULT_CAUSES, layout.STATE_POWER_PER_V2,
     layout.STATE_VX_MM_S, layout.STATE_FIRST_SEGMENT_SAMPLES,
+    layout.STATE_MODEL_V, layout.STATE_MODEL_STEP, layout.STATE_DRIVE_LOW_V,
 )
 
 

@@ -85,15 +85,19 @@ class RenderOptions:
     - ``control_interval``: samples between control steps (1 to 256). The plate's
       envelope follows the drive with ``tau = Q / (pi f0)``: about 3 ms (2.3 ms at 2 N)
       on the default device, a bandwidth near 50-70 Hz; with pre-emphasis the envelope
-      follows the 1 ms smoothing instead (160 Hz). 32 samples at 192 kHz is a 6 kHz
-      control rate: over 35x that bandwidth, command steps 6x shorter than the
-      smoothing time constant (no staircase reaches the plate), a texture edge placed
+      follows the 0.25 ms smoothing instead, as far as the volt and power limits let it.
+      32 samples at 192 kHz is a 6 kHz control rate: over 35x the plate's bandwidth,
+      command steps shorter than the smoothing time constant, a texture edge placed
       within 17 um at 100 mm/s, and the control step's cost (finger, texture, inverse
       model, limits, carrier anchor: about 90 ns for a grating) shared by 32 samples
       (bench/results/kernel.md: 4.3 ns per sample; 7.5 at 16, 2.7 at 64).
     - ``smoothing_ms``: one-pole time constant of the commanded envelope (ms).
     - ``preemphasis``: shape the drive so the plate envelope follows the smoothing
-      instead of its own ``tau``; None: ``device.preemphasis``.
+      instead of its own ``tau``: the shaper drives a model of the envelope onto the
+      smoothed command, as hard as the cap allows; None: ``device.preemphasis``.
+    - ``braking``: let the shaper drive in anti-phase (a negative envelope, within the
+      same volt and power limits) to take energy out of the plate faster than it rings
+      down, when the command falls.
     - ``horizon_ms``: extra extrapolation lead of the finger position (ms; latency
       compensation). The default equals the default ``smoothing_ms``: a one-pole filter
       delays a slowly varying envelope by its time constant, so looking that far ahead
@@ -116,9 +120,10 @@ class RenderOptions:
     power_avg_w: float | None = None
     power_window_s: float = 1.0
     control_interval: int = 32
-    smoothing_ms: float = 1.0
+    smoothing_ms: float = 0.25
     preemphasis: bool | None = None
-    horizon_ms: float = 1.0
+    braking: bool = True
+    horizon_ms: float = 0.25
     velocity_window_ms: float = 10.0
     watchdog_ms: float = 50.0
     ramp_ms: float = 5.0
@@ -146,6 +151,8 @@ class RenderOptions:
         ]
         if self.preemphasis is not None and not isinstance(self.preemphasis, bool):
             found.append(("preemphasis", f"must be true, false or None, got {self.preemphasis!r}"))
+        if not isinstance(self.braking, bool):
+            found.append(("braking", f"must be true or false, got {self.braking!r}"))
         return [(name, problem) for name, problem in found if problem]
 
 
@@ -349,6 +356,7 @@ class Pipeline:
             layout.CFG_FORCE_GRID_START_N: grid_start_n,
             layout.CFG_FORCE_GRID_STEP_N: grid_step_n,
             layout.CFG_OUTPUT_ENVELOPE: 1.0 if self.envelope_output else 0.0,
+            layout.CFG_BRAKING: 1.0 if options.braking else 0.0,
         }.items():
             cfg[index] = value
         return cfg

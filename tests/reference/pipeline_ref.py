@@ -31,7 +31,7 @@ from tpad_rt.pipeline import RenderOptions
 
 #: docs/kernel.md: every limit is kept with this relative margin against rounding.
 SAFETY_MARGIN = 1e-6
-VOLTAGE, POWER, SPEED_FLOOR, WATCHDOG = 1, 2, 4, 8
+VOLTAGE, POWER, SPEED_FLOOR, WATCHDOG, SHAPER_LIMIT = 1, 2, 4, 8, 32
 STEP_FIELDS = (
     "t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu", "amplitude_um", "command_v", "cap_v",
     "gate", "flags", "power_w", "peak_v",
@@ -70,7 +70,13 @@ def _finger_at(fingers: np.ndarray, t_s: float, options: RenderOptions) -> _Fing
     if down == 0 or t_s - t_i > watchdog_s:
         return _Finger(False)
     j = i
+    heading = np.zeros(2)  # the newest step that moved; a step against it is a reversal and ends the stroke
     while j > 0 and fingers[j - 1, 4] != 0 and t_i - fingers[j - 1, 0] <= options.velocity_window_ms / 1000:
+        step = fingers[j, 1:3] - fingers[j - 1, 1:3]
+        if float(step @ heading) < 0:
+            break
+        if not heading.any():
+            heading = step
         j -= 1
     vx = vy = 0.0
     if t_i > fingers[j, 0]:
@@ -98,6 +104,7 @@ class _Stream:
         self.target_mu = 0.0
         self.command_v = 0.0
         self.smoothed_v = 0.0
+        self.model_v = 0.0  # the shaper's first-order model of the plate envelope (volts of drive)
         self.ramp = 0
 
     def control_step(self, n: int, fingers: np.ndarray, texture: Any, t0_s: float, run: bool) -> dict[str, float]:
@@ -131,9 +138,12 @@ class _Stream:
         if self.command_v > self.cap_v:
             self.command_v, flags = self.cap_v, flags | bound
         tau_s = float(device.envelope_time_constant_s(force_n))
-        self.preemphasis_gain = tau_s / (options.smoothing_ms / 1000) if self.preemphasis else 0.0
+        self.model_step = 1 - math.exp(-1 / (tau_s * self.fs_hz))
+        self.follow_gain = 1 / self.model_step if self.preemphasis else 0.0
+        self.low_v = -self.cap_v if options.braking and self.preemphasis else 0.0
         self.gate = finger.active and run
         self.energy_v2: list[float] = []
+        self.step_flags = flags
         f = self.finger
         return dict(
             t=t_s, x_mm=f.x_mm, y_mm=f.y_mm, speed_mm_s=math.hypot(f.vx_mm_s, f.vy_mm_s), force_n=f.force_n,
@@ -145,10 +155,15 @@ class _Stream:
     def sample(self, n: int) -> tuple[float, float]:
         """Drive envelope (V) and DAC sample of sample ``n`` (the doc's per-sample recurrences)."""
         self.smoothed_v += self.k_smooth * (self.command_v - self.smoothed_v)
-        drive_v = self.smoothed_v + self.preemphasis_gain * (self.command_v - self.smoothed_v)
-        drive_v = min(max(drive_v, 0.0), self.cap_v)
         self.ramp = min(max(self.ramp + (1 if self.gate else -1), 0), self.ramp_samples)
-        envelope_v = self.ramp / self.ramp_samples * drive_v
+        if self.ramp < self.ramp_samples or not self.follow_gain:
+            envelope_v = self.ramp / self.ramp_samples * min(max(self.smoothed_v, 0.0), self.cap_v)
+        else:
+            drive_v = self.model_v + self.follow_gain * (self.smoothed_v - self.model_v)
+            envelope_v = min(max(drive_v, self.low_v), self.cap_v)
+            if envelope_v != drive_v:
+                self.step_flags |= SHAPER_LIMIT
+        self.model_v += self.model_step * (envelope_v - self.model_v)
         phase = n * self.carrier
         sine = math.sin(2 * math.pi * float(phase - math.floor(phase)))
         self.energy_v2.append(envelope_v * envelope_v)
@@ -197,5 +212,6 @@ def render_reference(
             steps.append(stream.control_step(n, fingers, texture, t0_s, running))
         envelope[n], value = stream.sample(n)
         samples[n] = np.float32(value)
+        steps[-1]["flags"] = stream.step_flags
     steps[-1]["power_w"], steps[-1]["peak_v"] = stream.close_step()
     return Reference(samples, envelope, {name: np.array([step[name] for step in steps]) for name in STEP_FIELDS})

@@ -20,7 +20,7 @@ CFG_PSI_STAR = 10
 CFG_MU_FLOOR = 11             # lowest relative friction the kernel asks for
 CFG_CONTROL_INTERVAL = 12     # samples between control steps
 CFG_SMOOTHING_S = 13          # envelope one-pole time constant
-CFG_PREEMPHASIS = 14          # 1.0: shape the drive to speed up the plate envelope
+CFG_PREEMPHASIS = 14          # 1.0: shape the drive so a model of the plate envelope follows the smoothing
 CFG_HORIZON_S = 15            # extra extrapolation lead (latency compensation)
 CFG_VELOCITY_WINDOW_S = 16    # finger velocity estimated over this span
 CFG_WATCHDOG_S = 17           # no finger sample for longer: gate closes
@@ -31,7 +31,8 @@ CFG_FORCE_GRID_STEP_N = 21    # dev tables: force step between columns
 CFG_RUN = 22                  # 1.0 while running, 0.0 to ramp down and stay silent
 CFG_TEXTURE_T0_S = 23         # stream time the current texture was set (temporal kinds)
 CFG_OUTPUT_ENVELOPE = 24      # 1.0: samples are the envelope (for an amplifier that makes the carrier); 0.0: carrier
-CFG_SIZE = 25
+CFG_BRAKING = 25              # 1.0: the shaper may drive in anti-phase (negative envelope) to brake the plate
+CFG_SIZE = 26
 
 # --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
 DEV_AMP_M_PER_V = 0           # plate amplitude (m) per peak drive volt
@@ -68,6 +69,7 @@ FLAG_POWER = 2                # drive limited by the power cap or average budget
 FLAG_SPEED_FLOOR = 4          # finger slower than the speed floor
 FLAG_WATCHDOG = 8             # no fresh finger sample, or finger lifted: gate closed
 FLAG_FAULT = 16               # a non-finite or absurd value met: the drive ramps to 0 (FAULT_* say where)
+FLAG_SHAPER_LIMIT = 32        # the shaper's drive was held at the cap (or -cap, braking): a step as fast as the limits allow
 
 # --- fault causes: bits of STATE_FAULT_CAUSES ----------------------------------
 FAULT_FINGER = 1              # the finger sample or the velocity from it is non-finite or absurd
@@ -136,7 +138,7 @@ STATE_CAP_V = 7               # the step's cap on the envelope (volts peak)
 STATE_SMOOTH_START_V = 8      # smoothed volts before the step's first sample
 STATE_RAMP_START = 9          # gain ramp position before it (samples, 0..ramp length)
 STATE_RAMP_SAMPLES = 10       # gain ramp length (samples)
-STATE_PREEMPHASIS_GAIN = 11   # tau(force) / smoothing_s; 0.0 without pre-emphasis
+STATE_FOLLOW_GAIN = 11        # 1 / (1 - exp(-1 / (tau fs))): drive per volt the plate model lags; 0.0 without pre-emphasis
 STATE_POWER_PER_V2 = 12       # p1(force): W per squared peak volt
 STATE_CARRIER_COS = 13        # carrier phasor at the step's first sample
 STATE_CARRIER_SIN = 14
@@ -166,6 +168,10 @@ STATE_FAULT_EVENTS = 33       # faults that began (a fault step after a step wit
 STATE_FAULT_CAUSES = 34       # OR of the FAULT_* bits met so far
 STATE_FAULT_PREVIOUS = 35     # 1.0 if the last control step met a fault
 STATE_FAULT_SAMPLES = 36      # samples the output guard zeroed
+# The shaper's model of the plate envelope (docs/kernel.md "Per sample"):
+STATE_MODEL_V = 37            # model envelope (drive volts it is worth) after the last rendered sample
+STATE_MODEL_STEP = 38         # 1 - exp(-1 / (tau(force) fs)): the model's per-sample step towards the drive
+STATE_DRIVE_LOW_V = 39        # the open step's lowest drive: -cap with braking, else 0
 # Per-sample tables, indexed by j, the sample's offset in its control step:
 MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
 STATE_COS_TABLE = 40          # cos(j w), w the carrier's phase step (rad)

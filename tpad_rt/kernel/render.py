@@ -46,6 +46,7 @@ from tpad_rt.kernel.cache_stamp import stamp_cache
 from tpad_rt.kernel.layout import (
     ABSURD_FORCE_N,
     ABSURD_POSITION_MM,
+    CFG_BRAKING,
     CFG_CARRIER_HZ,
     CFG_CONTROL_INTERVAL,
     CFG_DEFAULT_FORCE_N,
@@ -86,6 +87,7 @@ from tpad_rt.kernel.layout import (
     FAULT_TEXTURE,
     FLAG_FAULT,
     FLAG_POWER,
+    FLAG_SHAPER_LIMIT,
     FLAG_SPEED_FLOOR,
     FLAG_VOLTAGE,
     FLAG_WATCHDOG,
@@ -98,6 +100,7 @@ from tpad_rt.kernel.layout import (
     STATE_COMMAND_V,
     STATE_COS_TABLE,
     STATE_DECAY_TABLE,
+    STATE_DRIVE_LOW_V,
     STATE_ENVELOPE,
     STATE_FAULT_CAUSES,
     STATE_FAULT_EVENTS,
@@ -109,10 +112,12 @@ from tpad_rt.kernel.layout import (
     STATE_FIRST_SEGMENT_V2,
     STATE_FORCE_N,
     STATE_GATE,
+    STATE_MODEL_STEP,
+    STATE_MODEL_V,
     STATE_NEXT_INDEX,
     STATE_NEXT_PHASE,
     STATE_POWER_PER_V2,
-    STATE_PREEMPHASIS_GAIN,
+    STATE_FOLLOW_GAIN,
     STATE_RING_SLOT,
     STATE_RAMP_SAMPLES,
     STATE_RAMP_START,
@@ -288,7 +293,7 @@ def _repaired_ring_sum(power_ring: np.ndarray, cap_w: float) -> float:
 
 @_inline
 def _envelope_sums(state: np.ndarray, first: int, stop: int) -> tuple[float, float]:
-    """Peak (V) and sum of squares (V^2) of the open step's envelope ``e_j``, ``first <= j < stop``.
+    """Peak magnitude (V) and sum of squares (V^2) of the open step's envelope ``e_j``, ``first <= j < stop``.
 
     Summed in four interleaved partial sums (independent chains, so fast) combined
     as ``(s0 + s1) + (s2 + s3)``: a fixed order for given ``first, stop``.
@@ -309,12 +314,12 @@ def _envelope_sums(state: np.ndarray, first: int, stop: int) -> tuple[float, flo
         s1 += e1 * e1
         s2 += e2 * e2
         s3 += e3 * e3
-        peak_v = max(peak_v, max(max(e0, e1), max(e2, e3)))
+        peak_v = max(peak_v, max(max(abs(e0), abs(e1)), max(abs(e2), abs(e3))))
         j += 4
     while j < end:
         e0 = state[j]
         s0 += e0 * e0
-        peak_v = max(peak_v, e0)
+        peak_v = max(peak_v, abs(e0))
         j += 1
     return peak_v, (s0 + s1) + (s2 + s3)
 
@@ -398,11 +403,14 @@ def _newest_sample(finger: np.ndarray, count: int, t_s: float, hint: int) -> tup
 
 @_inline
 def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, row: int, window_s: float) -> tuple[float, float]:
-    """Finger velocity (mm/s) from sample ``newest`` (at ``row``) and the oldest of its touch within ``window_s``.
+    """Finger velocity (mm/s) from sample ``newest`` (at ``row``) and the oldest of its stroke within ``window_s``.
 
-    The touch runs back while samples are down and their positions are finite and
-    within ABSURD_POSITION_MM (a bad sample ends it, as a lift does); ``(0, 0)`` without
-    an older sample or when the two samples share a time.
+    The stroke runs back while samples are down, their positions are finite and within
+    ABSURD_POSITION_MM (a bad sample ends it, as a lift does), and the finger moved the
+    same way: a step whose direction is opposed (negative dot product) to the newest
+    step that moved ends it, so a reversal inside the window does not average the two
+    directions into a slow speed. ``(0, 0)`` without an older sample or when the two
+    samples share a time.
     """
     rows = finger.shape[0]
     oldest = max(0, count - rows + 1)
@@ -410,9 +418,18 @@ def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, row: int, window
     first = row
     k = newest - 1
     earlier = _previous_slot(row, rows)
+    heading_x = 0.0
+    heading_y = 0.0
     while (k >= oldest and finger[earlier, FINGER_DOWN] != 0.0 and t_newest - finger[earlier, FINGER_T_S] <= window_s
            and abs(finger[earlier, FINGER_X_MM]) <= ABSURD_POSITION_MM
            and abs(finger[earlier, FINGER_Y_MM]) <= ABSURD_POSITION_MM):
+        step_x = finger[first, FINGER_X_MM] - finger[earlier, FINGER_X_MM]
+        step_y = finger[first, FINGER_Y_MM] - finger[earlier, FINGER_Y_MM]
+        if step_x * heading_x + step_y * heading_y < 0.0:
+            break
+        if heading_x == 0.0 and heading_y == 0.0:
+            heading_x = step_x
+            heading_y = step_y
         first = earlier
         k -= 1
         earlier = _previous_slot(earlier, rows)
@@ -546,7 +563,8 @@ def _cap_volts(
 def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     """Reset the carried values that are out of their ranges; FAULT_STATE if one was.
 
-    The smoothed volts must lie in ``[0, max_voltage_v]``, the gain ramp position in
+    The smoothed volts must lie in ``[0, max_voltage_v]``, the plate model's in
+    ``[-max_voltage_v, max_voltage_v]``, the gain ramp position in
     ``[0, ramp samples]`` (both 0 for a fresh stream); a reset one restarts from 0 (no
     ramp can start from a value that is not finite). The per-sample tables are then
     rebuilt, in case they were overwritten too.
@@ -554,6 +572,9 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     fault = 0
     if not 0.0 <= state[STATE_SMOOTH_START_V] <= cfg[CFG_MAX_VOLTAGE_V]:
         state[STATE_SMOOTH_START_V] = 0.0
+        fault = FAULT_STATE
+    if not abs(state[STATE_MODEL_V]) <= cfg[CFG_MAX_VOLTAGE_V]:
+        state[STATE_MODEL_V] = 0.0
         fault = FAULT_STATE
     if not 0.0 <= state[STATE_RAMP_START] <= max(state[STATE_RAMP_SAMPLES], 0.0):
         state[STATE_RAMP_START] = 0.0
@@ -629,12 +650,15 @@ def _control_step(
         flags |= limit_flag
     elif not command_v >= 0.0:
         fault |= FAULT_STATE
-    preemphasis_gain = tau_s / cfg[CFG_SMOOTHING_S] if cfg[CFG_PREEMPHASIS] != 0.0 else 0.0
-    if not 0.0 <= preemphasis_gain < math.inf:
+    # The plate model's step per sample, 1 - exp(-1 / (tau fs)) (1 for tau = 0: the model is the drive).
+    model_step = -math.expm1(-1.0 / (tau_s * fs_hz)) if tau_s > 0.0 else 1.0
+    follow_gain = 1.0 / model_step if cfg[CFG_PREEMPHASIS] != 0.0 else 0.0
+    if not (0.0 < model_step <= 1.0 and 0.0 <= follow_gain < math.inf):
         fault |= FAULT_DEVICE
     if fault:
         command_v = 0.0
-        preemphasis_gain = 0.0
+        follow_gain = 0.0
+        model_step = 1.0
         flags |= FLAG_FAULT
         _note_fault(state, fault, True)
     else:
@@ -643,7 +667,9 @@ def _control_step(
     state[STATE_CAP_V] = cap_v
     state[STATE_AMPLITUDE_M] = command_v * amplitude_m_per_v if fault == 0 else 0.0
     state[STATE_POWER_PER_V2] = p1_w
-    state[STATE_PREEMPHASIS_GAIN] = preemphasis_gain
+    state[STATE_FOLLOW_GAIN] = follow_gain
+    state[STATE_MODEL_STEP] = model_step
+    state[STATE_DRIVE_LOW_V] = -cap_v if cfg[CFG_BRAKING] != 0.0 and follow_gain > 0.0 else 0.0
     state[STATE_GATE] = 1.0 if finger_status > 0 and fault == 0 and cfg[CFG_RUN] != 0.0 else 0.0
     state[STATE_RAMP_SAMPLES] = max(1.0, float(round(cfg[CFG_RAMP_S] * fs_hz)))
     state[STATE_RAMP_START] = min(state[STATE_RAMP_START], state[STATE_RAMP_SAMPLES])
@@ -657,23 +683,36 @@ def _control_step(
 
 
 @_inline
+def _step_flags(state: np.ndarray) -> int:
+    """The open step's FLAG_* bits (0 if the slot holds no such value)."""
+    flags = state[STATE_STEP_FLAGS]
+    return int(flags) if 0.0 <= flags < 256.0 else 0
+
+
+@_inline
 def _render_samples(
     out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float, modulate: bool
 ) -> bool:
     """Render ``out[first:stop]``, all inside the open step, and store their envelope in ``state``.
 
-    The control stage (command, pre-emphasis, cap, gain ramp) makes each sample's
+    The control stage (command, smoothing, shaper, cap, gain ramp) makes each sample's
     envelope ``e_j`` (volts); the modulation stage multiplies it by the carrier when
     ``modulate`` (DAC samples), or passes it on (an amplifier that makes the carrier
     itself), both scaled by ``out_per_v``. Every limit is applied in the control stage,
-    so both kinds of output obey the same ones. Returns True if every sample's magnitude
-    is within ``limit`` (full scale; NaN is not): the output guard's first check
-    (render_block then checks the envelope). No value is carried from one sample to the
-    next, so the loops vectorise.
+    so both kinds of output obey the same ones. The shaper carries a first-order model
+    of the plate's envelope from sample to sample (docs/kernel.md "Per sample"): the
+    one loop with a carried value; the others vectorise. Returns True if every sample's
+    magnitude is within ``limit`` (full scale; NaN is not): the output guard's first
+    check (render_block then checks the envelope). A shaper drive held at the cap (or
+    at ``-cap``, braking) sets FLAG_SHAPER_LIMIT on the step.
     """
     command_v = state[STATE_COMMAND_V]
     cap_v = state[STATE_CAP_V]
-    offset_v = (1.0 - state[STATE_PREEMPHASIS_GAIN]) * (state[STATE_SMOOTH_START_V] - command_v)
+    low_v = state[STATE_DRIVE_LOW_V]
+    follow_gain = state[STATE_FOLLOW_GAIN]
+    model_step = state[STATE_MODEL_STEP]
+    model_v = state[STATE_MODEL_V]
+    start_offset_v = state[STATE_SMOOTH_START_V] - command_v
     ramp_samples = state[STATE_RAMP_SAMPLES]
     per_ramp_sample = 1.0 / ramp_samples
     ramp_direction = 1.0 if state[STATE_GATE] != 0.0 else -1.0
@@ -683,49 +722,49 @@ def _render_samples(
     decay = state[STATE_DECAY_TABLE + j0 : STATE_DECAY_TABLE + j0 + count]
     envelope = state[STATE_ENVELOPE + j0 : STATE_ENVELOPE + j0 + count]
     samples = out[first:stop]
+    clipped = 0
+    for k in range(count):
+        reference_v = command_v + start_offset_v * decay[k]
+        ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
+        if ramp < ramp_samples or follow_gain == 0.0:  # ramping (or no shaper): the ramp scales the reference
+            e_v = ramp * per_ramp_sample * min(max(reference_v, 0.0), cap_v)
+        else:  # the drive that brings the model to the reference in one sample, within [low_v, cap_v]
+            drive_v = model_v + (reference_v - model_v) * follow_gain
+            e_v = min(max(drive_v, low_v), cap_v)
+            clipped += 0 if e_v == drive_v else 1
+        model_v += (e_v - model_v) * model_step
+        envelope[k] = e_v
+    state[STATE_MODEL_V] = model_v
+    if clipped:
+        state[STATE_STEP_FLAGS] = float(_step_flags(state) | FLAG_SHAPER_LIMIT)
     if modulate:
         sin0 = state[STATE_CARRIER_SIN] * out_per_v
         cos0 = state[STATE_CARRIER_COS] * out_per_v
         cos_jw = state[STATE_COS_TABLE + j0 : STATE_COS_TABLE + j0 + count]
         sin_jw = state[STATE_SIN_TABLE + j0 : STATE_SIN_TABLE + j0 + count]
         for k in range(count):
-            drive_v = min(max(command_v + offset_v * decay[k], 0.0), cap_v)
-            ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
-            e_v = ramp * per_ramp_sample * drive_v
-            samples[k] = e_v * (sin0 * cos_jw[k] + cos0 * sin_jw[k])
-            envelope[k] = e_v
+            samples[k] = envelope[k] * (sin0 * cos_jw[k] + cos0 * sin_jw[k])
     else:
         for k in range(count):
-            drive_v = min(max(command_v + offset_v * decay[k], 0.0), cap_v)
-            ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
-            e_v = ramp * per_ramp_sample * drive_v
-            samples[k] = e_v * out_per_v
-            envelope[k] = e_v
+            samples[k] = envelope[k] * out_per_v
     state[STATE_STEP_SAMPLES] = j0 + count
     within = 0
-    for k in range(count):  # a loop of its own: the ones above vectorise as they did before the guard
+    for k in range(count):  # a loop of its own, so the ones above vectorise
         within += 1 if abs(samples[k]) <= limit else 0
     return within == count
 
 
 @_inline
 def _zero_outside(samples: np.ndarray, envelope: np.ndarray, limit: float, max_v: float) -> int:
-    """Zero every sample (and its envelope) outside ``limit`` (full scale) or with envelope outside
-    ``max_v`` (volts), NaN included; how many were."""
+    """Zero every sample (and its envelope) outside ``limit`` (full scale) or with an envelope whose
+    magnitude is over ``max_v`` (volts), NaN included; how many were."""
     rejected = 0
     for k in range(samples.shape[0]):
-        if not (abs(samples[k]) <= limit and envelope[k] <= max_v):
+        if not (abs(samples[k]) <= limit and abs(envelope[k]) <= max_v):
             samples[k] = 0.0
             envelope[k] = 0.0
             rejected += 1
     return rejected
-
-
-@_inline
-def _step_flags(state: np.ndarray) -> int:
-    """The open step's FLAG_* bits (0 if the slot holds no such value)."""
-    flags = state[STATE_STEP_FLAGS]
-    return int(flags) if 0.0 <= flags < 256.0 else 0
 
 
 @_inline
@@ -737,6 +776,7 @@ def _output_fault(state: np.ndarray, rejected: int) -> None:
     state[STATE_STEP_FLAGS] = float(_step_flags(state) | FLAG_FAULT)
     state[STATE_COMMAND_V] = 0.0
     state[STATE_SMOOTH_START_V] = 0.0
+    state[STATE_MODEL_V] = 0.0
     state[STATE_RAMP_START] = 0.0
     state[STATE_GATE] = 0.0
     state[STATE_TABLE_FS_HZ] = math.nan
