@@ -5,6 +5,8 @@ API map
 texture_at_finger(finger, texture, t_s, texture_t0_s=0.0) -> (mu, valid)
     the texture's relative friction at stream times ``t_s`` (s), at the finger's
     position interpolated between its samples, and where that is known
+departures(felt_mu, achieved_mu, judged, tolerance_mu=DEPARTURE_TOLERANCE_MU) -> mask
+    the blocks whose achieved friction is further than ``tolerance_mu`` from the felt one
 
 Used to judge a rendering against its texture free of the kernel's own extrapolation
 (``horizon_ms``): ``tpad-rt render``'s summary and plots (through
@@ -16,6 +18,16 @@ from __future__ import annotations
 import numpy as np
 
 from tpad_rt.texture import CompiledTexture
+
+#: How far (relative friction) the achieved friction may be from the texture under the finger
+#: before a block counts as a departure: 0.1, a tenth of the whole range of relative friction.
+DEPARTURE_TOLERANCE_MU = 0.1
+
+
+def departures(felt_mu: np.ndarray, achieved_mu: np.ndarray, judged: np.ndarray,
+               tolerance_mu: float = DEPARTURE_TOLERANCE_MU) -> np.ndarray:
+    """True for the ``judged`` blocks where ``|felt_mu - achieved_mu| > tolerance_mu`` (NaN counts as departed)."""
+    return judged & ~(np.abs(felt_mu - achieved_mu) <= tolerance_mu)
 
 
 def texture_at_finger(finger: np.ndarray, texture: CompiledTexture, t_s: np.ndarray,

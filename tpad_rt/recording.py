@@ -12,7 +12,9 @@ reads every one):
 - one 1-D array per block, all the same length: the telemetry columns ``t, x_mm, y_mm,
   speed_mm_s, force_n, target_mu, amplitude_um, voltage_v, power_w, saturated``
   (``tpad_rt.kernel.layout.TEL_NAMES``), plus ``achieved_mu`` and
-  ``plate_amplitude_um`` when the output was the simulated plate;
+  ``plate_amplitude_um`` when the output was the simulated plate, and ``departed``
+  (1 where the achieved friction was further than the metadata's
+  ``departure_tolerance_mu`` from the texture under the finger) from ``tpad-rt render``;
 - ``metadata_json`` (0-d str): a JSON object with at least the keys in
   :data:`REQUIRED_METADATA` (texture path and description, device label, carrier,
   volts per full scale, max voltage, power budgets, block size, tpad-rt version).
@@ -39,6 +41,9 @@ FORMAT = "tpad-rt recording"
 FORMAT_VERSION = 1
 #: Per-block arrays the simulated plate adds (both or neither).
 SIM_NAMES = ("achieved_mu", "plate_amplitude_um")
+#: Per-block arrays a render on the simulated plate adds (optional): 1 where the achieved friction
+#: departed from the texture under the finger by more than the metadata's ``departure_tolerance_mu``.
+JUDGED_NAMES = ("departed",)
 #: Metadata keys every recording has (values: JSON numbers, text or null).
 REQUIRED_METADATA = (
     "texture_path", "texture_description", "device_label", "carrier_hz", "volts_per_full_scale",
@@ -52,7 +57,8 @@ _NUMERIC_METADATA = (
 #: Largest entry (bytes, uncompressed) a recording may hold: the drive at MAX_RECORDING_SAMPLES, plus headers.
 MAX_ENTRY_BYTES = 4 * MAX_RECORDING_SAMPLES + 2**16
 #: Largest recording (bytes, uncompressed): the drive and every per-block column at MAX_RENDER_BLOCKS.
-MAX_RECORDING_BYTES = MAX_ENTRY_BYTES + (len(TEL_NAMES) + len(SIM_NAMES) + 8) * (8 * MAX_RENDER_BLOCKS + 2**16)
+MAX_RECORDING_BYTES = MAX_ENTRY_BYTES + (len(TEL_NAMES) + len(SIM_NAMES) + len(JUDGED_NAMES) + 8) * (
+    8 * MAX_RENDER_BLOCKS + 2**16)
 
 
 @dataclass(frozen=True)
@@ -122,7 +128,7 @@ def read_recording(path: str | Path) -> Recording:
         raise ConfigError(f"{path}: not a tpad-rt recording (an entry's header claims an array too large to "
                           "allocate)") from None
     _check(str(path), entries)
-    blocks = {name: entries[name] for name in (*TEL_NAMES, *SIM_NAMES) if name in entries}
+    blocks = {name: entries[name] for name in (*TEL_NAMES, *SIM_NAMES, *JUDGED_NAMES) if name in entries}
     return Recording(
         fs_hz=int(entries["fs"]),
         drive=entries["drive"],
@@ -188,7 +194,7 @@ def _check_blocks(entries: dict[str, np.ndarray]) -> list[str]:
     present_sim = [name for name in SIM_NAMES if name in entries]
     if present_sim and len(present_sim) != len(SIM_NAMES):
         problems.append(f"{' and '.join(SIM_NAMES)}: must both be present or both absent")
-    names = [name for name in (*TEL_NAMES, *SIM_NAMES) if name in entries]
+    names = [name for name in (*TEL_NAMES, *SIM_NAMES, *JUDGED_NAMES) if name in entries]
     lengths = set()
     for name in names:
         array = entries[name]

@@ -45,7 +45,7 @@ from tpad_rt.cli.render import add_session_arguments
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
-from tpad_rt.felt import texture_at_finger
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, texture_at_finger
 from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import screen_size_px
@@ -330,5 +330,6 @@ class Session:
         if self.friction_errors:
             errors = np.array(self.friction_errors)
             lines.append(f"friction |texture under the finger - simulated plate| at {len(errors)} status samples "
-                         f"(touching, not saturated): mean {errors.mean():.4f}, max {errors.max():.4f}")
+                         f"(touching, not saturated): mean {errors.mean():.4f}, max {errors.max():.4f}; "
+                         f"{np.count_nonzero(errors > DEPARTURE_TOLERANCE_MU)} further than {DEPARTURE_TOLERANCE_MU:g}")
         return [line.replace("nan", "n/a") for line in lines]

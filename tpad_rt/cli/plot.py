@@ -4,7 +4,10 @@ Four panels against time (or, with ``--along x``, the finger's x): relative fric
 (target, and achieved when the plate was simulated), plate amplitude (commanded, and
 simulated), drive volts against the device maximum, and power against the cap and the
 average budget (instantaneous, and averaged over the budget's window). Blocks where
-the drive saturated are shaded red, blocks without a touching finger grey.
+the drive saturated are shaded red, blocks without a touching finger grey; on the
+friction panel, blocks whose achieved friction departed from the texture under the
+finger by more than the recording's tolerance (``departed``, from ``tpad-rt render``
+on the simulated plate) are marked in purple.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from tpad_rt.recording import Recording, read_recording
 
 _FORMATS = (".png", ".pdf", ".svg")
 _TARGET, _ACHIEVED, _LIMIT, _AVERAGE = "#1f5fa8", "#e07b00", "#c0392b", "#6a3d9a"
-_SATURATED, _LIFTED = "#e74c3c", "#7f8c8d"
+_SATURATED, _LIFTED, _DEPARTED = "#e74c3c", "#7f8c8d", "#8e44ad"
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -104,6 +107,12 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
         amplitude.plot(axis, blocks["plate_amplitude_um"], color=_ACHIEVED, lw=1.2, label="simulated plate")
     lowest = min(np.nanmin(values, initial=1.0) for name, values in felt.items() if name != "amplitude_um")
     friction.set(ylabel="relative friction μ'", ylim=(max(0.0, math.floor(10 * lowest - 1) / 10), 1.04))
+    departed = blocks["departed"] != 0 if "departed" in blocks else np.zeros(len(axis), dtype=bool)
+    if departed.any():
+        tolerance = meta.get("departure_tolerance_mu", math.nan)
+        friction.plot(axis[departed], felt["achieved_mu"][departed], ls="none", marker="|", ms=9, color=_DEPARTED,
+                      label=f"departed > {tolerance:g} from the texture under the finger "
+                            f"({np.count_nonzero(departed)} blocks)")
     amplitude.set(ylabel="amplitude (µm)")
 
     volts.plot(axis, blocks["voltage_v"], color=_TARGET, lw=1.2, label="drive (peak per block)")

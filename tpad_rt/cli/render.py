@@ -35,6 +35,7 @@ from tpad_rt import __version__
 from tpad_rt.cli.arguments import number, whole
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures
 from tpad_rt.files import check_writable_target
 from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
@@ -169,6 +170,7 @@ def run(args: argparse.Namespace) -> int:
         _run_with_progress(session.render, console)
         wall_s = time.perf_counter() - started
     result = session.render.result()
+    judge_departures(result, session.metadata, session.render.pipeline.texture)
     if result.drive is not None:
         write_recording(out, Recording(result.fs_hz, result.drive, result.blocks, session.metadata))
     for line in summary_lines(result, session.metadata, wall_s, session.render.pipeline.texture):
@@ -198,6 +200,36 @@ def _settled(t_s: np.ndarray, touching: np.ndarray, settle_s: float) -> np.ndarr
     """True for blocks at least ``settle_s`` (s) after the touch they belong to began (ramp, velocity)."""
     touch_start_s = np.where(touching & ~np.r_[False, touching[:-1]], t_s, -np.inf)
     return t_s - np.maximum.accumulate(touch_start_s) >= settle_s
+
+
+def judge_departures(result: RenderResult, metadata: dict[str, Any], texture: CompiledTexture) -> None:
+    """On the simulated plate, add the ``departed`` block column (1 where a touching block's achieved friction
+    is further than DEPARTURE_TOLERANCE_MU from the texture under the finger) and its tolerance to ``metadata``."""
+    blocks = result.blocks
+    if "achieved_mu" not in blocks:
+        return
+    felt_mu, known = texture_under_finger(result, texture)
+    touching = (blocks["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0
+    felt_mu = np.clip(felt_mu, metadata["render_options"]["mu_floor"], 1.0)
+    blocks["departed"] = departures(felt_mu, blocks["achieved_mu"], touching & known).astype(np.int8)
+    metadata["departure_tolerance_mu"] = DEPARTURE_TOLERANCE_MU
+
+
+def _departure_line(result: RenderResult, texture: CompiledTexture) -> str:
+    """How many touching blocks departed from the texture under the finger, and the worst one."""
+    blocks = result.blocks
+    departed = blocks["departed"] != 0
+    felt_mu, known = texture_under_finger(result, texture)
+    touching = ((blocks["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0) & known
+    error = np.where(touching, np.abs(felt_mu - blocks["achieved_mu"]), 0.0)
+    worst = int(np.argmax(error)) if len(error) else 0
+    worst_text = f"worst {error[worst]:.3f} at {blocks['t'][worst]:.3f} s" if touching.any() else "no touching block"
+    if not departed.any():
+        return (f"departures: none; every touching block within {DEPARTURE_TOLERANCE_MU:g} of the texture under the "
+                f"finger ({worst_text})")
+    return (f"departures: {np.count_nonzero(departed)} of {np.count_nonzero(touching)} touching blocks "
+            f"({_percent(departed[touching])}) further than {DEPARTURE_TOLERANCE_MU:g} from the texture under the "
+            f"finger ({worst_text}); `tpad-rt plot` shades them")
 
 
 def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
@@ -239,4 +271,6 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
         if len(error):
             lines.append(f"friction |texture under the finger - achieved| (simulated plate; touching, "
                          f"not saturated): mean {error.mean():.4f}, 95th percentile {np.percentile(error, 95):.4f}")
+    if "departed" in blocks:
+        lines.append(_departure_line(result, texture))
     return lines
