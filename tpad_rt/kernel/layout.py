@@ -172,10 +172,11 @@ STATE_FAULT_SAMPLES = 36      # samples the output guard zeroed
 STATE_MODEL_V = 37            # model envelope (drive volts it is worth) after the last rendered sample
 STATE_MODEL_STEP = 38         # 1 - exp(-1 / (tau(force) fs)): the model's per-sample step towards the drive
 STATE_DRIVE_LOW_V = 39        # the open step's lowest drive: -cap with braking, else 0
+STATE_MODEL_ON_REF = 40       # 1.0: the model is on the smoothed command (STATE_MODEL_V is then 0, unused), 0.0: off
 # Per-sample tables, indexed by j, the sample's offset in its control step:
 MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
-STATE_COS_TABLE = 40          # cos(j w), w the carrier's phase step (rad)
+STATE_COS_TABLE = 44          # cos(j w), w the carrier's phase step (rad)
 STATE_SIN_TABLE = STATE_COS_TABLE + MAX_CONTROL_INTERVAL       # sin(j w)
-STATE_DECAY_TABLE = STATE_SIN_TABLE + MAX_CONTROL_INTERVAL     # d^(j + 1), d the smoothing decay
-STATE_ENVELOPE = STATE_DECAY_TABLE + MAX_CONTROL_INTERVAL      # the open step's envelope e_j (V)
+STATE_DECAY_TABLE = STATE_SIN_TABLE + MAX_CONTROL_INTERVAL     # d^j (0 <= j <= MAX_CONTROL_INTERVAL), d the smoothing decay
+STATE_ENVELOPE = STATE_DECAY_TABLE + MAX_CONTROL_INTERVAL + 1  # the open step's envelope e_j (V)
 STATE_SIZE = STATE_ENVELOPE + MAX_CONTROL_INTERVAL

@@ -15,8 +15,8 @@ carrier_step_units(carrier_hz, fs_hz) -> int
 
 docs/kernel.md is the design; ``tpad_rt.kernel.layout`` names every array slot.
 Arguments are arrays and scalars only, so that a numba ``@cfunc`` (the real-time audio
-callback) can call :func:`render_block` with arrays rebuilt from raw pointers; it is
-inlined into such a caller at numba IR level (no per-call argument passing).
+callback) and the serial streamer can call :func:`render_block` with arrays rebuilt
+from raw pointers; it is compiled once and called, not inlined into them.
 
 How the doc's per-sample recurrences are evaluated: within a control step the command
 ``v``, the cap, the pre-emphasis gain ``g`` and the gate are constant, so the
@@ -112,6 +112,7 @@ from tpad_rt.kernel.layout import (
     STATE_FIRST_SEGMENT_V2,
     STATE_FORCE_N,
     STATE_GATE,
+    STATE_MODEL_ON_REF,
     STATE_MODEL_STEP,
     STATE_MODEL_V,
     STATE_NEXT_INDEX,
@@ -176,12 +177,15 @@ COMPILED_SOURCES = stamp_cache(__file__, layout.__file__, texture_eval.__file__,
 
 # error_model="numpy": a division by zero gives inf/nan instead of raising, so no
 # exception checks are compiled in (nothing here may raise inside an audio callback).
-_kernel = numba.njit(cache=True, nogil=True, error_model="numpy")
-# Inlined at numba IR level into every numba caller: the helpers into render_block, and
-# render_block into the audio @cfunc. A call passing arrays costs a reference-count
-# call per array on each side (~40 ns per block for render_block's 14 arguments); in
-# one function numba drops them.
-_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+# _nrt=False: without numba's reference-counted runtime (nothing here allocates), a call
+# passing arrays costs no reference-count calls, so the helpers are ordinary functions
+# that LLVM inlines. Inlining them at numba IR level instead (inline="always") made the
+# first compile 24 s for render_block and 60 s more for the audio @cfunc it was inlined
+# into (numba deep-copies the callee's IR at every call site); now render_block compiles
+# once, in about 10 s, and the @cfunc and the serial streamer call it (docs/kernel.md
+# "Compilation"). The per-segment helpers stay inlined at IR level: cheap to copy.
+_kernel = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False, inline="always")
 
 
 @_kernel
@@ -210,7 +214,7 @@ def carrier_phase_units(n: int, step_units: int) -> int:
     return (n_lo * s_lo + (cross << _HALF_BITS)) & _PHASE_MASK
 
 
-@_inline
+@_kernel
 def _unit_phasor(phase_units: int) -> tuple[float, float]:
     """``(cos, sin)`` of the phase ``phase_units`` (2**-60 cycles), within ~3e-16, without libm.
 
@@ -228,7 +232,7 @@ def _unit_phasor(phase_units: int) -> tuple[float, float]:
     return cos_c * cos_d - sin_c * sin_d, sin_c * cos_d + cos_c * sin_d
 
 
-@_inline
+@_kernel
 def _force_cell(cfg: np.ndarray, dev: np.ndarray, force_n: float) -> tuple[int, int, float]:
     """Columns ``(i, i + 1)`` of the force grid around ``force_n`` (N) and the weight of the second, clamped."""
     last = dev.shape[1] - 1
@@ -240,19 +244,20 @@ def _force_cell(cfg: np.ndarray, dev: np.ndarray, force_n: float) -> tuple[int, 
     return i, min(i + 1, last), position - i
 
 
-@_inline
+@_kernel
 def _device_value(dev: np.ndarray, row: int, cell: tuple[int, int, float]) -> float:
     """``dev[row]`` linearly interpolated in a :func:`_force_cell`."""
     i, i_next, weight = cell
     return dev[row, i] + weight * (dev[row, i_next] - dev[row, i])
 
 
-@_inline
+@_kernel
 def _refresh_tables(cfg: np.ndarray, state: np.ndarray) -> None:
     """Rebuild the per-sample tables (carrier rotation, smoothing decay) if their cfg values changed.
 
-    ``cos(j w)``, ``sin(j w)`` of the exact integer phase of sample ``j``, and
-    ``d^(j+1) = exp(-(j+1) / (smoothing_s fs))``, for every ``j < MAX_CONTROL_INTERVAL``.
+    ``cos(j w)``, ``sin(j w)`` of the exact integer phase of sample ``j``, for every
+    ``j < MAX_CONTROL_INTERVAL``, and ``d^j = exp(-j / (smoothing_s fs))`` for every ``j <=
+    MAX_CONTROL_INTERVAL``.
     """
     fs_hz = cfg[CFG_FS_HZ]
     carrier_hz = cfg[CFG_CARRIER_HZ]
@@ -267,13 +272,14 @@ def _refresh_tables(cfg: np.ndarray, state: np.ndarray) -> None:
     smoothing_samples = smoothing_s * fs_hz
     for j in range(MAX_CONTROL_INTERVAL):
         state[STATE_COS_TABLE + j], state[STATE_SIN_TABLE + j] = _unit_phasor(carrier_phase_units(j, step_units))
-        state[STATE_DECAY_TABLE + j] = math.exp(-(j + 1.0) / smoothing_samples)
+    for j in range(MAX_CONTROL_INTERVAL + 1):
+        state[STATE_DECAY_TABLE + j] = math.exp(-j / smoothing_samples)
     state[STATE_TABLE_FS_HZ] = fs_hz
     state[STATE_TABLE_CARRIER_HZ] = carrier_hz
     state[STATE_TABLE_SMOOTHING_S] = smoothing_s
 
 
-@_inline
+@_kernel
 def _ring_sum(power_ring: np.ndarray) -> float:
     """Sum of the power ring in slot order (W)."""
     total = 0.0
@@ -282,7 +288,7 @@ def _ring_sum(power_ring: np.ndarray) -> float:
     return total
 
 
-@_inline
+@_kernel
 def _repaired_ring_sum(power_ring: np.ndarray, cap_w: float) -> float:
     """Sum of the power ring (W) after entering every slot outside ``[0, cap_w]`` (NaN too) as ``cap_w``."""
     for slot in range(power_ring.shape[0]):
@@ -324,7 +330,7 @@ def _envelope_sums(state: np.ndarray, first: int, stop: int) -> tuple[float, flo
     return peak_v, (s0 + s1) + (s2 + s3)
 
 
-@_inline
+@_kernel
 def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> None:
     """Account for the open control step: its power into the ring, its smoothing and ramp advanced.
 
@@ -353,26 +359,26 @@ def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> N
     if slot == power_ring.shape[0] - 1:
         state[STATE_WINDOW_SUM_W] = _ring_sum(power_ring)
     command_v = state[STATE_COMMAND_V]
-    decay = state[STATE_DECAY_TABLE + samples - 1]
+    decay = state[STATE_DECAY_TABLE + samples]
     state[STATE_SMOOTH_START_V] = command_v + (state[STATE_SMOOTH_START_V] - command_v) * decay
     direction = 1.0 if state[STATE_GATE] != 0.0 else -1.0
     ramp = state[STATE_RAMP_START] + direction * samples
     state[STATE_RAMP_START] = min(max(ramp, 0.0), state[STATE_RAMP_SAMPLES])
 
 
-@_inline
+@_kernel
 def _next_slot(slot: int, slots: int) -> int:
     """The ring slot after ``slot`` (no division)."""
     return slot + 1 if slot + 1 < slots else 0
 
 
-@_inline
+@_kernel
 def _previous_slot(slot: int, slots: int) -> int:
     """The ring slot before ``slot`` (no division)."""
     return slot - 1 if slot > 0 else slots - 1
 
 
-@_inline
+@_kernel
 def _newest_sample(finger: np.ndarray, count: int, t_s: float, hint: int) -> tuple[int, int]:
     """``(index, row)`` of the newest finger sample with ``t <= t_s``, or ``(-1, -1)``.
 
@@ -401,7 +407,7 @@ def _newest_sample(finger: np.ndarray, count: int, t_s: float, hint: int) -> tup
     return (i, row) if i >= oldest else (-1, -1)
 
 
-@_inline
+@_kernel
 def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, row: int, window_s: float) -> tuple[float, float]:
     """Finger velocity (mm/s) from sample ``newest`` (at ``row``) and the oldest of its stroke within ``window_s``.
 
@@ -441,7 +447,7 @@ def _velocity_mm_s(finger: np.ndarray, count: int, newest: int, row: int, window
     ) / dt_s
 
 
-@_inline
+@_kernel
 def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndarray, count: int) -> int:
     """Update the step's finger in ``state`` (position extrapolated, speed, force): 1 if it is active,
     0 if not, -1 for a fault (the sample or the velocity from it is not finite, or is absurd).
@@ -492,7 +498,7 @@ def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndar
     return 1
 
 
-@_inline
+@_kernel
 def _command_volts(
     t_s: float, cfg: np.ndarray, state: np.ndarray, amplitude_m_per_v: float,
     prog: np.ndarray, params: np.ndarray, img: np.ndarray, stack: np.ndarray,
@@ -528,7 +534,7 @@ def _command_volts(
     return command_v, flags, 0
 
 
-@_inline
+@_kernel
 def _cap_volts(
     cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray, p1_w: float, slot: int
 ) -> tuple[float, int, int]:
@@ -559,7 +565,7 @@ def _cap_volts(
     return 0.0, FLAG_POWER, fault | FAULT_POWER
 
 
-@_inline
+@_kernel
 def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     """Reset the carried values that are out of their ranges; FAULT_STATE if one was.
 
@@ -576,6 +582,9 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     if not abs(state[STATE_MODEL_V]) <= cfg[CFG_MAX_VOLTAGE_V]:
         state[STATE_MODEL_V] = 0.0
         fault = FAULT_STATE
+    if not (state[STATE_MODEL_ON_REF] == 0.0 or state[STATE_MODEL_ON_REF] == 1.0):
+        state[STATE_MODEL_ON_REF] = 0.0
+        fault = FAULT_STATE
     if not 0.0 <= state[STATE_RAMP_START] <= max(state[STATE_RAMP_SAMPLES], 0.0):
         state[STATE_RAMP_START] = 0.0
         fault = FAULT_STATE
@@ -584,7 +593,7 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     return fault
 
 
-@_inline
+@_kernel
 def _note_fault(state: np.ndarray, causes: int, new_step: bool) -> None:
     """Record the faults ``causes`` (FAULT_* bits); a ``new_step`` is counted as a fault step, and as a
     new fault if the last step had none."""
@@ -597,7 +606,7 @@ def _note_fault(state: np.ndarray, causes: int, new_step: bool) -> None:
     state[STATE_FAULT_CAUSES] = float((int(known) if 0.0 <= known < 2**31 else 0) | causes)
 
 
-@_inline
+@_kernel
 def _control_step(
     n: int, cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, power_ring: np.ndarray,
     finger: np.ndarray, finger_count: np.ndarray,
@@ -689,6 +698,43 @@ def _step_flags(state: np.ndarray) -> int:
     return int(flags) if 0.0 <= flags < 256.0 else 0
 
 
+@_kernel
+def _shape_in_sequence(
+    state: np.ndarray, envelope: np.ndarray, decay: np.ndarray, command_v: float, start_offset_v: float,
+    cap_v: float, low_v: float, follow_gain: float, model_step: float, ramp: float, ramp_direction: float,
+    ramp_samples: float,
+) -> int:
+    """The shaper sample by sample (ramping, or the model off the command): fill ``envelope`` (V), carry the
+    model in ``state``; how many drives were held at a limit.
+
+    ``decay[k] = d^j`` for the sample before ``envelope[k]``; ``ramp`` is the gain ramp at the first sample
+    before clipping to ``[0, ramp_samples]``. While ramping the drive is the ramped smoothed command and the
+    model follows it; at full gain the drive lands the model on the command (docs/kernel.md "Per sample").
+    """
+    on_reference = state[STATE_MODEL_ON_REF] != 0.0
+    model_v = state[STATE_MODEL_V]
+    clipped = 0
+    for k in range(envelope.shape[0]):
+        reference_before_v = command_v + start_offset_v * decay[k]
+        reference_v = command_v + start_offset_v * decay[k + 1]
+        gain = min(max(ramp + ramp_direction * k, 0.0), ramp_samples)
+        if on_reference:
+            model_v = reference_before_v
+        if gain < ramp_samples:
+            e_v = gain * (1.0 / ramp_samples) * min(max(reference_v, 0.0), cap_v)
+            on_reference = False
+        else:
+            drive_v = model_v + (reference_v - model_v) * follow_gain
+            e_v = min(max(drive_v, low_v), cap_v)
+            on_reference = e_v == drive_v
+            clipped += 0 if on_reference else 1
+        model_v += (e_v - model_v) * model_step
+        envelope[k] = e_v
+    state[STATE_MODEL_ON_REF] = 1.0 if on_reference else 0.0
+    state[STATE_MODEL_V] = 0.0 if on_reference else model_v  # on the command: not used, kept canonical
+    return clipped
+
+
 @_inline
 def _render_samples(
     out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float, modulate: bool
@@ -711,7 +757,6 @@ def _render_samples(
     low_v = state[STATE_DRIVE_LOW_V]
     follow_gain = state[STATE_FOLLOW_GAIN]
     model_step = state[STATE_MODEL_STEP]
-    model_v = state[STATE_MODEL_V]
     start_offset_v = state[STATE_SMOOTH_START_V] - command_v
     ramp_samples = state[STATE_RAMP_SAMPLES]
     per_ramp_sample = 1.0 / ramp_samples
@@ -719,22 +764,29 @@ def _render_samples(
     ramp_start = state[STATE_RAMP_START] + ramp_direction
     j0 = int(state[STATE_STEP_SAMPLES])
     count = stop - first
-    decay = state[STATE_DECAY_TABLE + j0 : STATE_DECAY_TABLE + j0 + count]
+    decay = state[STATE_DECAY_TABLE + j0 : STATE_DECAY_TABLE + j0 + count + 1]  # d^j for the sample before, on
     envelope = state[STATE_ENVELOPE + j0 : STATE_ENVELOPE + j0 + count]
     samples = out[first:stop]
+    # The smoothed command after sample j is a_j = v + (a0 - v) d^(j+1); the shaper lands the model on it.
+    ramp_full = ramp_direction > 0.0 and ramp_start + j0 >= ramp_samples  # the whole segment at full gain
     clipped = 0
-    for k in range(count):
-        reference_v = command_v + start_offset_v * decay[k]
-        ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
-        if ramp < ramp_samples or follow_gain == 0.0:  # ramping (or no shaper): the ramp scales the reference
-            e_v = ramp * per_ramp_sample * min(max(reference_v, 0.0), cap_v)
-        else:  # the drive that brings the model to the reference in one sample, within [low_v, cap_v]
-            drive_v = model_v + (reference_v - model_v) * follow_gain
+    if follow_gain == 0.0:  # no shaper: the ramped smoothed command (vectorises)
+        for k in range(count):
+            ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
+            envelope[k] = ramp * per_ramp_sample * min(max(command_v + start_offset_v * decay[k + 1], 0.0), cap_v)
+    elif ramp_full and state[STATE_MODEL_ON_REF] != 0.0:
+        # The model sits on the command: each drive depends on the command alone (vectorises). If one
+        # is clipped the segment is rendered again below, sample by sample, with the same expressions.
+        for k in range(count):
+            reference_before_v = command_v + start_offset_v * decay[k]
+            drive_v = reference_before_v + (command_v + start_offset_v * decay[k + 1] - reference_before_v) * follow_gain
             e_v = min(max(drive_v, low_v), cap_v)
             clipped += 0 if e_v == drive_v else 1
-        model_v += (e_v - model_v) * model_step
-        envelope[k] = e_v
-    state[STATE_MODEL_V] = model_v
+            envelope[k] = e_v
+    if follow_gain != 0.0 and (clipped or not (ramp_full and state[STATE_MODEL_ON_REF] != 0.0)):
+        clipped = _shape_in_sequence(state, envelope, decay, command_v, start_offset_v, cap_v, low_v,
+                                     follow_gain, model_step, ramp_start + ramp_direction * j0, ramp_direction,
+                                     ramp_samples)
     if clipped:
         state[STATE_STEP_FLAGS] = float(_step_flags(state) | FLAG_SHAPER_LIMIT)
     if modulate:
@@ -754,7 +806,7 @@ def _render_samples(
     return within == count
 
 
-@_inline
+@_kernel
 def _zero_outside(samples: np.ndarray, envelope: np.ndarray, limit: float, max_v: float) -> int:
     """Zero every sample (and its envelope) outside ``limit`` (full scale) or with an envelope whose
     magnitude is over ``max_v`` (volts), NaN included; how many were."""
@@ -767,7 +819,7 @@ def _zero_outside(samples: np.ndarray, envelope: np.ndarray, limit: float, max_v
     return rejected
 
 
-@_inline
+@_kernel
 def _output_fault(state: np.ndarray, rejected: int) -> None:
     """The output guard zeroed ``rejected`` samples (>= 1) of the open step: count them, close the gate,
     and restart the smoothing and ramp from 0 with tables rebuilt at the next step (state out of range)."""
@@ -777,12 +829,13 @@ def _output_fault(state: np.ndarray, rejected: int) -> None:
     state[STATE_COMMAND_V] = 0.0
     state[STATE_SMOOTH_START_V] = 0.0
     state[STATE_MODEL_V] = 0.0
+    state[STATE_MODEL_ON_REF] = 0.0
     state[STATE_RAMP_START] = 0.0
     state[STATE_GATE] = 0.0
     state[STATE_TABLE_FS_HZ] = math.nan
 
 
-@_inline
+@_kernel
 def _write_telemetry(
     telem: np.ndarray, telem_count: np.ndarray, t_s: float, state: np.ndarray,
     peak_v: float, power_w: float, flags: int,
@@ -802,7 +855,7 @@ def _write_telemetry(
     telem_count[0] += 1
 
 
-@_inline
+@_kernel
 def render_block(
     out: np.ndarray,
     start_index: int,

@@ -93,15 +93,14 @@ _TWO_PI = 2.0 * math.pi
 #: Pixel positions are turned into int64 indices only below this (exact in a float64).
 _MAX_PIXEL_INDEX = 2.0**52  # (and phases in cycles: floor() of one gives an int64)
 
-#: Helpers and ``eval_texture`` are inlined at numba IR level into their callers: a call with
-#: array arguments costs more than a grating (argument passing and reference counting),
-#: and a caller that inlines ``eval_texture`` lets LLVM see the whole program loop.
+#: ``_nrt=False``: nothing here allocates, and without numba's reference-counted runtime a
+#: call passing arrays costs no reference counting, so the helpers are ordinary functions
+#: LLVM inlines (inlining them at numba IR level cost about 10 s of the first compile).
 #: ``error_model="numpy"``: no division-by-zero checks (``texture.py`` never divides by 0).
-_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-_kernel = numba.njit(cache=True, nogil=True, error_model="numpy")
+_kernel = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 
-@_inline
+@_kernel
 def waveform(code: int, phase: float, duty: float) -> float:
     """One period of waveform ``code`` (``WAVE_*``) at ``phase`` in [0, 1] (cycles), in [0, 1].
 
@@ -120,7 +119,7 @@ def waveform(code: int, phase: float, duty: float) -> float:
     return (1.0 - phase) / (1.0 - duty)
 
 
-@_inline
+@_kernel
 def _frac(cycles: float) -> float:
     """The fractional part of ``cycles``, in [0, 1] (1 only by rounding of a tiny negative); NaN when
     ``cycles`` is not finite or beyond 2**52 (no fraction is left, and ``floor`` would not fit an int64)."""
@@ -129,7 +128,7 @@ def _frac(cycles: float) -> float:
     return cycles - math.floor(cycles)
 
 
-@_inline
+@_kernel
 def _periodic_level(params: np.ndarray, o: int, code: int, phase: float) -> float:
     """``low + span * waveform`` with ``duty, low, span`` at ``params[o:o + 3]``; NaN for a NaN ``phase``
     (the render kernel counts a texture fault; a square wave's comparison alone would hide it)."""
@@ -138,20 +137,20 @@ def _periodic_level(params: np.ndarray, o: int, code: int, phase: float) -> floa
     return params[o + 1] + params[o + 2] * waveform(code, phase, params[o])
 
 
-@_inline
+@_kernel
 def _grating(params: np.ndarray, o: int, code: int, x_mm: float, y_mm: float) -> float:
     """Grating friction: phase ``s / period + phase`` with ``s = x cos_a - y sin_a`` (mm)."""
     s_mm = x_mm * params[o] - y_mm * params[o + 1]
     return _periodic_level(params, o + 4, code, _frac(s_mm * params[o + 2] + params[o + 3]))
 
 
-@_inline
+@_kernel
 def _temporal(params: np.ndarray, o: int, code: int, t_s: float) -> float:
     """Temporal friction: phase ``t_s * frequency_hz``."""
     return _periodic_level(params, o + 1, code, _frac(t_s * params[o]))
 
 
-@_inline
+@_kernel
 def _pixel_pair(index: int, size: int, wrap: float) -> tuple[int, int]:
     """Indices of pixel ``index`` and the next one along a side of ``size`` pixels, wrapped."""
     if wrap == WRAP_TILE:
@@ -160,7 +159,7 @@ def _pixel_pair(index: int, size: int, wrap: float) -> tuple[int, int]:
     return min(max(index, 0), size - 1), min(max(index + 1, 0), size - 1)
 
 
-@_inline
+@_kernel
 def _image_cell(
     params: np.ndarray, o: int, img: np.ndarray, img_offset: int, x_mm: float, y_mm: float
 ) -> tuple[float, float, float, float, float, float]:
@@ -188,7 +187,7 @@ def _image_cell(
     return img[row0 + i0], img[row0 + i1], img[row1 + i0], img[row1 + i1], fx - ix, fy - iy
 
 
-@_inline
+@_kernel
 def _bitmap(params: np.ndarray, o: int, img: np.ndarray, img_offset: int, x_mm: float, y_mm: float) -> float:
     """Bitmap friction: ``low + span * bilinear(pixels)``."""
     v00, v10, v01, v11, tx, ty = _image_cell(params, o, img, img_offset, x_mm, y_mm)
@@ -197,7 +196,7 @@ def _bitmap(params: np.ndarray, o: int, img: np.ndarray, img_offset: int, x_mm: 
     return params[o + 7] + params[o + 8] * (top + ty * (bottom - top))
 
 
-@_inline
+@_kernel
 def _bump_slope(params: np.ndarray, o: int, x_mm: float, y_mm: float, ux: float, uy: float) -> float:
     """Slope along (ux, uy) of ``h = H/2 (1 + cos(pi d / R))`` for ``d < R`` (0 outside).
 
@@ -211,7 +210,7 @@ def _bump_slope(params: np.ndarray, o: int, x_mm: float, y_mm: float, ux: float,
     return params[o + 4] * math.sin(params[o + 3] * d_mm) * (dx * ux + dy * uy) / d_mm
 
 
-@_inline
+@_kernel
 def _ridge_slope(params: np.ndarray, o: int, x_mm: float, y_mm: float, ux: float, uy: float) -> float:
     """Slope along (ux, uy) of ``h = H/2 (1 + cos(2 pi n / W))`` for ``|n| < W/2`` (0 outside).
 
@@ -224,7 +223,7 @@ def _ridge_slope(params: np.ndarray, o: int, x_mm: float, y_mm: float, ux: float
     return params[o + 6] * math.sin(params[o + 5] * n_mm) * (params[o + 2] * ux + params[o + 3] * uy)
 
 
-@_inline
+@_kernel
 def _sine_slope(params: np.ndarray, o: int, x_mm: float, y_mm: float, ux: float, uy: float) -> float:
     """Slope along (ux, uy) of ``h = H (0.5 + 0.5 sin(2 pi s / P))``, ``s = x cos_a - y sin_a``.
 
@@ -234,7 +233,7 @@ def _sine_slope(params: np.ndarray, o: int, x_mm: float, y_mm: float, ux: float,
     return params[o + 3] * math.cos(params[o + 2] * s_mm) * (params[o] * ux - params[o + 1] * uy)
 
 
-@_inline
+@_kernel
 def _image_slope(
     params: np.ndarray, o: int, img: np.ndarray, img_offset: int, x_mm: float, y_mm: float, ux: float, uy: float
 ) -> float:
@@ -249,7 +248,7 @@ def _image_slope(
     return params[o + 7] * (dv_dx * ux + dv_dy * uy)
 
 
-@_inline
+@_kernel
 def _gradient(
     params: np.ndarray, o: int, shape: int, img: np.ndarray, img_offset: int,
     x_mm: float, y_mm: float, ux: float, uy: float,
@@ -267,7 +266,7 @@ def _gradient(
     return min(max(params[o] + params[o + 1] * slope, params[o + 2]), params[o + 3])
 
 
-@_inline
+@_kernel
 def _nearest_grid_d2(params: np.ndarray, o: int, x_mm: float, y_mm: float) -> float:
     """Squared distance (mm^2) to the nearest centre of the grid ``sx, sy, 1/sx, 1/sy, ox, oy``."""
     gx = x_mm - params[o + 4]
@@ -277,7 +276,7 @@ def _nearest_grid_d2(params: np.ndarray, o: int, x_mm: float, y_mm: float) -> fl
     return dx * dx + dy * dy
 
 
-@_inline
+@_kernel
 def _nearest_centre_d2(params: np.ndarray, o: int, n: int, x_mm: float, y_mm: float, reach_mm: float) -> float:
     """Squared distance (mm^2) to the nearest of ``n`` centres sorted by x, or ``reach^2`` if none is closer.
 
@@ -302,7 +301,7 @@ def _nearest_centre_d2(params: np.ndarray, o: int, n: int, x_mm: float, y_mm: fl
     return best
 
 
-@_inline
+@_kernel
 def _bumps(params: np.ndarray, o: int, profile: int, n: int, x_mm: float, y_mm: float) -> float:
     """Bumps friction from the nearest centre (the strongest: every bump has the same falling profile).
 
@@ -326,7 +325,7 @@ def _bumps(params: np.ndarray, o: int, profile: int, n: int, x_mm: float, y_mm: 
     return params[o + 1] + (params[o] - params[o + 1]) * weight
 
 
-@_inline
+@_kernel
 def _outline_distance(params: np.ndarray, r: int, x_mm: float, y_mm: float) -> float:
     """Unsigned distance (mm) from a point to the outline in the shape record at ``params[r]``."""
     code = params[r]
@@ -343,7 +342,7 @@ def _outline_distance(params: np.ndarray, r: int, x_mm: float, y_mm: float) -> f
     return math.hypot(ax - t * params[r + 3], ay - t * params[r + 4])
 
 
-@_inline
+@_kernel
 def _edges(params: np.ndarray, o: int, profile: int, n: int, x_mm: float, y_mm: float) -> float:
     """Edges friction from the nearest outline: the band ``d <= width/2``, step or raised cosine."""
     d_mm = math.inf
@@ -357,7 +356,7 @@ def _edges(params: np.ndarray, o: int, profile: int, n: int, x_mm: float, y_mm: 
     return params[o + 1] + (params[o] - params[o + 1]) * weight
 
 
-@_inline
+@_kernel
 def _in_region(params: np.ndarray, o: int, shape: int, x_mm: float, y_mm: float) -> bool:
     """Whether a point lies in a layer's region (edges included)."""
     if shape == SHAPE_EVERYWHERE:
@@ -369,7 +368,7 @@ def _in_region(params: np.ndarray, o: int, shape: int, x_mm: float, y_mm: float)
     return dx * dx + dy * dy <= params[o + 2]
 
 
-@_inline
+@_kernel
 def _combine(op: int, result: float, layer: float) -> float:
     """``op(result, layer)`` clamped to ``[LAYER_FLOOR, 1]``; replace returns ``layer``."""
     if op == COMBINE_MULTIPLY:
@@ -385,7 +384,7 @@ def _combine(op: int, result: float, layer: float) -> float:
     return min(max(value, LAYER_FLOOR), 1.0)
 
 
-@_inline
+@_kernel
 def eval_texture(
     prog: np.ndarray,
     params: np.ndarray,

@@ -1,0 +1,85 @@
+"""A notice while numba compiles the kernels: the first run only, with what it is compiling.
+
+API map
+-------
+compile_notice(console=None)
+    a context manager; inside it, the first numba compile prints one line to stderr
+    (:data:`NOTICE`), then, on a terminal, a spinner naming each function as it compiles,
+    and at the end how many it compiled and how long it took. When everything loads from
+    numba's cache (every run after the first) it prints nothing. Nested uses show once.
+
+numba compiles a kernel the first time it is called in a fresh cache (about 10 s for the
+render kernel on a 2-core machine), then loads it from its cache in milliseconds
+(docs/kernel.md "Compilation"). The notice listens to numba's own compile events
+(``numba.core.event``), so it never guesses from timing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+from numba.core import event
+from rich.console import Console
+from rich.status import Status
+
+#: The first line a compile prints.
+NOTICE = "tpad-rt: compiling the render kernels (first run only; numba caches them for the next runs)"
+
+_active = threading.Lock()  # held by the outermost compile_notice
+
+
+class _Notice(event.Listener):
+    """Counts numba's compiles; prints the notice at the first and keeps a spinner up to date."""
+
+    def __init__(self, console: Console):
+        self.console = console
+        self.started_s: float | None = None
+        self.compiled = 0
+        self.status: Status | None = None
+
+    def on_start(self, compile_event: event.Event) -> None:
+        if self.started_s is None:
+            self.started_s = time.perf_counter()
+            self.console.print(NOTICE)
+            if self.console.is_terminal:
+                self.status = self.console.status("compiling")
+                self.status.start()
+        if self.status is not None:
+            self.status.update(f"compiling {_name(compile_event.data)} ({self.compiled} functions done)")
+
+    def on_end(self, compile_event: event.Event) -> None:
+        self.compiled += 1
+
+    def finish(self) -> None:
+        """Stop the spinner; say what was compiled, if anything."""
+        if self.status is not None:
+            self.status.stop()
+        if self.started_s is not None:
+            self.console.print(f"tpad-rt: compiled {self.compiled} functions in "
+                               f"{time.perf_counter() - self.started_s:.1f} s")
+
+
+def _name(data: Any) -> str:
+    """The name of the function a compile event is about."""
+    dispatcher = data.get("dispatcher") if isinstance(data, dict) else None
+    function = getattr(dispatcher, "py_func", None)
+    return str(getattr(function, "__qualname__", "a kernel"))
+
+
+@contextlib.contextmanager
+def compile_notice(console: Console | None = None) -> Iterator[None]:
+    """Show the compile notice for compiles inside the block (module docstring); on stderr by default."""
+    if not _active.acquire(blocking=False):  # an outer compile_notice shows them
+        yield
+        return
+    notice = _Notice(console or Console(stderr=True, soft_wrap=True, highlight=False, markup=False, emoji=False))
+    try:
+        with event.install_listener("numba:compile", notice):
+            yield
+    finally:
+        notice.finish()
+        _active.release()
