@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from tpad_rt import __version__
+from tpad_rt.compiling import compile_notice
 from tpad_rt.device import Device
 from tpad_rt.drivers import Driver, open_driver
 from tpad_rt.errors import ConfigError
@@ -198,9 +199,10 @@ class Renderer:
         table = CallbackTable(self._pipeline.arrays, self._texture, channels=driver.channels, channel=driver.channel)
         table.slot_t0_s[0] = self.now_s()
         self._last_table = table
-        driver.warm(table.copy())
         try:
-            driver.open(self._pipeline)
+            with compile_notice():  # the first run in a fresh numba cache compiles the kernels here
+                driver.warm(table.copy())
+                driver.open(self._pipeline)
             self._pipeline.start()
             self._table = table
             driver.start(table)

@@ -42,6 +42,7 @@ from rich.table import Table
 
 from tpad_rt.cli.arguments import number
 from tpad_rt.cli.render import add_session_arguments
+from tpad_rt.compiling import compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
@@ -141,22 +142,29 @@ def run(args: argparse.Namespace) -> int:
         check_writable_target(args.record, "recordings")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
     output, finger = choose_output(args.output, args.rate), choose_input(args.input)
-    device = Device.default() if args.device is None else Device.from_file(args.device)
     options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
                             **({} if args.force is None else {"default_force_n": args.force}))
-    with open_input(finger.url, device=device) as source, _sigint_event() as interrupted:
-        from tpad_rt.engine import Renderer  # compiles the audio callback: only once the input is known good
+    with contextlib.ExitStack() as compiling:
+        # A first run compiles the kernels (about 10 s): say so at once, and compile everything
+        # before the clock starts, so the run itself renders from its first second.
+        compiling.enter_context(compile_notice())
+        device = Device.default() if args.device is None else Device.from_file(args.device)
+        with open_input(finger.url, device=device) as source, _sigint_event() as interrupted:
+            from tpad_rt.engine import Renderer  # compiles the audio callback: only once the input is known good
 
-        renderer = Renderer(device, output.url, texture=args.texture, rate_hz=args.rate,
-                            block_frames=args.block, options=options, stall_timeout_s=args.stall_timeout)
-        console.print(f"output {output}, input {finger}; "
-                      + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
-        if args.record is not None:
-            renderer.record(args.record)
-        with renderer, LiveFeed(source, _pusher(renderer, args.force), renderer.lift,
-                                clock=renderer.now_s) as feed:
-            session = Session(renderer, console)
-            _loop(session, feed, interrupted, args.duration)
+            renderer = Renderer(device, output.url, texture=args.texture, rate_hz=args.rate,
+                                block_frames=args.block, options=options, stall_timeout_s=args.stall_timeout)
+            console.print(f"output {output}, input {finger}; "
+                          + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
+            if args.record is not None:
+                renderer.record(args.record)
+            renderer.texture.evaluate(np.zeros(1), np.zeros(1))  # the status line's texture under the finger
+            renderer.start()
+            compiling.close()
+            with renderer, LiveFeed(source, _pusher(renderer, args.force), renderer.lift,
+                                    clock=renderer.now_s) as feed:
+                session = Session(renderer, console)
+                _loop(session, feed, interrupted, args.duration)
     session.take_telemetry()
     for line in session.summary(interrupted.is_set()):
         console.print(line)

@@ -33,6 +33,7 @@ from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, T
 
 from tpad_rt import __version__
 from tpad_rt.cli.arguments import number, whole
+from tpad_rt.compiling import compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures
@@ -164,8 +165,10 @@ def run(args: argparse.Namespace) -> int:
     check_writable_target(out, "recordings and WAV files")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
     with contextlib.ExitStack() as stack:
-        session = open_session(args, stack, keep_drive=out.suffix.lower() == ".npz",
-                               wav_path=out if out.suffix.lower() == ".wav" else None)
+        with compile_notice():  # the first run compiles the kernels: say so at once
+            session = open_session(args, stack, keep_drive=out.suffix.lower() == ".npz",
+                                   wav_path=out if out.suffix.lower() == ".wav" else None)
+            session.render.pipeline.warm_up()
         started = time.perf_counter()
         _run_with_progress(session.render, console)
         wall_s = time.perf_counter() - started

@@ -40,6 +40,7 @@ class PacedDriver(Driver):
     def open(self, pipeline: Pipeline) -> None:
         """Open the output (ConfigError, BackendError as :func:`tpad_rt.outputs.open_output`)."""
         self._output = open_output(self.url.text, device=self.device, fs_hz=self.rate_hz)
+        self._output.warm()  # compiled now, not in the pacing thread while the clock runs
         self._pipeline = pipeline
 
     def start(self, table: CallbackTable) -> None:

@@ -85,6 +85,13 @@ class Output(ABC):
         """The last block's measurements, by name (none by default); cheap, for status lines."""
         return {}
 
+    def warm(self) -> None:
+        """Compile (or load from numba's cache) what :meth:`write` runs, changing nothing; nothing by default.
+
+        A real-time driver calls it before the clock starts, so a first run does not spend its
+        first second compiling while blocks fall due.
+        """
+
     def close(self) -> None:
         """Finish and release what the output holds (nothing by default)."""
 

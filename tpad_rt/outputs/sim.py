@@ -79,6 +79,14 @@ class SimOutput(Output):
         self._achieved_mu.append(relative_friction_core(
             amplitude_m, device.resonance_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
 
+    def warm(self) -> None:
+        """Run the plate model and the friction model once on scratch arrays (nothing recorded)."""
+        coef, state = np.zeros(COEF_SIZE), np.zeros(SIM_STATE_SIZE)
+        device = self.device
+        resonator_coefficients(device.resonance_hz, 100.0, 1e-8, float(self.fs_hz), coef)
+        resonate(np.zeros(1, dtype=np.float32), device.volts_per_full_scale, coef, state, np.zeros(1))
+        relative_friction_core(1e-6, device.resonance_hz, 0.1, device.mu0, device.poisson, device.psi_star)
+
     def latest(self) -> dict[str, float]:
         """``plate_amplitude_um`` and ``achieved_mu`` of the last block written (none before the first)."""
         if not self._achieved_mu:
