@@ -141,7 +141,7 @@ def test_on_a_terminal_it_shows_the_panel_and_ctrl_c_stops_with_a_ramp(tmp_path:
     os.close(slave)
     seen = bytearray()
     try:
-        assert _read_until(master, b"simulated plate 0.", seen), seen.decode(errors="replace")
+        assert _read_until(master, b"(the friction the simulated plate gives now)", seen), seen.decode(errors="replace")
         child.send_signal(signal.SIGINT)
         _read_until(master, b"wrote ", seen)
         assert child.wait(timeout=120) == 0

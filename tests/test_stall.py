@@ -69,6 +69,30 @@ def test_play_on_a_stopped_server_reports_the_stall_in_one_line_and_status_1() -
     assert "(device hung or server stopped)" in err
 
 
+@pytest.mark.system
+def test_play_through_a_short_stall_says_how_long_the_output_stalled() -> None:
+    """Issue 10: a run whose output stopped for a while used to report its wall time as 'played'; the
+    summary now gives the drive played and the run's time, and says the output stalled, as the panel does."""
+    with server_process() as server, client_of(server, [
+            sys.executable, "-m", "tpad_rt", "play", "textures/grating.yaml", "--output", "audio://system",
+            "--input", "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1", "--duration", "3",
+            "--stall-timeout", "10"]) as play:
+        assert play.stdout is not None
+        assert play.stdout.readline().startswith("output audio://system, input ")
+        assert wait_until_playing(server.name, SAFETY_TIMEOUT_S)
+        os.kill(server.process.pid, signal.SIGSTOP)
+        time.sleep(1.0)  # the stimulus: the server held stopped for a second
+        os.kill(server.process.pid, signal.SIGCONT)
+        out, err = play.communicate(timeout=SAFETY_TIMEOUT_S)
+    assert play.returncode == 0, (out, err)
+    summary = out.splitlines()[0]
+    played_s, ran_s = float(summary.split()[1]), float(summary.split(" in ")[1].split()[0])
+    assert summary.startswith("played ") and "; the output stalled for " in summary
+    stalled_s = float(summary.split("the output stalled for ")[1].split()[0])
+    assert stalled_s == pytest.approx(ran_s - played_s, abs=0.011)
+    assert stalled_s >= 0.8  # the second the server was stopped (less what the buffers held)
+
+
 #: A Renderer on audio:// whose server the test stops (SIGSTOP) after "playing": join re-raises the stall,
 #: stop returns, audio is refused after, and the interpreter exits.
 STALLED_SERVER_APP = f"""

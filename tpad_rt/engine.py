@@ -396,15 +396,18 @@ class Renderer:
         """Counters and distributions so far (units in the keys; NaN where nothing was measured yet).
 
         ``callbacks``, ``frames``, ``underflows`` (of the current or last run), ``rate_hz``,
-        ``block_frames``, ``output_latency_s`` (the stream's, audio only); ``compute_us_p50/p99/max``
+        ``block_frames``, ``played_s`` (seconds of drive the output took: ``frames / rate_hz``);
+        ``compute_us_p50/p99/max``
         (time in the callback, over the recent blocks); ``callback_load_p99`` (that p99 as a
         fraction of a block's duration); ``blocks``,
         ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (blocks), ``power_mean_w``,
         ``power_peak_w``, ``power_budget_w``, ``power_avg_w`` (from telemetry);
         ``latency_ms_p50/p99``: from a push to the DAC time of the first block that
         read it, over the recent blocks; ``dac_delay_ms``: the part of it the host
-        reports from a callback to the DAC (median over the recent blocks; 0 on paced
-        outputs); ``faults``, ``fault_steps``, ``fault_samples``, ``fault_causes``: the kernel's fault
+        reports from a callback to the DAC (median over the recent blocks, from the
+        time stamps PortAudio passes each callback; 0 on paced outputs; PortAudio's
+        stream-level ``outputLatency`` is not reported: JACK's dummy driver says 0 there
+        while its callbacks' time stamps say 0.33 ms); ``faults``, ``fault_steps``, ``fault_samples``, ``fault_causes``: the kernel's fault
         guard (docs/kernel.md "Faults"), since the renderer was made.
         """
         if self._table is not None:
@@ -417,7 +420,8 @@ class Renderer:
         else:
             counters, blocks = np.zeros(tab.STAT_SIZE, dtype=np.int64), np.zeros((0, tab.BLOCK_COLS), dtype=np.int64)
         result.update(callbacks=int(counters[tab.STAT_CALLBACKS]), frames=int(counters[tab.STAT_FRAMES]),
-                      underflows=int(counters[tab.STAT_UNDERFLOWS]))
+                      underflows=int(counters[tab.STAT_UNDERFLOWS]),
+                      played_s=int(counters[tab.STAT_FRAMES]) / self.rate_hz)
         result.update(self._driver.stats())
         compute_us = blocks[:, tab.BLOCK_COMPUTE_NS] * 1e-3
         for name, q in (("p50", 50), ("p99", 99), ("max", 100)):

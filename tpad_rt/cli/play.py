@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import Iterator
 from types import FrameType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from rich.console import Console
@@ -285,17 +285,29 @@ class Session:
             lifted = int(row["saturated"]) & FLAG_WATCHDOG
             grid.add_row("finger", f"({row['x_mm']:5.1f}, {row['y_mm']:5.1f}) mm  {row['speed_mm_s']:4.0f} mm/s  "
                          + ("lifted" if lifted else "down"))
-            grid.add_row("friction", f"target {row['target_mu']:.2f}"
-                         + ("" if self.felt is None else f", under the finger {self.felt:.2f}")
-                         + ("" if self.achieved is None else f", simulated plate {self.achieved:.2f}"))
+            grid.add_row("target friction", f"{row['target_mu']:.2f}  (what the renderer asks of the plate, at the "
+                         "finger extrapolated ahead by horizon_ms)")
+            if self.felt is not None:
+                grid.add_row("under the finger", f"{self.felt:.2f}  (the texture where the finger last was)")
+            if self.achieved is not None:
+                grid.add_row("simulated plate", f"{self.achieved:.2f}  (the friction the simulated plate gives now)")
             grid.add_row("drive", f"{row['voltage_v']:5.1f} V of {self.renderer.device.max_voltage_v:g} V"
                          + ("  SATURATED" if int(row["saturated"]) & (FLAG_VOLTAGE | FLAG_POWER) else ""))
         grid.add_row("power", f"now {row.get('power_w', 0.0):.3f} W, mean {stats['power_mean_w']:.3f} W, "
                      f"peak {stats['power_peak_w']:.3f} W of {stats['power_budget_w']:g} W")
         grid.add_row("callbacks", f"{stats['callbacks']}, {stats['underflows']} underflows, "
                      f"load p99 {100 * stats['callback_load_p99']:.1f} % of a block")
-        grid.add_row("time", f"{self.elapsed_s():.1f} s")
+        grid.add_row("time", f"{self.elapsed_s():.1f} s, {stats['played_s']:.1f} s of drive played"
+                     + self.stalled_note(stats).upper())
         return grid
+
+    def stalled_note(self, stats: dict[str, Any]) -> str:
+        """``; the output stalled for S s`` when the output took less drive than the time that passed (more
+        than two blocks' worth and 5 %), else empty: what the summary and the panel both say."""
+        missing_s = self.elapsed_s() - stats["played_s"]
+        if missing_s <= max(2 * stats["block_frames"] / stats["rate_hz"], 0.05 * self.elapsed_s()):
+            return ""
+        return f"; the output stalled for {missing_s:.2f} s"
 
     def summary(self, interrupted: bool) -> list[str]:
         """The end-of-play summary from the renderer's stats (and the friction samples, on sim://)."""
@@ -304,10 +316,11 @@ class Session:
         amplifier = stats.get("amplifier")
         block, output = ("frame", "amplifier") if amplifier else ("callback", "DAC")
         lines = [
-            f"played {self.elapsed_s():.2f} s" + (" (stopped by Ctrl-C)" if interrupted else "")
+            f"played {stats['played_s']:.2f} s of drive in {self.elapsed_s():.2f} s"
+            + (" (stopped by Ctrl-C)" if interrupted else "")
             + f": {stats['callbacks']} {block}s of {stats['block_frames']} {'samples' if amplifier else 'frames'} "
             f"at {stats['rate_hz']} Hz, "
-            f"{stats['underflows']} " + ("sent late" if amplifier else "underflows"),
+            f"{stats['underflows']} " + ("sent late" if amplifier else "underflows") + self.stalled_note(stats),
             f"{block} compute: p50 {stats['compute_us_p50']:.1f} us, p99 {stats['compute_us_p99']:.1f} us "
             f"({100 * stats['callback_load_p99']:.1f} % of a {block})",
             f"push-to-output latency: p50 {stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms"

@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-from typing import Any
 
 from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
@@ -46,7 +45,6 @@ class AudioCallbackDriver(Driver):
         self.stall_timeout_s = stall_timeout_s
         self.audio_device: audio.AudioDevice | None = None  # found by prepare()
         self.stream: audio.AudioStream | None = None  # while started
-        self._output_latency_s = math.nan
         self._stalled = False
         self._failure: BackendError | None = None  # what poll() found, returned again by close()
         self._seen_callbacks, self._seen_at = -1, 0.0
@@ -74,7 +72,6 @@ class AudioCallbackDriver(Driver):
         assert address is not None
         self.stream = audio.AudioStream(self.audio_device, self.rate_hz, self.block_frames, self.channels,
                                         address, table.user_data)
-        self._output_latency_s = self.stream.output_latency_s
         self.stream.start()
 
     def poll(self, table: CallbackTable) -> BaseException | None:
@@ -129,10 +126,6 @@ class AudioCallbackDriver(Driver):
             stream.abandon()
             return _stall_error(stream.device, f"stopping it took over {bound_s:.2f} s")
         return errors[0] if errors else None
-
-    def stats(self) -> dict[str, Any]:
-        """``output_latency_s``: the stream's, as PortAudio reports it."""
-        return {"output_latency_s": self._output_latency_s}
 
     def stream_time_s(self) -> float:
         """PortAudio's stream time (s), NaN when no stream runs."""

@@ -68,8 +68,8 @@ class Driver(ABC):
         error met doing so, or that ended the output, if any. Safe to call twice."""
 
     def stats(self) -> dict[str, Any]:
-        """The driver's own figures for Renderer.stats() (``output_latency_s`` at least)."""
-        return {"output_latency_s": math.nan}
+        """The driver's own figures for Renderer.stats(), if it has any (none by default)."""
+        return {}
 
     def stall_limit_s(self) -> float:
         """How long (s) the output may go without a callback before :meth:`poll` reports it stalled (0: it

@@ -78,8 +78,7 @@ class SerialStreamDriver(Driver):
         return failure
 
     def stats(self) -> dict[str, Any]:
-        """``output_latency_s`` (NaN: the amplifier reports none) and ``amplifier``: the link's and the
-        amplifier's counters (AmpLink.stats), once it was opened."""
+        """``amplifier``: the link's and the amplifier's counters (AmpLink.stats), once it was opened."""
         result = super().stats()
         if self._last_link is not None:
             result["amplifier"] = self._last_link.stats()
