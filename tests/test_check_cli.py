@@ -109,7 +109,8 @@ def test_schema_prints_json(kind: str, capsys: pytest.CaptureFixture[str]) -> No
 def test_schema_out_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     target = tmp_path / "texture.schema.json"
     assert main(["schema", "texture", "--out", str(target)]) == 0
-    assert capsys.readouterr().out == ""
+    size = len(target.read_bytes())
+    assert capsys.readouterr().out == f"wrote the JSON Schema of texture files to {target} ({size} bytes)\n"
     assert json.loads(target.read_text()) == schema_json("texture")
 
 

@@ -36,4 +36,5 @@ def run(args: argparse.Namespace) -> int:
         Path(args.out).write_text(text, encoding="utf-8")
     except OSError as err:
         raise TpadError(f"cannot write {args.out}: {err.strerror or err}") from None
+    print(f"wrote the JSON Schema of {args.kind} files to {args.out} ({len(text.encode())} bytes)")
     return 0
