@@ -8,11 +8,10 @@ and ``texture_views`` (views without reference counts, as in the audio callback)
 per block, pushes the finger samples due by the block's end into the ring (row first, then
 count: the producer's protocol) and calls ``render_block``. Nothing crosses into Python
 between blocks, so the time measured is the kernel's. ``compile_driver(render_block)``
-makes such a ``@cfunc`` around another ``render_block`` (bench/kernel/unguarded.py: the
-kernel before its fault guard).
+makes such a ``@cfunc`` around a given ``render_block``.
 
-The ``@cfunc`` is compiled at import (about 20 s: ``render_block`` is inlined into it)
-and not cached: numba's cache would not notice a change to ``render.py``.
+The ``@cfunc`` is compiled at import (a few seconds: it calls the compiled
+``render_block``) and not cached: numba's cache would not notice a change to ``render.py``.
 """
 
 from __future__ import annotations

@@ -17,11 +17,9 @@ ns per output sample; ``x real time`` is the 192 kHz sample period over the kern
 median. The run checks that the driver's samples equal ``Pipeline.render``'s bit for
 bit and records how far the NumPy samples are from them.
 
-The fault guard's cost (docs/kernel.md "Faults"): the same driver around the kernel as it
-was before the guard (bench/kernel/unguarded.py, read from git history) renders the same
-streams, runs alternating with today's kernel; the run checks that both give the same
-samples bit for bit, and reports each one's ns per sample and the median of the paired
-ratios. Nothing here is a pass/fail threshold (docs/realtime.md "Measuring").
+Today's kernel against an earlier revision's, in paired alternating runs that also compare
+their samples: bench/kernel/compare.py. Nothing here is a pass/fail threshold
+(docs/realtime.md "Measuring").
 """
 
 from __future__ import annotations
@@ -45,8 +43,7 @@ ROOT = HERE.parents[1]
 sys.path[:0] = [str(HERE), str(ROOT / "tests")]  # the siblings; the NumPy texture reference
 
 from numpy_pipeline import NumpyPipeline  # noqa: E402
-from realtime_driver import RENDER_STREAM, compile_driver, render_stream  # noqa: E402
-from unguarded import PRE_GUARD_REVISION, load_render_block  # noqa: E402
+from realtime_driver import RENDER_STREAM, render_stream  # noqa: E402
 
 from tpad_rt.config import load_texture  # noqa: E402
 from tpad_rt.device import Device  # noqa: E402
@@ -184,55 +181,6 @@ class Case:
         }
 
 
-def paired_ns_per_sample(prepare_a: Callable[[], Run], prepare_b: Callable[[], Run], runs: int) -> dict[str, object]:
-    """ns per sample of two implementations over ``runs`` alternating runs (each figure as ns_per_sample's),
-    and the median, p10 and p90 of the per-pair ratios a / b."""
-    times: dict[str, list[float]] = {"a": [], "b": []}
-    for index in range(runs):
-        order = ("a", "b") if index % 2 == 0 else ("b", "a")
-        for name in order:
-            run = (prepare_a if name == "a" else prepare_b)()
-            start = time.perf_counter()
-            samples = run()
-            times[name].append((time.perf_counter() - start) * 1e9 / samples)
-    ratios = [a / b for a, b in zip(times["a"], times["b"])]
-
-    def figure(values: list[float]) -> dict[str, float]:
-        return {"median": statistics.median(values), "p10": float(np.percentile(values, 10)),
-                "p90": float(np.percentile(values, 90)), "runs": runs}
-
-    return {"a": figure(times["a"]), "b": figure(times["b"]), "ratio": figure(ratios)}
-
-
-#: (kind, block) pairs the guard's cost is measured at.
-GUARD_CASES = [(kind, 64) for kind in TEXTURES] + [("grating", 16), ("grating", 256), ("grating", 4096)]
-
-
-def measure_guard(plan: Plan, log: Callable[[str], None]) -> dict[str, object]:
-    """The fault guard's cost: today's kernel against the one before the guard (module docstring)."""
-    try:
-        unguarded = compile_driver(load_render_block())
-    except RuntimeError as error:
-        log(f"guard cost skipped: {error}")
-        return {"skipped": str(error)}
-    device = Device.default()
-    rows = []
-    for kind, block in GUARD_CASES:
-        case = Case(device, ROOT / "textures" / TEXTURES[kind], RenderOptions())
-        total = round(plan.agreement_s * FS_HZ / block) * block
-        guarded_out, unguarded_out = np.zeros(total, dtype=np.float32), np.zeros(total, dtype=np.float32)
-        case.kernel(block, plan.agreement_s, guarded_out)()
-        case.kernel(block, plan.agreement_s, unguarded_out, unguarded)()
-        paired = paired_ns_per_sample(lambda: case.kernel(block, plan.kernel_s),
-                                      lambda: case.kernel(block, plan.kernel_s, driver=unguarded), plan.kernel_runs)
-        rows.append({"kind": kind, "block": block, "identical": bool(np.array_equal(guarded_out, unguarded_out)),
-                     "guarded_ns_per_sample": paired["a"], "unguarded_ns_per_sample": paired["b"],
-                     "guarded_over_unguarded": paired["ratio"]})
-        log(f"guard {kind:9s} block {block:5d}: {paired['a']['median']:6.2f} ns/sample with the guard, "
-            f"{paired['b']['median']:6.2f} without (x{paired['ratio']['median']:.3f})")
-    return {"revision": PRE_GUARD_REVISION, "rows": rows}
-
-
 def measure(plan: Plan, log: Callable[[str], None]) -> dict[str, object]:
     """Every figure of the benchmark (see the module docstring)."""
     device = Device.default()
@@ -260,7 +208,7 @@ def measure(plan: Plan, log: Callable[[str], None]) -> dict[str, object]:
             kernel = ns_per_sample(lambda: case.kernel(block, plan.kernel_s), plan.kernel_runs)
             sweep.append({"control_interval": interval, "block": block, "kernel_ns_per_sample": kernel})
             log(f"grating, control_interval {interval:3d}, block {block:4d}: kernel {kernel['median']:6.2f} ns/sample")
-    return {"rows": rows, "control_interval_sweep": sweep, "guard_cost": measure_guard(plan, log)}
+    return {"rows": rows, "control_interval_sweep": sweep}
 
 
 def machine() -> dict[str, object]:
@@ -304,19 +252,6 @@ def markdown(report: dict[str, object]) -> str:
               "| control_interval | block | kernel ns/sample |", "| ---: | ---: | ---: |"]
     for row in report["control_interval_sweep"]:
         lines.append(f"| {row['control_interval']} | {row['block']} | {band(row['kernel_ns_per_sample'], 2)} |")
-    guard = report["guard_cost"]
-    if "rows" in guard:
-        lines += ["", f"Fault guard cost: today's kernel against the kernel before the guard (git {guard['revision']}), "
-                  "in alternating runs of the same streams; ratio: median (p10-p90) of the paired ratios; identical: "
-                  "both gave the same samples bit for bit.", "",
-                  "| kind | block | with guard ns/sample | without ns/sample | ratio | identical |",
-                  "| --- | ---: | ---: | ---: | ---: | --- |"]
-        for row in guard["rows"]:
-            lines.append(f"| {row['kind']} | {row['block']} | {band(row['guarded_ns_per_sample'], 2)} "
-                         f"| {band(row['unguarded_ns_per_sample'], 2)} | {band(row['guarded_over_unguarded'], 3)} "
-                         f"| {'yes' if row['identical'] else 'NO'} |")
-    else:
-        lines += ["", f"Fault guard cost: not measured ({guard['skipped']})."]
     checks = {row["kind"]: row for row in report["rows"]}
     lines += ["", "Agreement (blocks of 64): kernel driver == Pipeline.render bit for bit: "
               + ", ".join(f"{kind} {'yes' if row['driver_equals_pipeline'] else 'NO'}" for kind, row in checks.items())
