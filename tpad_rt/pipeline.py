@@ -90,7 +90,7 @@ class RenderOptions:
       command steps shorter than the smoothing time constant, a texture edge placed
       within 17 um at 100 mm/s, and the control step's cost (finger, texture, inverse
       model, limits, carrier anchor: about 90 ns for a grating) shared by 32 samples
-      (bench/results/kernel.md: 4.3 ns per sample; 7.5 at 16, 2.7 at 64).
+      (bench/results/kernel.md, grating at block 4096: 9.5 ns per sample; 15.5 at 16, 6.7 at 64).
     - ``smoothing_ms``: one-pole time constant of the commanded envelope (ms).
     - ``preemphasis``: shape the drive so the plate envelope follows the smoothing
       instead of its own ``tau``: the shaper drives a model of the envelope onto the
