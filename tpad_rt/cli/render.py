@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
