@@ -3,7 +3,8 @@
 API map
 -------
 compile_notice(console=None)
-    a context manager; inside it, the first numba compile prints one line to stderr
+    a context manager; inside it, the first compile of a kernel (``tpad_rt.kernel``)
+    prints one line to stderr
     (:data:`NOTICE`), then, on a terminal, a spinner naming each function as it compiles,
     and at the end how many it compiled and how long it took. When everything loads from
     numba's cache (every run after the first) it prints nothing. Nested uses show once.
@@ -29,6 +30,9 @@ from rich.status import Status
 #: The first line a compile prints.
 NOTICE = "tpad-rt: compiling the render kernels (first run only; numba caches them for the next runs)"
 
+#: Compiles of functions in this package are the ones the notice is about.
+KERNEL_PACKAGE = "tpad_rt.kernel"
+
 _active = threading.Lock()  # held by the outermost compile_notice
 
 
@@ -42,6 +46,8 @@ class _Notice(event.Listener):
         self.status: Status | None = None
 
     def on_start(self, compile_event: event.Event) -> None:
+        if not _is_kernel(compile_event.data):
+            return
         if self.started_s is None:
             self.started_s = time.perf_counter()
             self.console.print(NOTICE)
@@ -52,7 +58,8 @@ class _Notice(event.Listener):
             self.status.update(f"compiling {_name(compile_event.data)} ({self.compiled} functions done)")
 
     def on_end(self, compile_event: event.Event) -> None:
-        self.compiled += 1
+        if _is_kernel(compile_event.data):
+            self.compiled += 1
 
     def finish(self) -> None:
         """Stop the spinner; say what was compiled, if anything."""
@@ -63,11 +70,21 @@ class _Notice(event.Listener):
                                f"{time.perf_counter() - self.started_s:.1f} s")
 
 
+def _function(data: Any) -> Any:
+    """The Python function a compile event is about (None if it names none)."""
+    dispatcher = data.get("dispatcher") if isinstance(data, dict) else None
+    return getattr(dispatcher, "py_func", None)
+
+
+def _is_kernel(data: Any) -> bool:
+    """True for a compile of one of tpad-rt's kernels (``tpad_rt.kernel``): not the physics ufuncs a device
+    file's check compiles in a second, before any refusal of a bad argument."""
+    return str(getattr(_function(data), "__module__", "")).startswith(KERNEL_PACKAGE)
+
+
 def _name(data: Any) -> str:
     """The name of the function a compile event is about."""
-    dispatcher = data.get("dispatcher") if isinstance(data, dict) else None
-    function = getattr(dispatcher, "py_func", None)
-    return str(getattr(function, "__qualname__", "a kernel"))
+    return str(getattr(_function(data), "__qualname__", "a kernel"))
 
 
 @contextlib.contextmanager
