@@ -197,6 +197,8 @@ def stream_native(callback: str, block: int, seconds: float, gil_threads: int) -
 def _latency(rows, pushes: list[tuple[int, int]], cb) -> dict:
     """Each push's latency to the DAC time of the first block that read it, and its two parts."""
     import numpy as np
+
+    from tpad_rt.kernel import table as tab
     if not pushes or len(rows) < 2:
         return {"latency_ms": {"n": 0}}
     pushed_ns, index = np.array(pushes, dtype=np.int64).T
@@ -267,7 +269,7 @@ def startup(block: int) -> dict:
     from time import monotonic_ns
     begin_ns = monotonic_ns()
     from tpad_rt.engine import Renderer
-    from tpad_rt.kernel import callback as cb
+    from tpad_rt.kernel import table as tab
     imported_ns = monotonic_ns()
     renderer = Renderer(output=f"audio://?rate={RATE_HZ}&block={block}", texture=GRATING)
     built_ns = monotonic_ns()
@@ -292,7 +294,7 @@ def startup_play(block: int) -> dict:
     begin_ns = monotonic_ns()
     from tpad_rt import cli
     from tpad_rt.engine import Renderer
-    from tpad_rt.kernel import callback as cb
+    from tpad_rt.kernel import table as tab
     imported_ns = monotonic_ns()
     original = Renderer.start
     noted: dict = {}
