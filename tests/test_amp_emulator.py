@@ -786,7 +786,7 @@ def test_stall_trips_the_watchdog_and_status_goes_on(amps: Callable[..., Amp]) -
     info = amp.begin(16000, 0, 64)
     after = amp.info_at
     amp.stream(np.full(16000 * 20, level(5.0), dtype=np.int16), 0, until=lambda status: status.watchdog_trips)
-    status = amp.status(lambda status: status.watchdog_trips == 1 and status.state == IDLE)
+    amp.status(lambda status: status.watchdog_trips == 1 and status.state == IDLE)
     times = np.array([status.time_us for status in amp.statuses(after)], dtype=np.int64)
     assert ((np.diff(times) % 2**32) == info.status_period_ms * 1000).all()
     assert amp.finish()["watchdog_trips"] == 1

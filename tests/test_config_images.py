@@ -100,11 +100,11 @@ def test_a_texture_holds_at_most_one_4096_x_4096_image_worth_of_pixels(
 
     np.save(tmp_path / "half.npy", np.zeros((4096, 2048)))  # half the budget
     entries = "".join(
-        f"  - kind: bitmap\n    image: half.npy\n    size_mm: [130.0, 60.0]\n    friction: {{low: 0.5, high: 1.0}}\n"
+        "  - kind: bitmap\n    image: half.npy\n    size_mm: [130.0, 60.0]\n    friction: {low: 0.5, high: 1.0}\n"
         for _ in range(layers))
     (tmp_path / "t.yaml").write_text(f"kind: layers\ndescription: images\nlayers:\n{entries}")
     errors = check_file(tmp_path / "t.yaml")
-    expected = (f"layers[2].image: the texture's images hold 25,165,824 pixels with this one, more than the "
-                f"16,777,216 a texture may hold in all")
+    expected = ("layers[2].image: the texture's images hold 25,165,824 pixels with this one, more than the "
+                "16,777,216 a texture may hold in all")
     assert [error for error in errors if expected in error] == ([errors[0]] if refused else []), errors
     assert len(errors) == (1 if refused else 0), errors

@@ -128,7 +128,7 @@ def test_q_is_bounded_between_knots_not_only_at_them(tmp_path: Path) -> None:
     # Q = 1 at both knots (sqrt(L / C) = 1 and 100 ohm, R = 1 and 100 ohm), but L, C, R are
     # interpolated separately: halfway sqrt(L / C) = 10 ohm and R = 50.5 ohm, Q = 0.198.
     l_h, c_f, r_ohm = [1e-6, 1e-4], [1e-6, 1e-8], [1.0, 100.0]
-    assert [math.sqrt(l / c) / r for l, c, r in zip(l_h, c_f, r_ohm)] == pytest.approx([1.0, 1.0])
+    assert [math.sqrt(ind / cap) / r for ind, cap, r in zip(l_h, c_f, r_ohm)] == pytest.approx([1.0, 1.0])
     halfway = [float(np.mean(values)) for values in (l_h, c_f, r_ohm)]
     assert math.sqrt(halfway[0] / halfway[1]) / halfway[2] == pytest.approx(0.198, abs=1e-3)
     path = _write(tmp_path, _with({("circuit", "force_n"): [0.0, 1.0], ("circuit", "motional_l_h"): l_h,

@@ -229,7 +229,7 @@ def test_url_errors_show_the_expected_form(url: str, problem: str) -> None:
     assert str(error.value).endswith("expected mouse://?rect=screen&plate_mm=device&force_n=0.5&button=left&hover=0")
 
 
-def test_render_refuses_a_live_input_in_one_line(display: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_render_refuses_a_live_input_in_one_line(display: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:  # noqa: F811 - the fixture
     from tpad_rt.cli import main
 
     status = main(["render", "textures/grating.yaml", "--input", "mouse://", "--duration", "1",

@@ -95,10 +95,10 @@ def _parse_plate(text: str) -> Layer:
         numbers = [float(field) for field in fields[1:]]
     except ValueError:
         raise ConfigError(problem) from None
-    for number, (name, alias, unit) in zip(numbers, _PLATE_NUMBERS):
+    for value, (name, alias, unit) in zip(numbers, _PLATE_NUMBERS):
         low, high = _bounds(alias)
-        if not low <= number <= high:
-            raise ConfigError(f"--plate {text!r}: {name} must be in [{low:g}, {high:g}] {unit}, got {number:g}")
+        if not low <= value <= high:
+            raise ConfigError(f"--plate {text!r}: {name} must be in [{low:g}, {high:g}] {unit}, got {value:g}")
     return Layer(fields[0].strip(), "user", *numbers)
 
 

@@ -71,7 +71,6 @@ from tpad_rt.kernel.layout import (
     OP_BITMAP,
     OP_BUMPS,
     OP_COMBINE,
-    OP_EDGES,
     OP_GRADIENT,
     OP_GRATING,
     OP_PUSH_ONE,
