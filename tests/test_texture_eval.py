@@ -240,6 +240,64 @@ def test_layers_combine_inside_their_region_only() -> None:
     assert _at(deep, 9.0, 9.0) == layout.LAYER_FLOOR
 
 
+#: Corruptions of a compiled texture, each giving an unknown code where the kernel dispatches:
+#: (file, (array, index) to overwrite with 99, a point (x, y) (mm) where that code decides).
+_UNKNOWN_CODES = {
+    "opcode": ("grating.yaml", ("prog", (0, 0)), (5.0, 5.0)),
+    "waveform": ("grating.yaml", ("prog", (0, 2)), (5.0, 5.0)),
+    "height shape": ("gradient_bump.yaml", ("prog", (0, 2)), (60.0, 30.0)),
+    "bumps profile": ("bumps_centers.yaml", ("prog", (0, 2)), (10.5, 10.0)),
+    "edges profile": ("edges.yaml", ("prog", (0, 2)), (10.0, 20.0)),
+    "edges shape record": ("edges.yaml", ("params", 4), (10.0, 20.0)),
+    "image wrap": ("bitmap.yaml", ("params", 6), (20.0, 20.0)),
+    "combine op": ("layers.yaml", ("prog", (-1, 2)), None),
+    "combine region": ("layers.yaml", ("prog", (-1, 3)), None),
+}
+
+
+@pytest.mark.parametrize("case", _UNKNOWN_CODES)
+def test_an_unknown_code_in_a_program_is_nan_not_another_case(case: str) -> None:
+    """A corrupt program must reach the render kernel as a texture fault (NaN), never as some other
+    layer's value: every dispatch matches its codes explicitly."""
+    name, (array, index), point = _UNKNOWN_CODES[case]
+    compiled = compile_texture(load_texture(GOOD / name))
+    arrays = {"prog": compiled.prog.copy(), "params": compiled.params.copy()}
+    if point is None:  # the last combine: somewhere inside its region
+        point = _inside_last_region(compiled)
+    x = np.array([point[0]])
+    y = np.array([point[1]])
+    good = kernel_friction(compiled, x, y, 0.0, 0.0, 0.0)
+    assert np.isfinite(good).all(), "the point must evaluate before the corruption"
+    arrays[array][index] = 99
+    corrupt = CompiledTexture(arrays["prog"], arrays["params"], compiled.img, compiled.stack_depth,
+                              compiled.kind, compiled.description)
+    assert np.isnan(kernel_friction(corrupt, x, y, 0.0, 0.0, 0.0)).all()
+
+
+def _inside_last_region(compiled: CompiledTexture) -> tuple[float, float]:
+    """A plate point inside the region of the program's last combine row (rect or circle: its first corner
+    or centre, or (0, 0) for everywhere)."""
+    o, region = int(compiled.prog[-1, 1]), int(compiled.prog[-1, 3])
+    if region == layout.SHAPE_EVERYWHERE:
+        return 0.0, 0.0
+    return float(compiled.params[o]), float(compiled.params[o + 1])
+
+
+def test_a_layer_that_cannot_be_evaluated_is_nan_through_min_and_max() -> None:
+    """``min``/``max`` would drop a NaN layer and keep the other: the combine passes it on."""
+    for op in ("min", "max", "multiply", "add"):
+        spec = {"kind": "layers", "layers": [
+            {"kind": "grating", "period_mm": 2.0, "friction": {"low": 0.4, "high": 0.9}},
+            {"kind": "temporal", "frequency_hz": 1, "friction": {"low": 0.5, "high": 0.5}, "op": op},
+        ]}
+        compiled = compile_texture(texture_model({"description": "test", **spec}))
+        prog = compiled.prog.copy()
+        prog[np.flatnonzero(prog[:, 0] == layout.OP_GRATING)[0], 2] = 99  # the grating's waveform
+        corrupt = CompiledTexture(prog, compiled.params, compiled.img, compiled.stack_depth,
+                                  compiled.kind, compiled.description)
+        assert np.isnan(kernel_friction(corrupt, 1.0, 1.0, 0.0, 0.0, 0.0)).all(), op
+
+
 # --- real-time rules ------------------------------------------------------------
 
 

@@ -10,8 +10,10 @@ eval_texture_points(prog, params, img, stack, x_mm, y_mm, ux, uy, t_s, out) -> N
 waveform(code, phase, duty) -> float
     one period of a ``WAVE_*`` waveform, in [0, 1]
 
-``eval_texture`` and its helpers are ``inline="always"``: a kernel calling it gets the
-program loop compiled into its own body. Measured along a smooth finger path with
+``eval_texture`` and its helpers are ordinary numba functions without the reference-counted
+runtime (``_kernel`` below), which LLVM inlines into a kernel calling them. Every opcode and
+record code is matched explicitly: an unknown one gives NaN, never another case's value.
+Measured (before that change) along a smooth finger path with
 ``numba.carray`` arrays (2-core CI machine class): 4-16 ns per call for one grating,
 bitmap, gradient, bumps or temporal row (a sine costs ~11 ns of that), ~35 ns for four
 edges outlines, 27-51 ns for the example layers textures.
@@ -64,27 +66,34 @@ from tpad_rt.kernel.layout import (
     COMBINE_MAX,
     COMBINE_MIN,
     COMBINE_MULTIPLY,
+    COMBINE_REPLACE,
     HEIGHT_BUMP,
+    HEIGHT_IMAGE,
     HEIGHT_RIDGE,
     HEIGHT_SINE,
     LAYER_FLOOR,
     OP_BITMAP,
     OP_BUMPS,
     OP_COMBINE,
+    OP_EDGES,
     OP_GRADIENT,
     OP_GRATING,
     OP_PUSH_ONE,
     OP_TEMPORAL,
     PROFILE_COSINE,
+    PROFILE_DISK,
     PROFILE_GAUSSIAN,
     PROFILE_STEP,
     SHAPE_CIRCLE,
     SHAPE_EVERYWHERE,
+    SHAPE_LINE,
     SHAPE_RECORD_SIZE,
     SHAPE_RECT,
     WAVE_SAWTOOTH,
     WAVE_SINE,
     WAVE_SQUARE,
+    WAVE_TRIANGLE,
+    WRAP_CLAMP,
     WRAP_TILE,
 )
 
@@ -105,7 +114,7 @@ def waveform(code: int, phase: float, duty: float) -> float:
 
     sine ``0.5 + 0.5 sin(2 pi p)``; square 1 while ``p < duty``; triangle rising over
     ``duty``, then falling; sawtooth ``p``. At ``phase == 1`` each gives its limit from
-    below. ``duty`` is in (0, 1).
+    below. ``duty`` is in (0, 1). NaN for an unknown ``code`` (a fault, never a guess).
     """
     if code == WAVE_SINE:
         return 0.5 + 0.5 * math.sin(_TWO_PI * phase)
@@ -113,9 +122,11 @@ def waveform(code: int, phase: float, duty: float) -> float:
         return 1.0 if phase < duty else 0.0
     if code == WAVE_SAWTOOTH:
         return phase
-    if phase < duty:
-        return phase / duty
-    return (1.0 - phase) / (1.0 - duty)
+    if code == WAVE_TRIANGLE:
+        if phase < duty:
+            return phase / duty
+        return (1.0 - phase) / (1.0 - duty)
+    return math.nan
 
 
 @_kernel
@@ -151,7 +162,8 @@ def _temporal(params: np.ndarray, o: int, code: int, t_s: float) -> float:
 
 @_kernel
 def _pixel_pair(index: int, size: int, wrap: float) -> tuple[int, int]:
-    """Indices of pixel ``index`` and the next one along a side of ``size`` pixels, wrapped."""
+    """Indices of pixel ``index`` and the next one along a side of ``size`` pixels, wrapped (tiled,
+    else clamped: :func:`_image_cell` admits only the two)."""
     if wrap == WRAP_TILE:
         first = index % size
         return first, (first + 1) % size
@@ -167,12 +179,13 @@ def _image_cell(
     Returns ``(v00, v10, v01, v11, tx, ty)``: the four pixel values (``v10`` one pixel
     to the right of ``v00``, ``v01`` one below) and the point's fractions across the
     cell. Pixel ``i`` has its centre at ``ox + (i + 0.5) / px_per_mm``. A pixel position
-    that is not finite or beyond 2**52, or an image that does not fit in ``img`` (a
-    corrupt record), gives NaN values: no index is made from them.
+    that is not finite or beyond 2**52, or an image that does not fit in ``img`` or has an
+    unknown ``WRAP_*`` (a corrupt record), gives NaN values: no index is made from them.
     """
     fx = (x_mm - params[o]) * params[o + 2] - 0.5
     fy = (y_mm - params[o + 1]) * params[o + 3] - 0.5
-    fits = 1.0 <= params[o + 4] <= img.shape[0] and 1.0 <= params[o + 5] <= img.shape[0]
+    fits = (1.0 <= params[o + 4] <= img.shape[0] and 1.0 <= params[o + 5] <= img.shape[0]
+            and (params[o + 6] == WRAP_TILE or params[o + 6] == WRAP_CLAMP))
     if not (fits and abs(fx) < _MAX_PIXEL_INDEX and abs(fy) < _MAX_PIXEL_INDEX
             and 0 <= img_offset <= img.shape[0] - int(params[o + 4]) * int(params[o + 5])):
         return math.nan, math.nan, math.nan, math.nan, 0.0, 0.0
@@ -260,8 +273,10 @@ def _gradient(
         slope = _ridge_slope(params, h, x_mm, y_mm, ux, uy)
     elif shape == HEIGHT_SINE:
         slope = _sine_slope(params, h, x_mm, y_mm, ux, uy)
-    else:
+    elif shape == HEIGHT_IMAGE:
         slope = _image_slope(params, h, img, img_offset, x_mm, y_mm, ux, uy)
+    else:
+        return math.nan
     return min(max(params[o] + params[o + 1] * slope, params[o + 2]), params[o + 3])
 
 
@@ -319,8 +334,10 @@ def _bumps(params: np.ndarray, o: int, profile: int, n: int, x_mm: float, y_mm: 
         weight = 0.5 + 0.5 * math.cos(math.pi * q)
     elif profile == PROFILE_GAUSSIAN:
         weight = math.exp(-2.0 * q * q)
-    else:
+    elif profile == PROFILE_DISK:
         weight = 1.0
+    else:
+        return math.nan
     return params[o + 1] + (params[o] - params[o + 1]) * weight
 
 
@@ -337,8 +354,10 @@ def _outline_distance(params: np.ndarray, r: int, x_mm: float, y_mm: float) -> f
         return abs(math.hypot(x_mm - params[r + 1], y_mm - params[r + 2]) - params[r + 3])
     ax = x_mm - params[r + 1]
     ay = y_mm - params[r + 2]
-    t = min(max((ax * params[r + 3] + ay * params[r + 4]) * params[r + 5], 0.0), 1.0)
-    return math.hypot(ax - t * params[r + 3], ay - t * params[r + 4])
+    if code == SHAPE_LINE:
+        t = min(max((ax * params[r + 3] + ay * params[r + 4]) * params[r + 5], 0.0), 1.0)
+        return math.hypot(ax - t * params[r + 3], ay - t * params[r + 4])
+    return math.nan
 
 
 @_kernel
@@ -346,30 +365,40 @@ def _edges(params: np.ndarray, o: int, profile: int, n: int, x_mm: float, y_mm: 
     """Edges friction from the nearest outline: the band ``d <= width/2``, step or raised cosine."""
     d_mm = math.inf
     for k in range(n):
-        d_mm = min(d_mm, _outline_distance(params, o + 4 + k * SHAPE_RECORD_SIZE, x_mm, y_mm))
+        outline_mm = _outline_distance(params, o + 4 + k * SHAPE_RECORD_SIZE, x_mm, y_mm)
+        if not outline_mm >= 0.0:
+            return math.nan  # an unknown shape record (min() would drop the NaN)
+        d_mm = min(d_mm, outline_mm)
     if d_mm > params[o + 2]:
         return params[o + 1]
     if profile == PROFILE_STEP:
         return params[o]
-    weight = 0.5 + 0.5 * math.cos(params[o + 3] * d_mm)
-    return params[o + 1] + (params[o] - params[o + 1]) * weight
+    if profile == PROFILE_COSINE:
+        weight = 0.5 + 0.5 * math.cos(params[o + 3] * d_mm)
+        return params[o + 1] + (params[o] - params[o + 1]) * weight
+    return math.nan
 
 
 @_kernel
-def _in_region(params: np.ndarray, o: int, shape: int, x_mm: float, y_mm: float) -> bool:
-    """Whether a point lies in a layer's region (edges included)."""
+def _in_region(params: np.ndarray, o: int, shape: int, x_mm: float, y_mm: float) -> int:
+    """1 where a point lies in a layer's region (edges included), 0 where not, -1 for an unknown ``shape``."""
     if shape == SHAPE_EVERYWHERE:
-        return True
+        return 1
     if shape == SHAPE_RECT:
-        return params[o] <= x_mm <= params[o + 2] and params[o + 1] <= y_mm <= params[o + 3]
-    dx = x_mm - params[o]
-    dy = y_mm - params[o + 1]
-    return dx * dx + dy * dy <= params[o + 2]
+        return int(params[o] <= x_mm <= params[o + 2] and params[o + 1] <= y_mm <= params[o + 3])
+    if shape == SHAPE_CIRCLE:
+        dx = x_mm - params[o]
+        dy = y_mm - params[o + 1]
+        return int(dx * dx + dy * dy <= params[o + 2])
+    return -1
 
 
 @_kernel
 def _combine(op: int, result: float, layer: float) -> float:
-    """``op(result, layer)`` clamped to ``[LAYER_FLOOR, 1]``; replace returns ``layer``."""
+    """``op(result, layer)`` clamped to ``[LAYER_FLOOR, 1]``; replace returns ``layer``. NaN for an unknown
+    ``op``, or when either value is NaN (a layer's fault must reach the render kernel: ``min`` would drop it)."""
+    if math.isnan(result) or math.isnan(layer):
+        return math.nan
     if op == COMBINE_MULTIPLY:
         value = result * layer
     elif op == COMBINE_MIN:
@@ -378,8 +407,10 @@ def _combine(op: int, result: float, layer: float) -> float:
         value = max(result, layer)
     elif op == COMBINE_ADD:
         value = result + layer - 1.0
-    else:
+    elif op == COMBINE_REPLACE:
         value = layer
+    else:
+        return math.nan
     return min(max(value, LAYER_FLOOR), 1.0)
 
 
@@ -402,7 +433,9 @@ def eval_texture(
     ``(ux, uy)`` the unit direction of finger motion in plate coordinates ((0, 0) when
     still); ``t_s`` seconds since the texture was set. Allocates nothing. The value is
     in (0, 1] for a program from ``tpad_rt.texture``; the caller clamps it to
-    ``[mu_floor, 1]``.
+    ``[mu_floor, 1]``. NaN for a corrupt program (an unknown opcode, or an unknown code in
+    a record) or a point no layer can evaluate: the render kernel counts it as a texture
+    fault and ramps the drive down.
     """
     sp = 0
     for row in range(prog.shape[0]):
@@ -412,8 +445,11 @@ def eval_texture(
         aux1 = prog[row, 3]
         if op == OP_COMBINE:
             sp -= 1
-            if _in_region(params, o, aux1, x_mm, y_mm):
+            inside = _in_region(params, o, aux1, x_mm, y_mm)
+            if inside == 1:
                 stack[sp - 1] = _combine(aux0, stack[sp - 1], stack[sp])
+            elif inside == -1:
+                stack[sp - 1] = math.nan
             continue
         if op == OP_GRATING:
             value = _grating(params, o, aux0, x_mm, y_mm)
@@ -427,8 +463,10 @@ def eval_texture(
             value = _gradient(params, o, aux0, img, aux1, x_mm, y_mm, ux, uy)
         elif op == OP_BUMPS:
             value = _bumps(params, o, aux0, aux1, x_mm, y_mm)
-        else:
+        elif op == OP_EDGES:
             value = _edges(params, o, aux0, aux1, x_mm, y_mm)
+        else:
+            value = math.nan  # an unknown opcode: a texture fault, never another layer's guess
         stack[sp] = value
         sp += 1
     return stack[0]
