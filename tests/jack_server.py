@@ -1,7 +1,7 @@
 """A real JACK server (dummy backend) for the audio tests, started and stopped by PID.
 
 ``jack_server(rate_hz, period_frames, sync=False)`` is a context manager around
-:func:`tpad_rt.jackd.dummy_server` (which starts ``jackd -n NAME [-S] -p 16 -d dummy -r
+:func:`jackd.dummy_server` (which starts ``jackd -n NAME [-S] -p 16 -d dummy -r
 RATE -p PERIOD`` with a NAME no running server has and stops it by PID): it skips the test
 without jackd or PortAudio (fails it under TPAD_RT_REQUIRE_SYSTEM=1), points clients
 at the server (``JACK_DEFAULT_SERVER``), re-initialises PortAudio so the JACK host API
@@ -26,7 +26,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from conftest import require_program, require_system
-from tpad_rt.jackd import RunningServer, dummy_server
+from jackd import RunningServer, dummy_server
 from tpad_rt.outputs import audio
 
 

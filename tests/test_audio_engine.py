@@ -23,7 +23,7 @@ from jack_server import jack_server, kill_server_under
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError
-from tpad_rt.jackd import playback_latency_frames
+from jackd import playback_latency_frames
 from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel import table as tab
 from tpad_rt.outputs import audio

@@ -23,7 +23,7 @@ from jack_server import jack_server, server_process, wait_until_playing
 from tpad_rt.engine import Renderer
 from tpad_rt.limits import MAX_STALL_TIMEOUT_S
 from tpad_rt.errors import ConfigError
-from tpad_rt.jackd import RunningServer, stop_process
+from jackd import RunningServer, stop_process
 
 REPO = Path(__file__).resolve().parents[1]
 GRATING = REPO / "textures" / "grating.yaml"

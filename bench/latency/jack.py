@@ -1,6 +1,6 @@
 """A JACK dummy server and CPU hogs for the latency benchmark, started and stopped by PID.
 
-``jack_server(rate_hz, period_frames)`` runs :func:`tpad_rt.jackd.dummy_server` under
+``jack_server(rate_hz, period_frames)`` runs the tests' :func:`jackd.dummy_server` (tests/jackd.py) under
 the names ``tpadrt-bench-0..3``, in JACK's synchronous mode (``-S``) unless
 ``sync=False``, and yields an environment for child processes
 (``JACK_DEFAULT_SERVER=NAME``). This process never loads PortAudio: every measured
@@ -20,7 +20,11 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from tpad_rt.errors import BackendError
-from tpad_rt.jackd import dummy_server, stop_process
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))  # tests/jackd.py: test and bench infrastructure
+from jackd import dummy_server, playback_latency_frames, stop_process  # noqa: E402
+
+__all__ = ["cpu_hogs", "jack_server", "playback_latency_frames", "wait_for_no_clients"]
 
 
 @contextlib.contextmanager

@@ -55,9 +55,7 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 
-from jack import cpu_hogs, jack_server, wait_for_no_clients  # noqa: E402
-
-from tpad_rt.jackd import playback_latency_frames  # noqa: E402
+from jack import cpu_hogs, jack_server, playback_latency_frames, wait_for_no_clients  # noqa: E402
 
 RATE_HZ = 192000
 COMPUTE_BLOCKS = (16, 32, 64, 256)
