@@ -56,7 +56,7 @@ from tpad_rt.amp.emulator import (
     Amplifier, Circuit, Emulator, FaultPlan, Plate, Port, Recorder, amplifier_info, check_record_path, sim_rate_hz,
     write_recording,
 )
-from tpad_rt.cli.arguments import number, whole
+from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.limits import MAX_INPUT_S
@@ -124,7 +124,7 @@ def fault_plan(specs: list[tuple[str, tuple[float, ...]]], seed: int) -> FaultPl
     )
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_parser(subparsers: Subparsers) -> None:
     """Register ``amp`` and its action ``emulate``."""
     parser = subparsers.add_parser(
         "amp",

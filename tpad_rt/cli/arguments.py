@@ -6,6 +6,8 @@ number(low, low_closed, high=inf, what="") -> type
     a finite number above ``low`` (or equal, when ``low_closed``), at most ``high``
 whole(high, what, low=1) -> type
     a whole number in ``[low, high]``
+Subparsers
+    the type of ``ArgumentParser.add_subparsers()``, which each subcommand's ``add_parser`` takes
 
 ``what`` (the unit, or why the bound) is shown in the message: ``argument --rate: must be
 a whole number in [1, 768000] (Hz, the highest rate tpad-rt runs at), got '1e9'``.
@@ -16,7 +18,11 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable
+from typing import TypeAlias
 
+#: argparse names the type ``add_subparsers()`` returns only privately, and documents no public
+#: base for it: this alias is the one place the private name appears.
+Subparsers: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
 
 def whole(high: int, what: str, low: int = 1) -> Callable[[str], int]:
     """An argparse type: a whole number in [``low``, ``high``] (``what`` says what the bound is)."""

@@ -13,11 +13,12 @@ import argparse
 from rich.console import Console
 from rich.text import Text
 
+from tpad_rt.cli.arguments import Subparsers
 from tpad_rt.config import DeviceFile, TextureFile, load_any
 from tpad_rt.errors import ConfigError
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_parser(subparsers: Subparsers) -> None:
     """Register ``check``."""
     parser = subparsers.add_parser(
         "check",

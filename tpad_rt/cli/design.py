@@ -20,7 +20,7 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
-from tpad_rt.cli.arguments import number, whole
+from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.config.device_schema import DensityGCm3, ModeM, PlateSideMm, ThicknessMm, YoungsModulusGpa
 from tpad_rt.errors import ConfigError
 from tpad_rt.physics import plate
@@ -47,7 +47,7 @@ _FOOTNOTE = (
 )
 
 
-def add_parser(subparsers: Any) -> None:
+def add_parser(subparsers: Subparsers) -> None:
     """Register ``tpad-rt design``."""
     parser = subparsers.add_parser(
         "design",

@@ -13,11 +13,12 @@ import argparse
 
 from serial.tools import list_ports
 
+from tpad_rt.cli.arguments import Subparsers
 from tpad_rt.errors import BackendError
 from tpad_rt.outputs import audio
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_parser(subparsers: Subparsers) -> None:
     """Register ``devices``."""
     parser = subparsers.add_parser(
         "devices",

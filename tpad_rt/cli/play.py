@@ -40,7 +40,7 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from tpad_rt.cli.arguments import number
+from tpad_rt.cli.arguments import Subparsers, number
 from tpad_rt.cli.render import add_session_arguments
 from tpad_rt.compiling import compile_notice
 from tpad_rt.device import Device
@@ -78,7 +78,7 @@ class Choice:
         return f"{self.url} ({self.reason})" if self.reason else self.url
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_parser(subparsers: Subparsers) -> None:
     """Register ``play``."""
     parser = subparsers.add_parser(
         "play",
@@ -86,10 +86,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Render TEXTURE in real time for the finger of --input on --output, with a live status "
         "panel; Ctrl-C stops with a ramp and prints a summary.",
     )
-    add_session_arguments(parser, input_default="auto", max_duration_s=MAX_INPUT_S)
-    _redefault(parser, "--input", "auto", f"finger input URL, or auto: mouse:// with an X display, else {AUTO_SWIPE}")
-    _redefault(parser, "--output", "auto", "output URL (audio://[device]?..., sim://, null://), or auto: an audio "
-               "device that accepts --rate (JACK first), else sim://")
+    add_session_arguments(
+        parser, input_default="auto", max_duration_s=MAX_INPUT_S,
+        input_help=f"finger input URL, or auto: mouse:// with an X display, else {AUTO_SWIPE}",
+        output_default="auto", output_help="output URL (audio://[device]?..., sim://, null://), or auto: an audio "
+        "device that accepts --rate (JACK first), else sim://")
     parser.add_argument("--record", metavar="FILE.npz",
                         help="also write a recording (the format of render); it keeps at most "
                         f"{MAX_RECORDING_SAMPLES:,} drive samples ({MAX_RECORDING_SAMPLES // 192000} s at 192 kHz), "
@@ -98,12 +99,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="an audio stream without a callback for S seconds has stalled (a hung device or a "
                         "stopped JACK server): play ends with an error (default 0.5)")
     parser.set_defaults(func=run)
-
-
-def _redefault(parser: argparse.ArgumentParser, option: str, default: str, help_text: str) -> None:
-    """Give the shared ``option`` play's own default and help."""
-    action = parser._option_string_actions[option]
-    action.default, action.help = default, f"{help_text} (default {default})"
 
 
 def choose_output(requested: str, rate_hz: int) -> Choice:

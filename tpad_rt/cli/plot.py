@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from tpad_rt.cli.arguments import Subparsers
 from tpad_rt.errors import BackendError, ConfigError, printable
 from tpad_rt.files import check_writable_target, ensure_regular
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
@@ -29,7 +30,7 @@ _TARGET, _ACHIEVED, _LIMIT, _AVERAGE = "#1f5fa8", "#e07b00", "#c0392b", "#6a3d9a
 _SATURATED, _LIFTED, _DEPARTED = "#e74c3c", "#7f8c8d", "#8e44ad"
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_parser(subparsers: Subparsers) -> None:
     """Register ``plot``."""
     parser = subparsers.add_parser(
         "plot",

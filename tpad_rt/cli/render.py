@@ -31,7 +31,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
 
 from tpad_rt import __version__
-from tpad_rt.cli.arguments import number, whole
+from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.compiling import compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
@@ -50,24 +50,27 @@ from tpad_rt.recording import Recording, write_recording
 from tpad_rt.texture import CompiledTexture, load_compiled
 
 DEFAULT_OUTPUT = "sim://"
+INPUT_HELP = "finger input, e.g. scripted://swipe?speed_mm_s=100 or file:///path/trajectory.csv"
+OUTPUT_HELP = "output: sim://, wav:///path/out.wav or null://"
 #: Highest --power-budget and --power-avg (W): the highest power_budget_w a device file may give.
 MAX_POWER_W = 1000.0
 
 
-def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str | None,
-                          max_duration_s: float = MAX_RENDER_S) -> None:
+def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str | None = None,
+                          input_help: str = INPUT_HELP, output_default: str = DEFAULT_OUTPUT,
+                          output_help: str = OUTPUT_HELP, max_duration_s: float = MAX_RENDER_S) -> None:
     """The arguments ``render`` and ``play`` share (``--input`` required when ``input_default`` is None).
 
-    ``--duration`` is bounded by ``max_duration_s`` (s); ``--rate`` and ``--block`` by
-    MAX_RATE_HZ and MAX_BLOCK_FRAMES.
+    ``input_help`` and ``output_help`` describe ``--input`` and ``--output`` (their defaults
+    are appended); ``--duration`` is bounded by ``max_duration_s`` (s); ``--rate`` and
+    ``--block`` by MAX_RATE_HZ and MAX_BLOCK_FRAMES.
     """
     parser.add_argument("texture", metavar="TEXTURE", help="texture file (YAML)")
     parser.add_argument("--device", metavar="FILE", help="device file (default: calibration/default.yaml)")
     parser.add_argument("--input", metavar="URL", required=input_default is None, default=input_default,
-                        help="finger input, e.g. scripted://swipe?speed_mm_s=100 or file:///path/trajectory.csv"
-                        + (f" (default {input_default})" if input_default else ""))
-    parser.add_argument("--output", metavar="URL", default=DEFAULT_OUTPUT,
-                        help=f"output: sim://, wav:///path/out.wav or null:// (default {DEFAULT_OUTPUT})")
+                        help=input_help + (f" (default {input_default})" if input_default else ""))
+    parser.add_argument("--output", metavar="URL", default=output_default,
+                        help=f"{output_help} (default {output_default})")
     parser.add_argument("--rate", metavar="HZ", type=whole(MAX_RATE_HZ, "Hz, the highest rate tpad-rt runs at"),
                         default=192000, help=f"sample rate, at most {MAX_RATE_HZ} Hz (default 192000)")
     parser.add_argument("--block", metavar="N", type=whole(MAX_BLOCK_FRAMES, "frames"), default=64,
@@ -84,7 +87,7 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
                         "input's")
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_parser(subparsers: Subparsers) -> None:
     """Register ``render``."""
     parser = subparsers.add_parser(
         "render",
@@ -92,7 +95,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Render TEXTURE for the finger path of --input, faster than real time, into --out "
         "(.npz: recording with telemetry and the simulated plate; .wav: the drive).",
     )
-    add_session_arguments(parser, input_default=None)
+    add_session_arguments(parser)
     parser.add_argument("--out", metavar="FILE", required=True,
                         help=f"FILE.npz (recording, at most {MAX_RECORDING_SAMPLES:,} drive samples: "
                         f"{MAX_RECORDING_SAMPLES // 192000} s at 192 kHz) or FILE.wav (drive)")

@@ -7,12 +7,13 @@ import json
 import sys
 from pathlib import Path
 
+from tpad_rt.cli.arguments import Subparsers
 from tpad_rt.config.json_schema import SCHEMA_KINDS, schema_json
 from tpad_rt.errors import TpadError
 from tpad_rt.files import check_writable_target
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_parser(subparsers: Subparsers) -> None:
     """Register ``schema``."""
     parser = subparsers.add_parser(
         "schema",

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
+from tpad_rt.cli.arguments import Subparsers
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, printable
 from tpad_rt.files import check_writable_target
@@ -78,7 +79,7 @@ class PlateMaps:
         return 100.0 * float(np.mean(self.saturated))
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> None:
+def add_parser(subparsers: Subparsers) -> None:
     """Register ``show``."""
     parser = subparsers.add_parser(
         "show",

@@ -153,7 +153,8 @@ def _stop(listener: Any) -> None:
     for _ in range(_STOP_ATTEMPTS):
         if not listener.is_alive():
             break
-        context = getattr(listener, "_context", None)  # None: not recording yet, it ends by itself
+        # pynput's private RECORD context (see _listener_class); None: not recording yet, it ends by itself
+        context = getattr(listener, "_context", None)
         if context is not None:
             display = Xlib.display.Display()
             display.set_error_handler(_ignore_x_error)  # BadContext: the context is already gone
@@ -208,6 +209,11 @@ def _listener_class() -> Any:
     or its thread has ended; an error that ends the thread is re-raised by ``join()``
     (pynput only does that for errors in callbacks). Raises BackendError when pynput
     cannot load.
+
+    Private pynput names, used here and in :func:`_stop` only, because pynput offers no
+    public way: ``_handler`` (its xorg backend's RECORD callback, the only place the
+    StartOfData reply is seen), ``_queue`` (where ``join()`` finds the error it
+    re-raises) and ``_context`` (the RECORD context to disable).
     """
     try:
         from pynput import mouse

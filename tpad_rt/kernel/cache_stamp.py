@@ -36,6 +36,8 @@ def stamp_cache(module_file: str, *sources: str | Path) -> tuple[Path, ...]:
 
         return Locator
 
+    # numba has no public way to add a cache locator: its own locators are found through this
+    # private list, and this function is the only place it is touched.
     caching.CacheImpl._locator_classes[:0] = [
         stamped(base)
         for base in (caching.UserProvidedCacheLocator, caching.InTreeCacheLocator, caching.UserWideCacheLocator)

@@ -177,7 +177,9 @@ COMPILED_SOURCES = stamp_cache(__file__, layout.__file__, texture_eval.__file__,
 
 # error_model="numpy": a division by zero gives inf/nan instead of raising, so no
 # exception checks are compiled in (nothing here may raise inside an audio callback).
-# _nrt=False: without numba's reference-counted runtime (nothing here allocates), a call
+# _nrt=False (numba's one option, private, that turns its runtime off for a function; these two
+# decorators and texture_eval's are the only places it is used): without numba's
+# reference-counted runtime (nothing here allocates), a call
 # passing arrays costs no reference-count calls, so the helpers are ordinary functions
 # that LLVM inlines. Inlining them at numba IR level instead (inline="always") made the
 # first compile 24 s for render_block and 60 s more for the audio @cfunc it was inlined

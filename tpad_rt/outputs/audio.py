@@ -86,6 +86,10 @@ def portaudio() -> tuple[Any, Any]:
     """``(ffi, lib)``: sounddevice's cffi handle on the PortAudio library (initialised).
 
     Raises BackendError when PortAudio is missing (sounddevice raises OSError then).
+    sounddevice's ``_ffi`` and ``_lib`` are private, but its public stream classes take
+    only Python callbacks (which the audio thread must never run: docs/realtime.md);
+    python-rtmixer reaches the same handles to pass a C callback. This function is the
+    only place they are read.
     """
     try:
         import sounddevice
@@ -112,6 +116,7 @@ def rescan_devices() -> None:
 
     _require_no_lost_stream()
     portaudio()
+    # sounddevice has no public re-scan; its docs give these two private calls for it.
     sounddevice._terminate()
     sounddevice._initialize()
 
@@ -278,6 +283,7 @@ class AudioStream:
 
         _ABANDONED.append(self._stream)
         self._stream = None
+        # sounddevice registers this private handler at import, with no public way to skip it.
         atexit.unregister(sounddevice._exit_handler)
 
     def time_s(self) -> float:
