@@ -38,7 +38,7 @@ from tpad_rt.limits import MAX_TRAJECTORY_BYTES
 
 PEAK_MB = 500
 GRATING = str(REPO / "textures" / "grating.yaml")
-DEFAULT_DEVICE = (REPO / "calibration" / "default.yaml").read_text()
+DEFAULT_DEVICE = (REPO / "tpad_rt" / "devices" / "default.yaml").read_text()
 BAD_FILES = REPO / "tests" / "bad_files"
 SWIPE = "scripted://swipe?speed_mm_s=100"
 SHORT = "scripted://still?duration_s=0.01"
@@ -228,7 +228,7 @@ CASES: list[tuple[str, Build, str]] = [
     ("dev-speed-floor-nan-render",
      lambda t: render(t, "--device", device(t, "speed_floor_mm_s: 5.0", "speed_floor_mm_s: .nan")),
      "speed_floor_mm_s: must be a finite number, got nan"),
-    ("dev-is-a-texture-as-texture", lambda t: render(t, texture_path=str(REPO / "calibration" / "default.yaml")),
+    ("dev-is-a-texture-as-texture", lambda t: render(t, texture_path=str(REPO / "tpad_rt" / "devices" / "default.yaml")),
      "default.yaml: kind: required key missing"),
 
     # family 1: bad finger samples through the inputs

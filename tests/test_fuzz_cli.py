@@ -50,7 +50,7 @@ from cli_run import REPO, Run, tpad_rt, warm_numba_cache
 from tpad_rt.errors import printable
 
 TEXTURES = sorted((REPO / "textures").glob("*.yaml")) + sorted((REPO / "tests" / "good_files").glob("*.yaml"))
-DEVICES = sorted((REPO / "calibration").glob("*.yaml"))
+DEVICES = sorted((REPO / "tpad_rt" / "devices").glob("*.yaml"))
 GRATING = str(REPO / "textures" / "grating.yaml")
 IS_ROOT = os.geteuid() == 0
 

@@ -18,7 +18,7 @@ from tpad_rt.kernel.render import render_block
 from tpad_rt.pipeline import KernelArrays, Pipeline, RenderOptions, device_tables, force_grid
 from tpad_rt.texture import compile_texture
 
-CALIBRATION = Path(__file__).resolve().parents[1] / "calibration"
+CALIBRATION = Path(__file__).resolve().parents[1] / "tpad_rt" / "devices"
 
 
 def pipeline(**options: object) -> Pipeline:

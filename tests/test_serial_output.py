@@ -37,7 +37,7 @@ from tpad_rt.recording import read_recording
 
 GRATING = REPO / "textures" / "grating.yaml"
 DEVICE = Device.default()
-DEFAULT_DEVICE = REPO / "calibration" / "default.yaml"
+DEFAULT_DEVICE = REPO / "tpad_rt" / "devices" / "default.yaml"
 SERIAL_HOST = Path(__file__).resolve().parent / "serial_host.py"
 PYTHON_WRITER = Path(__file__).resolve().parent / "python_serial_writer.py"
 #: Samples the streamer's amplifier may miss under GIL load beyond the idle run of the same test (10 ms at

@@ -2,7 +2,7 @@
 
 A :class:`Device` is built from a device file (docs/formats.md "Device files") by
 :meth:`Device.from_file`, from an already validated :class:`tpad_rt.config.DeviceFile`
-by :meth:`Device.from_spec`, or from ``calibration/default.yaml`` by
+by :meth:`Device.from_spec`, or from the shipped ``devices/default.yaml`` by
 :meth:`Device.default`. Its methods evaluate the force-dependent tables (linear
 interpolation, clamped at the table ends; vectorised over ``force_n``): these are
 what the real-time kernel tabulates. :meth:`Device.plate_amplitude_m` runs a drive
@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from tpad_rt import shipped
 from tpad_rt.config import DeviceFile, load_device
 from tpad_rt.config.breadcrumb import breadcrumb
 from tpad_rt.errors import ConfigError
@@ -26,7 +27,6 @@ from tpad_rt.physics import electromech
 from tpad_rt.physics._validate import FloatOrArray, checked, finite, non_negative
 
 #: Where the device files of the paper's TPaDs live (in the source tree).
-CALIBRATION_DIR = Path(__file__).resolve().parents[1] / "calibration"
 
 #: Forces spread evenly over the tables at which :meth:`Device.derived_problems` checks (besides the knots).
 DERIVED_CHECK_POINTS = 4097
@@ -155,13 +155,12 @@ class Device:
 
     @classmethod
     def default(cls) -> Device:
-        """The default device, ``calibration/default.yaml`` (SLG_0.56); ConfigError if it is missing."""
-        path = CALIBRATION_DIR / "default.yaml"
+        """The default device, the package's ``devices/default.yaml`` (SLG_0.56); ConfigError if it is missing
+        (a broken installation)."""
+        path = shipped.DEFAULT_DEVICE
         if not path.is_file():
-            raise ConfigError(
-                f"{path}: default device file not found (it ships in the source tree's calibration/ folder); "
-                "pass a device file instead"
-            )
+            raise ConfigError(f"{path}: the default device file is missing from the installed package "
+                              "(reinstall tpad-rt); pass a device file instead")
         return cls.from_file(path)
 
     def amplitude_m_per_v(self, force_n: npt.ArrayLike) -> FloatOrArray:

@@ -13,7 +13,7 @@ up to 256 samples, a 50 ms watchdog with a 10 ms ramp, STATUS every 5 ms; curren
 voltage and phase measured; an overcurrent trip at 1.5 x the current at the clamp at
 resonance), and enforces every amplifier rule A1-A8. Envelope samples play in real time
 at their due times on the monotonic clock; each drives the device's simulated plate
-(``--device``, default calibration/default.yaml, at a contact force of 0.5 N), whose
+(``--device``, default the shipped default device, at a contact force of 0.5 N), whose
 circuit gives the measured current and phase. The watchdog trips 38 ms after the last
 frame the emulator read (A4's 40 ms less 2 ms for its own reading latency), so the output
 is 0 within 50 ms of the frame's arrival. It asks for real-time scheduling (SCHED_FIFO),
@@ -145,7 +145,7 @@ def add_parser(subparsers: Subparsers) -> None:
         + "\n".join(f"  {_syntax(kind):<20} {text}" for kind, (_, text) in FAULTS.items()),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    emulate.add_argument("--device", metavar="FILE", help="device file (default: calibration/default.yaml)")
+    emulate.add_argument("--device", metavar="FILE", help="device file, or a shipped device's name such as SLG_0.4 (default: default, SLG_0.56)")
     emulate.add_argument("--port", metavar="PATH", help="serve this existing serial device instead of a new pty")
     emulate.add_argument("--record", metavar="FILE.npz",
                          help="write the applied samples and the counters here at the end (.npz)")

@@ -66,7 +66,7 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
     ``--block`` by MAX_RATE_HZ and MAX_BLOCK_FRAMES.
     """
     parser.add_argument("texture", metavar="TEXTURE", help="texture file (YAML)")
-    parser.add_argument("--device", metavar="FILE", help="device file (default: calibration/default.yaml)")
+    parser.add_argument("--device", metavar="FILE", help="device file, or a shipped device's name such as SLG_0.4 (default: default, SLG_0.56)")
     parser.add_argument("--input", metavar="URL", required=input_default is None, default=input_default,
                         help=input_help + (f" (default {input_default})" if input_default else ""))
     parser.add_argument("--output", metavar="URL", default=output_default,

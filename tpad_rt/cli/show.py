@@ -89,7 +89,7 @@ def add_parser(subparsers: Subparsers) -> None:
         "estimated power against the device's power budget.",
     )
     parser.add_argument("texture", metavar="TEXTURE", help="texture file (.yaml)")
-    parser.add_argument("--device", metavar="FILE", help="device file (default: calibration/default.yaml)")
+    parser.add_argument("--device", metavar="FILE", help="device file, or a shipped device's name such as SLG_0.4 (default: default, SLG_0.56)")
     parser.add_argument("--speed-mm-s", type=float, default=100.0, help="finger speed, mm/s (default 100)")
     parser.add_argument("--force-n", type=float, default=0.5, help="contact force, N (default 0.5)")
     parser.add_argument("--direction-deg", type=float, default=0.0,

@@ -14,6 +14,7 @@ from tpad_rt.config.messages import explain
 from tpad_rt.config.texture_schema import BASE_DIR, IMAGE_PIXELS, TextureFile
 from tpad_rt.config.yaml_io import YamlDocument, load_yaml
 from tpad_rt.errors import ConfigError
+from tpad_rt.shipped import device_file, texture_file
 
 PathLike = str | os.PathLike[str]
 
@@ -21,12 +22,16 @@ _ADAPTERS: dict[Any, TypeAdapter[Any]] = {TextureFile: TypeAdapter(TextureFile),
 
 
 def load_texture(path: PathLike) -> TextureFile:
-    """The texture file at ``path``; raises ConfigError listing every problem in it."""
+    """The texture file at ``path`` (or the shipped texture of that name, :mod:`tpad_rt.shipped`);
+    raises ConfigError listing every problem in it."""
+    path = texture_file(path)
     return _validate(TextureFile, path, load_yaml(Path(path), str(path)))
 
 
 def load_device(path: PathLike) -> DeviceFile:
-    """The device file at ``path``; raises ConfigError listing every problem in it."""
+    """The device file at ``path`` (or the shipped device of that name, :mod:`tpad_rt.shipped`);
+    raises ConfigError listing every problem in it."""
+    path = device_file(path)
     return _validate(DeviceFile, path, load_yaml(Path(path), str(path)))
 
 

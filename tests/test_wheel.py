@@ -1,0 +1,89 @@
+"""The package as a user installs it: a wheel built from the repository, installed (not editable)
+into a fresh virtual environment, run from a folder that is not the repository.
+
+The shipped textures and device files must come with it as package data. Building and
+installing needs the build backend and the dependencies from a package index (or pip's
+cache): without one the test skips, and fails under TPAD_RT_REQUIRE_SYSTEM=1.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import venv
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from conftest import REPO_ROOT, require_system
+
+pytestmark = [pytest.mark.slow, pytest.mark.system]
+
+
+def _run(command: list[str], cwd: Path, env: dict[str, str], timeout_s: float = 600) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout_s, check=False)
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, dict[str, str]]]:
+    """``(bin folder of a fresh venv holding the wheel, environment to run it in)``."""
+    root = tmp_path_factory.mktemp("wheel")
+    env = {key: value for key, value in os.environ.items()
+           if key not in ("PYTHONPATH", "VIRTUAL_ENV", "DISPLAY", "PYTHONHOME")}
+    env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
+    built = _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(root / "dist"), str(REPO_ROOT)],
+                 root, env)
+    require_system(built.returncode == 0, f"a wheel build (pip wheel: {built.stderr.strip()[-300:]})")
+    wheels = sorted((root / "dist").glob("tpad_rt-*.whl"))
+    assert len(wheels) == 1, wheels
+    venv.create(root / "venv", with_pip=True)
+    bin_dir = root / "venv" / "bin"
+    done = _run([str(bin_dir / "python"), "-m", "pip", "install", "-q", str(wheels[0])], root, env)
+    require_system(done.returncode == 0, f"the wheel's dependencies (pip install: {done.stderr.strip()[-300:]})")
+    env["NUMBA_CACHE_DIR"] = str(root / "numba-cache")
+    elsewhere = root / "elsewhere"
+    elsewhere.mkdir()
+    yield bin_dir, env
+
+
+def test_the_wheel_holds_the_package_not_the_repository(installed: tuple[Path, dict[str, str]]) -> None:
+    bin_dir, env = installed
+    where = _run([str(bin_dir / "python"), "-c",
+                  "import tpad_rt, tpad_rt.shipped as s; from tpad_rt.device import Device; "
+                  "print(tpad_rt.__file__); print(s.DEFAULT_DEVICE); print(Device.default().label); "
+                  "print(len(s.texture_names()), len(s.device_names()))"],
+                 bin_dir.parent.parent / "elsewhere", env)
+    assert where.returncode == 0, where.stderr
+    module, default, label, counts = where.stdout.split("\n")[:4]
+    venv_dir = bin_dir.parent
+    assert Path(module).is_relative_to(venv_dir) and Path(default).is_relative_to(venv_dir)
+    assert not Path(module).is_relative_to(REPO_ROOT)
+    assert label == "SLG_0.56"
+    shipped_textures = len(list((REPO_ROOT / "tpad_rt" / "textures").glob("*.yaml")))
+    shipped_devices = len(list((REPO_ROOT / "tpad_rt" / "devices").glob("*.yaml")))
+    assert counts == f"{shipped_textures} {shipped_devices}"
+
+
+def test_tpad_rt_play_runs_a_shipped_texture_from_any_folder(installed: tuple[Path, dict[str, str]]) -> None:
+    bin_dir, env = installed
+    elsewhere = bin_dir.parent.parent / "elsewhere"
+    played = _run([str(bin_dir / "tpad-rt"), "play", "grating", "--output", "sim://", "--duration", "0.5"],
+                  elsewhere, env)
+    assert played.returncode == 0, played.stderr
+    assert "played " in played.stdout and "drive: peak" in played.stdout, played.stdout
+    # a texture with an image asset: the assets are package data too
+    path = _run([str(bin_dir / "python"), "-c",
+                 "from tpad_rt.texture import load_compiled; print(load_compiled('bitmap_logo').img.size)"],
+                elsewhere, env)
+    assert path.returncode == 0 and int(path.stdout) > 0, path.stderr
+
+
+def test_a_repository_path_outside_the_repository_names_the_shipped_texture(
+        installed: tuple[Path, dict[str, str]]) -> None:
+    bin_dir, env = installed
+    done = _run([str(bin_dir / "tpad-rt"), "play", "textures/grating.yaml", "--duration", "0.5"],
+                bin_dir.parent.parent / "elsewhere", env)
+    assert done.returncode != 0
+    assert done.stderr.strip() == ("tpad-rt play: textures/grating.yaml: no such file; the package ships a texture "
+                                   "of that name: give just 'grating'")

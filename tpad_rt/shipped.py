@@ -1,0 +1,86 @@
+"""The textures and device files that ship inside the package, and references to them by name.
+
+They are package data (``tpad_rt/textures/``, ``tpad_rt/devices/``), found through
+:mod:`importlib.resources`, so an installed wheel has them wherever it runs; in a clone
+of the repository ``textures/`` links to the same folder.
+
+API map
+-------
+TEXTURES_DIR, DEVICES_DIR
+    the two folders (``Path``)
+texture_names() -> list[str], device_names() -> list[str]
+    the shipped files' names without ``.yaml``, sorted
+texture_file(ref) -> ref or Path, device_file(ref) -> ref or Path
+    ``ref`` itself when it names a file or looks like a path (it has a folder or a
+    ``.yaml``/``.yml`` suffix), else the shipped file of that name; ConfigError naming
+    the shipped ones when there is none, or naming the shipped file when a missing path
+    ends in a shipped file's name (``textures/grating.yaml`` run outside the repository)
+DEFAULT_DEVICE
+    ``DEVICES_DIR / "default.yaml"`` (SLG_0.56)
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+import os
+from pathlib import Path
+
+from tpad_rt.errors import ConfigError
+
+
+def _package_folder(name: str) -> Path:
+    """The package-data folder ``tpad_rt/<name>`` as a file-system path (pip installs wheels unpacked)."""
+    return Path(str(importlib.resources.files("tpad_rt").joinpath(name)))
+
+
+TEXTURES_DIR = _package_folder("textures")
+DEVICES_DIR = _package_folder("devices")
+DEFAULT_DEVICE = DEVICES_DIR / "default.yaml"
+_SUFFIXES = (".yaml", ".yml")
+PathLike = str | os.PathLike[str]
+
+
+def _names(folder: Path) -> list[str]:
+    """Names (without ``.yaml``) of the YAML files in ``folder``, sorted; empty if it is missing."""
+    return sorted(path.stem for path in folder.glob("*.yaml")) if folder.is_dir() else []
+
+
+def texture_names() -> list[str]:
+    """Names of the shipped textures (``grating``, ...), sorted."""
+    return _names(TEXTURES_DIR)
+
+
+def device_names() -> list[str]:
+    """Names of the shipped device files (``SLG_0.56``, ``default``, ...), sorted."""
+    return _names(DEVICES_DIR)
+
+
+def _resolve(ref: PathLike, folder: Path, what: str) -> PathLike:
+    """``ref`` itself, or the shipped ``folder / (ref + ".yaml")`` for a bare name (module docstring)."""
+    path = Path(ref)
+    text = os.fspath(ref)
+    looks_like_path = text == "" or os.sep in text or "/" in text or path.suffix.lower() in _SUFFIXES
+    if path.exists() or path.is_symlink():
+        return ref
+    if looks_like_path:
+        if path.suffix.lower() in _SUFFIXES and (folder / f"{path.stem}.yaml").is_file():
+            # textures/grating.yaml outside a clone of the repository: the name reaches the shipped file
+            raise ConfigError(f"{text}: no such file; the package ships a {what} of that name: give just "
+                              f"'{path.stem}'")
+        return ref
+    shipped = folder / f"{text}.yaml"
+    if shipped.is_file():
+        return shipped
+    names = _names(folder)
+    raise ConfigError(f"{text}: no such file, nor a shipped {what} of that name "
+                      f"(shipped: {', '.join(names) if names else 'none found in ' + str(folder)})")
+
+
+def texture_file(ref: PathLike) -> PathLike:
+    """The texture file ``ref`` names: a path, or a shipped texture's name; ConfigError if neither."""
+    return _resolve(ref, TEXTURES_DIR, "texture")
+
+
+def device_file(ref: PathLike) -> PathLike:
+    """The device file ``ref`` names: a path, or a shipped device's name; ConfigError if neither."""
+    return _resolve(ref, DEVICES_DIR, "device")
