@@ -154,6 +154,20 @@ def measure_async_latency(plan: Plan, log: Callable[[str], None], logs: Path) ->
     return {"server_playback_latency_frames": frames, "load_average_1min": os.getloadavg()[0], **result}
 
 
+#: The least any process running a cached numba function pays: import numba, then the first call of a
+#: trivial ``cache=True`` function (numba loads its lowering registries then, scipy.linalg among them).
+NUMBA_FLOOR_MODULE = """import numba
+
+
+@numba.njit(cache=True)
+def one_more(x):
+    return x + 1.0
+
+
+one_more(1.0)
+"""
+
+
 def _run_s(command: list[str], env: dict[str, str]) -> float:
     begin = time.monotonic()
     subprocess.run(command, env=env, check=True, capture_output=True, stdin=subprocess.DEVNULL, timeout=120)
@@ -166,9 +180,12 @@ def measure_startup(plan: Plan, log: Callable[[str], None], logs: Path) -> dict[
     play = _play_has_audio()
     modes = ["startup", "play"] if play else ["startup"]
     runs: dict[str, list[dict[str, float]]] = {mode: [] for mode in modes}
-    baseline, engine_import = [], []
+    baseline, engine_import, numba_floor = [], [], []
+    (logs / "numba_floor.py").write_text(NUMBA_FLOOR_MODULE)
     with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-startup.log") as env:
         env = {key: value for key, value in env.items() if key != "DISPLAY"}  # play: scripted input, no mouse
+        floor_env = {**env, "PYTHONPATH": str(logs)}
+        _run_s([sys.executable, "-c", "import numba_floor"], floor_env)  # compiles its cache; not counted
         for mode in modes:
             warm = _worker([mode], env, 300)  # fills the numba cache if it is cold; not counted
             if "error" in warm:
@@ -176,6 +193,7 @@ def measure_startup(plan: Plan, log: Callable[[str], None], logs: Path) -> dict[
         for _ in range(plan.startups):
             baseline.append(_run_s([sys.executable, "-c", "import tpad_rt"], env))
             engine_import.append(_run_s([sys.executable, "-c", "import tpad_rt.engine"], env))
+            numba_floor.append(_run_s([sys.executable, "-c", "import numba_floor"], floor_env))
             for mode in modes:
                 spawned_ns = time.monotonic_ns()
                 result = _worker([mode], env, 120)
@@ -197,7 +215,7 @@ def measure_startup(plan: Plan, log: Callable[[str], None], logs: Path) -> dict[
             log("cold start-up: first sample at " + ", ".join(f"{mode} {cold[mode][-1]['first_dac_ns']:.2f} s"
                                                               for mode in modes))
     return {"runs": runs["startup"], "play_runs": runs.get("play", []), "import_tpad_rt_s": baseline,
-            "import_tpad_rt_engine_s": engine_import, "play_wired_to_audio": play,
+            "import_tpad_rt_engine_s": engine_import, "numba_floor_s": numba_floor, "play_wired_to_audio": play,
             "cold_runs": cold["startup"], "cold_play_runs": cold.get("play", [])}
 
 
@@ -438,6 +456,9 @@ def markdown(report: dict[str, Any]) -> str:
             f"| baseline: `python -c \"import tpad_rt\"` (spawn to exit) | {_band(startup['import_tpad_rt_s'])} | |",
             f"| second baseline: `python -c \"import tpad_rt.engine\"` (spawn to exit: numba, the kernels "
             f"from the cache, the interpreter's exit) | {_band(startup['import_tpad_rt_engine_s'])} | |",
+            *([f"| numba's floor: `import numba`, then one call of a trivial cached `njit` function (spawn to "
+               f"exit; every process running cached numba code pays it) | {_band(startup['numba_floor_s'])} | |"]
+              if startup.get("numba_floor_s") else []),
             "",
             "First sample minus the `import tpad_rt` baseline (medians): "
             + (f"play {np.median([r['first_dac_ns'] for r in play_runs]) - np.median(startup['import_tpad_rt_s']):.3f}"
