@@ -13,7 +13,8 @@ import pytest
 import yaml
 
 from tpad_rt.config import check_file, load_device
-from tpad_rt.device import CALIBRATION_DIR, Device
+from tpad_rt.device import Device
+from tpad_rt.shipped import DEVICES_DIR
 from tpad_rt.errors import ConfigError
 from tpad_rt.outputs import open_output
 from tpad_rt.outputs.sim import SimOutput
@@ -170,7 +171,7 @@ def test_circuit_forces_equal_or_apart_from_the_calibration_forces(tmp_path: Pat
     assert "circuit.force_n[0]: must equal calibration.force_n's 0 or differ from it by at least 0.001 N" in error
 
 
-@pytest.mark.parametrize("path", sorted(CALIBRATION_DIR.glob("*.yaml")), ids=lambda path: path.stem)
+@pytest.mark.parametrize("path", sorted(DEVICES_DIR.glob("*.yaml")), ids=lambda path: path.stem)
 def test_shipped_devices_have_sound_derived_tables(path: Path) -> None:
     assert Device.from_file(path).derived_problems() == []
 

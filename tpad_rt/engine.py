@@ -138,22 +138,23 @@ class Renderer:
             raise ConfigError(f"block_frames: must be a whole number in [1, {MAX_BLOCK_FRAMES}], got "
                               f"{shown(block_frames)}")
         self._driver.block_frames = int(block_frames)
-        self.options = self._driver.options
-        compiled, self._texture_path = _compiled(texture)
-        self._pipeline = Pipeline(self.device, compiled, fs_hz=self._driver.rate_hz, options=self.options,
+        self.options: RenderOptions = self._driver.options
+        compiled, texture_path = _compiled(texture)
+        self._texture_path: str | None = texture_path
+        self._pipeline: Pipeline = Pipeline(self.device, compiled, fs_hz=self._driver.rate_hz, options=self.options,
                                   envelope_output=self._driver.consumes is Consumes.ENVELOPE)
-        self.rate_hz = self._driver.rate_hz
-        self._log = TelemetryLog(self._pipeline, self.rate_hz)
+        self.rate_hz: int = self._driver.rate_hz
+        self._log: TelemetryLog = TelemetryLog(self._pipeline, self.rate_hz)
         self._table: CallbackTable | None = None  # while running
         self._last_table: CallbackTable | None = None  # the last run's, for stats() after stop()
         self._watcher: threading.Thread | None = None
-        self._halt = threading.Event()
-        self._ended = threading.Event()  # set by stop() and by an error in the watcher
+        self._halt: threading.Event = threading.Event()
+        self._ended: threading.Event = threading.Event()  # set by stop() and by an error in the watcher
         self._error: BaseException | None = None
         self._reported: BaseException | None = None  # the driver's failure the watcher raised
-        self._push_ns = np.zeros(self.options.finger_ring, dtype=np.int64)
-        self._producer = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
-        self._texture = compiled
+        self._push_ns: np.ndarray = np.zeros(self.options.finger_ring, dtype=np.int64)
+        self._producer: threading.Lock = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
+        self._texture: CompiledTexture = compiled
 
     # --- lifecycle -----------------------------------------------------------------
 

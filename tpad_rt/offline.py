@@ -220,7 +220,7 @@ class OfflineRender:
         if self._drive is not None:
             drive = np.concatenate(self._drive) if self._drive else np.zeros(0, dtype=np.float32)
         finger = np.concatenate(self._finger) if self._finger else np.zeros(0, dtype=FINGER_DTYPE)
-        return RenderResult(self.pipeline.fs_hz, self.block_frames, drive, blocks, finger)
+        return RenderResult(int(self.pipeline.fs_hz), self.block_frames, drive, blocks, finger)
 
 
 def texture_under_finger(result: RenderResult, texture: CompiledTexture) -> tuple[np.ndarray, np.ndarray]:

@@ -194,7 +194,8 @@ def _count_problem(value: object, low: int, high: int | None) -> str:
     rule = f">= {low}" if high is None else f"in [{low}, {high}]"
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         return f"must be a whole number {rule}, got {shown(value)}"
-    return "" if low <= value and (high is None or value <= high) else f"must be {rule}, got {shown(value)}"
+    count = int(value)
+    return "" if low <= count and (high is None or count <= high) else f"must be {rule}, got {shown(value)}"
 
 
 class KernelArrays(NamedTuple):

@@ -100,7 +100,7 @@ def write_recording(path: str | Path, recording: Recording) -> None:
     _check(str(path), entries)
     try:
         with open(path, "wb") as file:
-            np.savez(file, **entries)
+            np.savez(file, allow_pickle=False, **entries)
     except OSError as error:
         raise BackendError(f"{path}: cannot write the recording ({error.strerror})") from None
 
@@ -226,9 +226,11 @@ def _check_metadata(entries: dict[str, np.ndarray]) -> list[str]:
         value = metadata.get(key)
         if key not in metadata or (isinstance(value, float) and not math.isfinite(value)):
             continue  # said above
-        number = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if key == "block_frames" and not (number and value > 0):
-            problems.append(f"metadata_json: {key}: must be a number > 0, got {json.dumps(value)[:40]}")
-        elif not (number and value >= 0):
-            problems.append(f"metadata_json: {key}: must be a number >= 0, got {json.dumps(value)[:40]}")
+        low, rule = (0, "> 0") if key == "block_frames" else (0, ">= 0")
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            fine = value > low if key == "block_frames" else value >= low
+        else:
+            fine = False
+        if not fine:
+            problems.append(f"metadata_json: {key}: must be a number {rule}, got {json.dumps(value)[:40]}")
     return problems

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -43,6 +43,7 @@ from tpad_rt.config.texture_schema import (
     Temporal,
     TextureFile,
 )
+from tpad_rt.errors import ConfigError
 from tpad_rt.kernel import layout
 from tpad_rt.kernel.texture_eval import eval_texture_points
 
@@ -72,7 +73,7 @@ _STACK_EFFECT = {layout.OP_COMBINE: -1}
 
 def _read_only(array: npt.ArrayLike, dtype: type) -> np.ndarray:
     """A C-contiguous, read-only copy of ``array`` with exactly ``dtype``."""
-    result = np.array(array, dtype=dtype, order="C")
+    result: np.ndarray = np.array(array, dtype=dtype, order="C")
     result.setflags(write=False)
     return result
 
@@ -116,7 +117,8 @@ class CompiledTexture:
         flat = [np.array(a, dtype=np.float64).ravel() for a in arrays]
         out = np.empty(flat[0].size, dtype=np.float64)
         stack = np.empty(self.stack_depth, dtype=np.float64)
-        eval_texture_points(self.prog, self.params, self.img, stack, *flat, out)
+        x, y, ux_, uy_, t = flat
+        eval_texture_points(self.prog, self.params, self.img, stack, x, y, ux_, uy_, t, out)
         return out.reshape(arrays[0].shape)
 
 
@@ -209,11 +211,12 @@ def _emit_gradient(b: _Builder, m: Gradient) -> None:
         offset = b.add_image(pixels)
         b.emit(layout.OP_GRADIENT, [*head, *_image_map(h, pixels), h.height_mm], layout.HEIGHT_IMAGE, offset)
         return
-    code, record = {
+    records: dict[str, tuple[int, Callable[[Any], list[float]]]] = {
         "bump": (layout.HEIGHT_BUMP, _bump_record),
         "ridge": (layout.HEIGHT_RIDGE, _ridge_record),
         "sine": (layout.HEIGHT_SINE, _sine_record),
-    }[h.shape]
+    }
+    code, record = records[h.shape]
     b.emit(layout.OP_GRADIENT, [*head, *record(h)], code)
 
 
@@ -252,10 +255,12 @@ def _region_record(region: Region | None) -> tuple[int, list[float]]:
     """``(SHAPE_* code, params)`` of a layer's region (None: everywhere)."""
     if region is None:
         return layout.SHAPE_EVERYWHERE, []
-    shape = region.shape
-    if isinstance(shape, Rect):
-        return layout.SHAPE_RECT, [shape.x_mm, shape.y_mm, shape.x_mm + shape.w_mm, shape.y_mm + shape.h_mm]
-    return layout.SHAPE_CIRCLE, [*shape.center_mm, shape.radius_mm**2]
+    rect, circle = region.rect, region.circle
+    if rect is not None:
+        return layout.SHAPE_RECT, [rect.x_mm, rect.y_mm, rect.x_mm + rect.w_mm, rect.y_mm + rect.h_mm]
+    if circle is not None:
+        return layout.SHAPE_CIRCLE, [*circle.center_mm, circle.radius_mm**2]
+    raise ConfigError("region: holds no shape (a validated Region holds exactly one)")
 
 
 def _emit_layers(b: _Builder, m: Layers) -> None:
@@ -266,7 +271,8 @@ def _emit_layers(b: _Builder, m: Layers) -> None:
         b.emit(layout.OP_COMBINE, region, _COMBINE_OPS["replace" if index == 0 else layer.op], shape)
 
 
-_EMITTERS: dict[str, Callable[[_Builder, TextureFile], None]] = {
+#: Each kind's emitter, by the model's ``kind`` (which selects the model class the emitter takes).
+_EMITTERS: dict[str, Callable[[_Builder, Any], None]] = {
     "grating": _emit_grating,
     "temporal": _emit_temporal,
     "bitmap": _emit_bitmap,

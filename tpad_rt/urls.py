@@ -235,4 +235,4 @@ def point(text: str) -> tuple[float, float]:
         values = ()
     if len(values) != 2 or not all(math.isfinite(value) for value in values):
         raise ValueError("must be two numbers x,y")
-    return values  # type: ignore[return-value]
+    return values

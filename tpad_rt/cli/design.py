@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from typing import Any, get_args
+from typing import Any, cast, get_args
 
 from annotated_types import Ge, Le
 
@@ -75,8 +75,9 @@ def add_parser(subparsers: Subparsers) -> None:
 def _bounds(alias: Any) -> tuple[float, float]:
     """``(low, high)`` of a device-file number type (``Annotated[float, Ge(low), Le(high)]``)."""
     metadata = get_args(alias)[1:]
-    return (float(next(item.ge for item in metadata if isinstance(item, Ge))),
-            float(next(item.le for item in metadata if isinstance(item, Le))))
+    low = next(item.ge for item in metadata if isinstance(item, Ge))
+    high = next(item.le for item in metadata if isinstance(item, Le))
+    return float(cast(float, low)), float(cast(float, high))
 
 
 #: ``--plate`` numbers: name, the device-file type whose bounds apply, unit.

@@ -165,10 +165,10 @@ def plate_maps(
         x_mm=x_mm,
         y_mm=y_mm,
         friction=friction,
-        volts_asked=volts_asked,
+        volts_asked=np.asarray(volts_asked),
         volts=volts,
         power_w=device.power_w_per_v2(finger.force_n) * volts**2,
-        saturated=volts_asked > device.max_voltage_v,
+        saturated=np.asarray(volts_asked > device.max_voltage_v),
     )
 
 

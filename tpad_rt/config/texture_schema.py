@@ -319,37 +319,40 @@ TextureFile = Annotated[
 # --- layers: every kind, with an optional description, op and region ---------
 
 
+# A layer's description is optional where a file's is required: each Layer class lists _LayerFields
+# first, so pydantic (and Python's MRO) take its Optional field; mypy flags the two bases' types
+# differing (misc), which is the point.
 class _LayerFields(StrictModel):
     description: Text | None = None
     op: Literal["multiply", "min", "max", "add"] = "multiply"
     region: Region | None = None
 
 
-class GratingLayer(_LayerFields, Grating):
+class GratingLayer(_LayerFields, Grating):  # type: ignore[misc]
     """A grating used as a layer."""
 
 
-class BitmapLayer(_LayerFields, Bitmap):
+class BitmapLayer(_LayerFields, Bitmap):  # type: ignore[misc]
     """A bitmap used as a layer."""
 
 
-class GradientLayer(_LayerFields, Gradient):
+class GradientLayer(_LayerFields, Gradient):  # type: ignore[misc]
     """A gradient used as a layer."""
 
 
-class BumpsLayer(_LayerFields, Bumps):
+class BumpsLayer(_LayerFields, Bumps):  # type: ignore[misc]
     """Bumps used as a layer."""
 
 
-class EdgesLayer(_LayerFields, Edges):
+class EdgesLayer(_LayerFields, Edges):  # type: ignore[misc]
     """Edges used as a layer."""
 
 
-class TemporalLayer(_LayerFields, Temporal):
+class TemporalLayer(_LayerFields, Temporal):  # type: ignore[misc]
     """A temporal texture used as a layer."""
 
 
-class LayersLayer(_LayerFields, Layers):
+class LayersLayer(_LayerFields, Layers):  # type: ignore[misc]
     """A nested composition used as a layer."""
 
 

@@ -132,11 +132,17 @@ class _LimitedLoader(yaml.SafeLoader):
         if self._open_collections > MAX_DEPTH:
             raise _LimitExceeded(f"nested deeper than {MAX_DEPTH} levels", event.start_mark)
         try:
-            node = super().compose_node(parent, index)
+            node = _present(super().compose_node(parent, index), event.start_mark)
         finally:
             self._open_collections -= opens
         if opens:
-            children = [self._size(child) for child in _children(node)]
+            children: list[tuple[int, int]] = []
+            for child in _children(node):
+                size = self._size(child)
+                if size is None:  # a child still being composed: only a recursive alias, which is refused
+                    raise _LimitExceeded("alias refers to a value that contains it (recursive structure)",
+                                         event.start_mark)
+                children.append(size)
             self._sizes[id(node)] = (
                 1 + sum(values for values, _ in children),
                 1 + max((height for _, height in children), default=0),
@@ -150,7 +156,7 @@ class _LimitedLoader(yaml.SafeLoader):
 
     def _compose_alias(self, parent: Node | None, index: Any) -> Node:
         mark = self.peek_event().start_mark
-        node = super().compose_node(parent, index)
+        node = _present(super().compose_node(parent, index), mark)
         size = self._size(node)
         if size is None:
             raise _LimitExceeded("alias refers to a value that contains it (recursive structure)", mark)
@@ -212,6 +218,13 @@ def _child(node: Node, elem: str | int) -> tuple[int, Node] | None:
         item = node.value[elem]
         return item.start_mark.line + 1, item
     return None
+
+
+def _present(node: Node | None, mark: yaml.Mark) -> Node:
+    """``node``: PyYAML's ``compose_node`` always returns one, though its stubs say Optional."""
+    if node is None:
+        raise _LimitExceeded("a value is missing", mark)
+    return node
 
 
 def _children(node: Node) -> list[Node]:

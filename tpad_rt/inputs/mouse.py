@@ -222,7 +222,7 @@ def _listener_class() -> Any:
                            f"{_HINT}") from None
     import Xlib.ext.record
 
-    class Listener(mouse.Listener):  # type: ignore[misc, valid-type]
+    class Listener(mouse.Listener):
         def __init__(self, **callbacks: Any):
             super().__init__(**callbacks)
             self.recording = threading.Event()
@@ -253,7 +253,7 @@ def _rect(text: str) -> str | tuple[int, int, int, int]:
         values = ()
     if len(values) != 4 or values[0] < 0 or values[1] < 0 or values[2] <= 0 or values[3] <= 0:
         raise ValueError("must be 'screen' or four whole numbers x,y,w,h (pixels, x,y >= 0, w,h > 0)")
-    return values  # type: ignore[return-value]
+    return values
 
 
 def _plate(text: str) -> str | tuple[float, float]:

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from abc import abstractmethod
 from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -280,7 +280,8 @@ def _url_name(field_name: str) -> str:
 
 def _form(kind: str) -> UrlForm:
     options = tuple(
-        Option(_url_name(item.name), item.default, _PARSERS[_url_name(item.name)]) for item in fields(_KINDS[kind])
+        Option(_url_name(item.name), item.default, _PARSERS[_url_name(item.name)])
+        for item in fields(cast(Any, _KINDS[kind]))  # every kind is a dataclass
     )
     return UrlForm("scripted", kind, options)
 
@@ -301,7 +302,7 @@ def open_url(url: Url, *, device: Device | None = None) -> _Scripted:
     form = FORMS[list(_KINDS).index(url.target)]
     values: dict[str, Any] = form.read(url)
     cls = _KINDS[url.target]
-    arguments = {item.name: values[_url_name(item.name)] for item in fields(cls)}
+    arguments = {item.name: values[_url_name(item.name)] for item in fields(cast(Any, cls))}  # cls: a dataclass
     try:
         pattern = cls(**arguments)
         pattern.check_limits(*position_range(device))

@@ -27,9 +27,9 @@ the document's worked bytes and against each other.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from tpad_rt.kernel.jit import njit
 from tpad_rt.kernel.cache_stamp import stamp_cache
 
 stamp_cache(__file__)
@@ -156,7 +156,7 @@ def _crc_table() -> np.ndarray:
 _CRC_TABLE = _crc_table()
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def crc16(data: np.ndarray, length: int) -> int:
     """CRC-16/IBM-3740 (init 0xFFFF, no reflection, no final XOR) of ``data[:length]`` (uint8)."""
     crc = 0xFFFF
@@ -165,7 +165,7 @@ def crc16(data: np.ndarray, length: int) -> int:
     return crc
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def cobs_encode(body: np.ndarray, length: int, out: np.ndarray) -> int:
     """COBS-encode ``body[:length]`` into ``out`` (room for ``length + length // 254 + 2``), then a 0x00.
 
@@ -195,7 +195,7 @@ def cobs_encode(body: np.ndarray, length: int, out: np.ndarray) -> int:
     return n + 1
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def cobs_decode(encoded: np.ndarray, length: int, body: np.ndarray) -> int:
     """Decode the COBS bytes ``encoded[:length]`` (without the delimiter) into ``body``.
 
@@ -224,56 +224,56 @@ def cobs_decode(encoded: np.ndarray, length: int, body: np.ndarray) -> int:
     return n
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def put_u16(buffer: np.ndarray, at: int, value: int) -> None:
     """Store ``value`` (taken mod 2**16) little-endian at ``buffer[at]``."""
     buffer[at] = value & 0xFF
     buffer[at + 1] = (value >> 8) & 0xFF
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def put_i16(buffer: np.ndarray, at: int, value: int) -> None:
     """Store ``value`` (two's complement, -32768..32767) little-endian at ``buffer[at]``."""
     put_u16(buffer, at, value & 0xFFFF)
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def put_u32(buffer: np.ndarray, at: int, value: int) -> None:
     """Store ``value`` (taken mod 2**32) little-endian at ``buffer[at]``."""
     for k in range(4):
         buffer[at + k] = (value >> (8 * k)) & 0xFF
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def get_u16(buffer: np.ndarray, at: int) -> int:
     """The little-endian u16 at ``buffer[at]``."""
-    return np.int64(buffer[at]) | (np.int64(buffer[at + 1]) << 8)
+    return int(np.int64(buffer[at]) | (np.int64(buffer[at + 1]) << 8))
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def get_i16(buffer: np.ndarray, at: int) -> int:
     """The little-endian i16 at ``buffer[at]``."""
     value = get_u16(buffer, at)
     return value - 0x10000 if value >= 0x8000 else value
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def get_u32(buffer: np.ndarray, at: int) -> int:
     """The little-endian u32 at ``buffer[at]``."""
     value = np.int64(0)
     for k in range(4):
         value |= np.int64(buffer[at + k]) << (8 * k)
-    return value
+    return int(value)
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def get_i32(buffer: np.ndarray, at: int) -> int:
     """The little-endian i32 at ``buffer[at]``."""
     value = get_u32(buffer, at)
     return value - 0x100000000 if value >= 0x80000000 else value
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def seal(frame: np.ndarray, payload_length: int, msg_type: int, seq: int, out: np.ndarray) -> int:
     """Write the header (version, ``msg_type``, ``seq``) and the CRC around the payload already in
     ``frame[PAYLOAD:PAYLOAD + payload_length]``, and COBS-encode the body into ``out`` (room for
@@ -286,7 +286,7 @@ def seal(frame: np.ndarray, payload_length: int, msg_type: int, seq: int, out: n
     return cobs_encode(frame, body_length + CRC_BYTES, out)
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def open_body(body: np.ndarray, length: int) -> int:
     """Check a decoded body of ``length`` bytes (section 2.3, steps 1-3): its type (byte 1),
     or CHECK_SHORT, CHECK_CRC or CHECK_VERSION."""
@@ -296,4 +296,4 @@ def open_body(body: np.ndarray, length: int) -> int:
         return CHECK_CRC
     if body[0] != VERSION:
         return CHECK_VERSION
-    return np.int64(body[1])
+    return int(body[1])

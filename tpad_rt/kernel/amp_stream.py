@@ -43,6 +43,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from tpad_rt.kernel.jit import njit
 from tpad_rt.kernel import amp_codec as codec
 from tpad_rt.kernel import atomics, libc
 from tpad_rt.kernel import table as tab
@@ -179,7 +180,7 @@ _U32 = 1 << 32
 _KERNEL = dict(nogil=True, cache=True, error_model="numpy")
 
 
-@numba.njit(inline="always", **_KERNEL)
+@njit(inline="always", **_KERNEL)
 def _unwrap(index_u32: int, near: int) -> int:
     """The number whose low 32 bits are ``index_u32`` closest to ``near`` (a stream index, a time in us)."""
     delta = (index_u32 - near) % _U32
@@ -188,7 +189,7 @@ def _unwrap(index_u32: int, near: int) -> int:
     return near + delta
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def _take_status(link: np.ndarray, body: np.ndarray, now_ns: int) -> None:
     """Copy a STATUS payload (docs/amp-protocol.md 3.2) into the link."""
     p = PAYLOAD
@@ -212,7 +213,7 @@ def _take_status(link: np.ndarray, body: np.ndarray, now_ns: int) -> None:
     link[LINK_STATUSES] += 1
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.ndarray, now_ns: int) -> int:
     """Decode and act on one frame from the amplifier (``encoded[:length]``, no delimiter).
 
@@ -245,7 +246,7 @@ def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.nda
     return 0
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def _receive(link: np.ndarray, buffers: np.ndarray, rx_length: int, now_ns: int) -> tuple[int, int, int]:
     """Read what the port holds and act on each whole frame; (bytes kept, STATUS frames, exit reason or 0)."""
     rx = buffers[BUF_RX]
@@ -280,7 +281,7 @@ def _receive(link: np.ndarray, buffers: np.ndarray, rx_length: int, now_ns: int)
             rx_length = 0
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def _flush(link: np.ndarray, tx: np.ndarray, pending: tuple[int, int]) -> tuple[int, int, int]:
     """Write the pending bytes ``tx[first:end]``; (first, end, exit reason or 0) after it."""
     first, end = pending
@@ -299,7 +300,7 @@ def _flush(link: np.ndarray, tx: np.ndarray, pending: tuple[int, int]) -> tuple[
     return 0, 0, 0
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def _queue(link: np.ndarray, buffers: np.ndarray, payload_length: int, msg_type: int, end: int) -> int:
     """Seal the body in BUF_FRAME (payload written) as the next host frame, appended to BUF_TX at ``end``;
     the new end."""
@@ -308,7 +309,7 @@ def _queue(link: np.ndarray, buffers: np.ndarray, payload_length: int, msg_type:
     return end + codec.seal(buffers[BUF_FRAME], payload_length, msg_type, seq, buffers[BUF_TX][end:])
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def _queue_start(link: np.ndarray, buffers: np.ndarray, end: int) -> int:
     """Queue a START from LINK_WRITTEN with the target fill as prefill (a restart after the watchdog)."""
     frame = buffers[BUF_FRAME]
@@ -319,7 +320,7 @@ def _queue_start(link: np.ndarray, buffers: np.ndarray, end: int) -> int:
     return _queue(link, buffers, START_BYTES, MSG_START, end)
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buffers: np.ndarray,
                     envelope: np.ndarray, times: np.ndarray, delay_ns: int, late: bool, priming: bool,
                     end: int) -> int:
@@ -334,7 +335,7 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
     anything else (never expected) is sent as 0.
     """
     count = link[LINK_FRAME_SAMPLES]
-    first = np.int64(state[STATE_NEXT_INDEX])
+    first = int(state[STATE_NEXT_INDEX])
     times[0] = 0.0
     times[1] = 0.0
     times[2] = delay_ns * 1e-9
@@ -345,7 +346,7 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
     codec.put_u32(frame, PAYLOAD + ENVELOPE_FIRST_INDEX, first)
     for k in range(count):
         value = envelope[k]
-        level = np.int64(round(value * 32767.0)) if abs(value) <= 1.0 else 0  # NaN is not <= 1
+        level = int(round(value * 32767.0)) if abs(value) <= 1.0 else 0  # NaN is not <= 1
         codec.put_i16(frame, PAYLOAD + ENVELOPE_SAMPLES + 2 * k, level)
     end = _queue(link, buffers, ENVELOPE_SAMPLES + 2 * count, MSG_ENVELOPE, end)
     link[LINK_WRITTEN] = first + count
@@ -353,7 +354,7 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
     return end
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def _skip_to(table: np.ndarray, state: np.ndarray, link: np.ndarray, index: int) -> None:
     """Continue the stream at ``index`` (past the next one): the kernel renders on from there as if no
     sample were missing, and the drive ring's skipped samples read 0 (a recording shows the gap)."""
@@ -364,7 +365,7 @@ def _skip_to(table: np.ndarray, state: np.ndarray, link: np.ndarray, index: int)
     link[LINK_WRITTEN] = index
 
 
-@numba.njit(**_KERNEL)
+@njit(**_KERNEL)
 def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: np.ndarray,
            times: np.ndarray) -> int:
     """Stream until LINK_STOP or a failure (module docstring); the EXIT_* reason, also in LINK_EXIT.
@@ -387,7 +388,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
     ref_index = float(link[LINK_WRITTEN])
     ref_ns = now_ns
     primed = False
-    amp_us = np.int64(0)
+    amp_us = 0
     offset_ns = np.int64(1) << 62  # no STATUS yet
     synced_ns = now_ns
     trips_at_start = link[LINK_AMP_WATCHDOG_TRIPS]
@@ -439,7 +440,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
         while (link[LINK_WRITTEN] < play + link[LINK_TARGET_FILL] + frame_samples * primed
                and link[LINK_WRITTEN] + frame_samples <= play + link[LINK_BUFFER_SAMPLES]
                and end + frame_bytes + MAX_ENCODED <= tx.shape[0]):  # room left for a START or STOP
-            delay_ns = np.int64((link[LINK_WRITTEN] - play) * 1e9 / rate_hz)
+            delay_ns = int((link[LINK_WRITTEN] - play) * 1e9 / rate_hz)
             end = _queue_envelope(table, state, link, buffers, envelope, times, delay_ns, skipped, not primed, end)
             skipped = False
         if end > first:

@@ -29,7 +29,8 @@ import numba
 import numpy as np
 from numba import types
 from numba.core import cgutils
-from numba.extending import intrinsic
+from tpad_rt.kernel.jit import njit
+from tpad_rt.kernel.jit import intrinsic
 
 #: Bytes of an int64: the alignment of the atomic accesses.
 _INT64_BYTES = 8
@@ -78,7 +79,7 @@ def store_release(typingctx, array, index, value):  # type: ignore[no-untyped-de
     return signature, codegen
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def _publish(array, index, value):  # type: ignore[no-untyped-def]
     store_release(array, index, value)
 
@@ -86,7 +87,7 @@ def _publish(array, index, value):  # type: ignore[no-untyped-def]
 def publish(array: np.ndarray, index: int, value: int) -> None:
     """``array[index] = value`` (int64 1-D array) as a release store: everything this thread wrote before
     is visible to a reader that load-acquires the element and sees ``value``."""
-    if numba.config.DISABLE_JIT:
+    if numba.config.DISABLE_JIT:  # type: ignore[attr-defined]  # read from the environment; not in its stubs
         array[index] = value
     else:
         _publish(array, np.int64(index), np.int64(value))

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 from pathlib import Path
+from typing import Any
 
 from numba.core import caching
 
@@ -25,8 +26,8 @@ def stamp_cache(module_file: str, *sources: str | Path) -> tuple[Path, ...]:
     this_file = Path(module_file).resolve()
     paths = (this_file, *(Path(source).resolve() for source in sources))
 
-    def stamped(base: type) -> type:
-        class Locator(base):  # type: ignore[valid-type, misc]
+    def stamped(base: type[Any]) -> type[Any]:
+        class Locator(base):
             @classmethod
             def from_function(cls, py_func, py_file):  # type: ignore[no-untyped-def]
                 return super().from_function(py_func, py_file) if Path(py_file).resolve() == this_file else None

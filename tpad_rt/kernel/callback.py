@@ -23,6 +23,7 @@ import numba
 import numpy as np
 from numba import types
 
+from tpad_rt.kernel.jit import njit
 from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.cache_stamp import stamp_cache
 from tpad_rt.kernel.layout import STATE_NEXT_INDEX
@@ -56,7 +57,7 @@ stamp_cache(__file__, *tab.COMPILED_SOURCES)
 _SIGNATURE = types.int32(types.voidptr, types.voidptr, types.uint64, types.voidptr, types.uint64, types.voidptr)
 
 
-@numba.njit(inline="always", nogil=True, error_model="numpy")
+@njit(inline="always", nogil=True, error_model="numpy")
 def _dac_delay_ns(time_info):  # type: ignore[no-untyped-def]
     """outputBufferDacTime - currentTime (ns) of PortAudio's PaStreamCallbackTimeInfo (adc, current, dac; s)."""
     times = numba.carray(time_info, 3, _F8)
@@ -96,7 +97,7 @@ _SOURCES = {"render_callback": _render, "silence_callback": _silence}
 @functools.cache
 def _compiled(name: str) -> numba.core.ccallback.CFunc:
     """The ``@cfunc`` ``name`` (a key of _SOURCES), compiled or loaded from numba's cache once."""
-    return numba.cfunc(_SIGNATURE, nopython=True, cache=True, error_model="numpy")(_SOURCES[name])
+    return numba.cfunc(_SIGNATURE, cache=True, error_model="numpy")(_SOURCES[name])  # a cfunc is nopython
 
 
 def __getattr__(name: str) -> numba.core.ccallback.CFunc:

@@ -30,7 +30,7 @@ import errno as _errno
 from llvmlite import ir
 from numba import types
 from numba.core import cgutils
-from numba.extending import intrinsic
+from tpad_rt.kernel.jit import intrinsic
 
 #: Linux clock id of CLOCK_MONOTONIC, and clock_nanosleep's flag for an absolute deadline.
 CLOCK_MONOTONIC = 1

@@ -38,9 +38,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from tpad_rt.kernel.jit import njit
 from tpad_rt.kernel import layout, texture_eval
 from tpad_rt.kernel.cache_stamp import stamp_cache
 from tpad_rt.kernel.layout import (
@@ -186,8 +186,8 @@ COMPILED_SOURCES = stamp_cache(__file__, layout.__file__, texture_eval.__file__,
 # into (numba deep-copies the callee's IR at every call site); now render_block compiles
 # once, in about 10 s, and the @cfunc and the serial streamer call it (docs/kernel.md
 # "Compilation"). The per-segment helpers stay inlined at IR level: cheap to copy.
-_kernel = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-_inline = numba.njit(cache=True, nogil=True, error_model="numpy", _nrt=False, inline="always")
+_kernel = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+_inline = njit(cache=True, nogil=True, error_model="numpy", _nrt=False, inline="always")
 
 
 @_kernel

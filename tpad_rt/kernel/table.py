@@ -48,9 +48,13 @@ which the kernel reads in its place).
 
 from __future__ import annotations
 
+import inspect
+from pathlib import Path
+
 import numba
 import numpy as np
 
+from tpad_rt.kernel.jit import njit
 from tpad_rt.kernel import atomics, libc, render
 from tpad_rt.kernel.atomics import load_acquire
 from tpad_rt.kernel.libc import monotonic_ns, pointer
@@ -58,7 +62,8 @@ from tpad_rt.kernel.layout import CFG_TEXTURE_T0_S, FINGER_COLS, STATE_NEXT_INDE
 from tpad_rt.kernel.render import render_block
 
 #: The sources compiled into a driver that renders a block (its cache stamp: cache_stamp.stamp_cache).
-COMPILED_SOURCES = (__file__, atomics.__file__, libc.__file__, *render.COMPILED_SOURCES)
+COMPILED_SOURCES: tuple[str | Path, ...] = (__file__, inspect.getfile(atomics), inspect.getfile(libc),
+                                             *render.COMPILED_SOURCES)
 
 # --- pointer table: int64[TAB_SIZE] ----------------------------------------------
 TAB_CFG = 0                   # cfg [TAB_CFG_SIZE]
@@ -122,7 +127,7 @@ _F4 = np.float32
 _I8 = np.int64
 
 
-@numba.njit(inline="always", nogil=True, error_model="numpy")
+@njit(inline="always", nogil=True, error_model="numpy")
 def begin_block(table, first_sample, frames, dac_delay_ns):  # type: ignore[no-untyped-def]
     """Start a block's record: its row in the block ring (``first_sample``, entry time, ``dac_delay_ns``
     from now to the first sample at the DAC or amplifier, finger count, ``frames``). The finger count is
@@ -142,7 +147,7 @@ def begin_block(table, first_sample, frames, dac_delay_ns):  # type: ignore[no-u
     return stats, row, entry_ns
 
 
-@numba.njit(inline="always", nogil=True, error_model="numpy")
+@njit(inline="always", nogil=True, error_model="numpy")
 def finish_block(stats, row, entry_ns, frames, underflow, priming):  # type: ignore[no-untyped-def]
     """Close a block's record: compute time, counters (the block count last)."""
     if underflow:
@@ -154,7 +159,7 @@ def finish_block(stats, row, entry_ns, frames, underflow, priming):  # type: ign
     stats[STAT_CALLBACKS] += 1
 
 
-@numba.njit(inline="always", nogil=True, error_model="numpy")
+@njit(inline="always", nogil=True, error_model="numpy")
 def kernel_views(table):  # type: ignore[no-untyped-def]
     """Views of the render kernel's arrays the table points to, except the texture: ``(cfg, dev, state,
     power_ring, finger, finger_count, telem, telem_count)``; ``finger_count`` is the live count (a driver
@@ -170,7 +175,7 @@ def kernel_views(table):  # type: ignore[no-untyped-def]
     return cfg, dev, state, power_ring, finger, finger_count, telem, telem_count
 
 
-@numba.njit(inline="always", nogil=True, error_model="numpy")
+@njit(inline="always", nogil=True, error_model="numpy")
 def texture_views(table, slot):  # type: ignore[no-untyped-def]
     """Views of texture slot ``slot``'s arrays (0 or 1): ``(prog, params, img, stack)``."""
     entries = table[TAB_SLOTS + slot * SLOT_SIZE: TAB_SLOTS + (slot + 1) * SLOT_SIZE]
@@ -181,7 +186,7 @@ def texture_views(table, slot):  # type: ignore[no-untyped-def]
     return prog, params, img, stack
 
 
-@numba.njit(inline="always", nogil=True, error_model="numpy")
+@njit(inline="always", nogil=True, error_model="numpy")
 def render_into(table, state, out, frames, channels, channel):  # type: ignore[no-untyped-def]
     """Render ``frames`` samples with the table's arrays into ``out[k * channels + channel]`` (other
     channels untouched) and the drive ring, in pieces of at most the scratch's length. Call it after
@@ -197,7 +202,7 @@ def render_into(table, state, out, frames, channels, channel):  # type: ignore[n
     while done < frames:
         count = min(frames - done, scratch.shape[0])
         piece = scratch[:count]
-        start = np.int64(state[STATE_NEXT_INDEX])
+        start = int(state[STATE_NEXT_INDEX])
         render_block(piece, start, cfg, dev, state, power_ring, finger, finger_count,
                      prog, params, img, stack, telem, telem_count)
         for k in range(count):

@@ -467,7 +467,10 @@ def render_callback_address() -> int:
     """The address of the compiled audio callback, which the streamer calls for each frame."""
     from tpad_rt.kernel import callback
 
-    return int(callback.render_callback.address)
+    address = callback.render_callback.address
+    if address is None:  # numba types it Optional: a compiled cfunc always has one
+        raise BackendError("serial: the audio callback has no address (it did not compile)")
+    return int(address)
 
 
 def _version_error(version: int) -> BackendError:
