@@ -47,6 +47,7 @@ def _render(texture: str, url: str, block: int, input_s: float, stop_after_block
 def test_many_blocks_per_step_render_what_one_block_per_step_renders(
         monkeypatch: pytest.MonkeyPatch, texture: str, url: str, block: int, input_s: float,
         stop_after: int | None) -> None:
+    monkeypatch.setattr(offline, "STEP_BLOCKS", 32)
     chunked, steps = _render(texture, url, block, input_s, stop_after)
     assert max(np.diff([0, *steps])) == offline.STEP_BLOCKS  # several blocks per step were rendered
     monkeypatch.setattr(offline, "STEP_BLOCKS", 1)
@@ -60,7 +61,8 @@ def test_many_blocks_per_step_render_what_one_block_per_step_renders(
     assert np.abs(chunked.drive).max() > 0.1  # something was rendered
 
 
-def test_a_step_ends_where_the_input_ends() -> None:
+def test_a_step_ends_where_the_input_ends(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(offline, "STEP_BLOCKS", 32)
     block, input_s = 64, 0.1  # 300 input blocks: not a multiple of STEP_BLOCKS
     _, steps = _render("grating.yaml", "scripted://swipe?speed_mm_s=100", block, input_s)
     assert int(np.ceil(input_s * RATE_HZ / block)) in steps

@@ -68,7 +68,7 @@ def test_a_bad_sample_is_refused_and_the_file_kept_valid_up_to_its_block(
     output = open_output(f"wav://{path}", device=Device.default(), fs_hz=192000)
     output.write(good, {})
     expected = (rf"wav: .*out\.wav: drive sample 74 is {bad!r}, {problem}: .*this is a bug in tpad-rt, please "
-                r"report it; the file was closed holding the 64 samples before this block")
+                r"report it; the file was closed holding the 64 samples written before this write")
     with pytest.raises(BackendError, match=expected):
         output.write(block, {})
     rate, data = wavfile.read(path)

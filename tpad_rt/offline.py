@@ -3,16 +3,20 @@
 Per block: push the input's finger samples up to the block's end time into the
 pipeline, render the block, hand the drive and the block's telemetry row to every
 output, keep the row (and the drive, if asked). A step does this for up to
-STEP_BLOCKS blocks, reading the input and draining the telemetry once per step (the
-Python work per block was ten times the kernel's; the samples are the same). After ``input_s`` seconds of input the
-pipeline is stopped and rendered for a tail long enough for its ramp to reach silence.
+STEP_BLOCKS blocks in one native call (:meth:`tpad_rt.pipeline.Pipeline.render_blocks`),
+then hands the outputs every block at once (:meth:`tpad_rt.outputs.Output.write_blocks`):
+no Python runs per block, and the samples are the same to the bit as block by block.
+Only a step holding a finger sample the pipeline refuses goes block by block, to name
+that sample. After ``input_s`` seconds of input the pipeline is stopped and rendered for
+a tail long enough for its ramp to reach silence.
 Nothing here waits for a clock: ``tpad-rt render`` runs it as fast as it goes
 (``tpad-rt play`` uses the real-time :class:`tpad_rt.engine.Renderer` instead).
 
 API map
 -------
 OfflineRender(pipeline, source, outputs, block_frames=, input_s=, tail_s=, force_n=, keep_drive=)
-    ``.step()`` renders the next blocks (at most STEP_BLOCKS); ``.done``, ``.blocks_done``, ``.total_blocks``,
+    ``.warm_up()``; ``.step()`` renders the next blocks (at most STEP_BLOCKS); ``.done``, ``.blocks_done``,
+    ``.total_blocks``,
     ``.stop_early()``; ``.latest`` (the last block's telemetry row and output
     measurements); ``.result()`` -> RenderResult
 RenderResult
@@ -41,7 +45,7 @@ from tpad_rt.errors import ConfigError, SampleError
 from tpad_rt.inputs import Input
 from tpad_rt.felt import texture_at_finger
 from tpad_rt.inputs.base import FINGER_DTYPE
-from tpad_rt.kernel.layout import TEL_NAMES
+from tpad_rt.kernel.layout import FINGER_COLS, FINGER_DOWN, FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_RENDER_BLOCKS, MAX_RENDER_S
 from tpad_rt.outputs import Output
 from tpad_rt.outputs.wav import BYTES_PER_SAMPLE as WAV_BYTES_PER_SAMPLE
@@ -50,8 +54,10 @@ from tpad_rt.pipeline import Pipeline
 from tpad_rt.texture import CompiledTexture
 
 
-#: Blocks rendered per :meth:`OfflineRender.step` at most (the telemetry ring holds far more).
-STEP_BLOCKS = 32
+#: Blocks rendered per :meth:`OfflineRender.step` at most: fewer when the telemetry ring holds fewer, or
+#: when they would hold more than STEP_SAMPLES samples (the step's drive buffer: 1 MiB).
+STEP_BLOCKS = 4096
+STEP_SAMPLES = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -146,7 +152,8 @@ class OfflineRender:
         self.input_blocks: float = _blocks(input_s, fs_hz, block_frames) if math.isfinite(input_s) else math.inf
         self.tail_blocks = _blocks(tail_s, fs_hz, block_frames)
         self.blocks_done = 0
-        self._block = np.zeros(block_frames, dtype=np.float32)
+        self._step_blocks = max(1, min(STEP_BLOCKS, pipeline.options.telemetry_ring, STEP_SAMPLES // block_frames))
+        self._buffer = np.zeros(self._step_blocks * block_frames, dtype=np.float32)
         self._drive: list[np.ndarray] | None = [] if keep_drive else None
         self._rows: dict[str, list[np.ndarray]] = {name: [] for name in TEL_NAMES}
         self._pushed_until_s = -math.inf
@@ -163,6 +170,13 @@ class OfflineRender:
         """True once every block has been rendered."""
         return self.blocks_done >= self.total_blocks
 
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) what :meth:`step` runs: the pipeline's batch kernel and the
+        outputs' (nothing is rendered or written)."""
+        self.pipeline.warm_up(batch=True)
+        for output in self.outputs:
+            output.warm()
+
     def stop_early(self) -> None:
         """Stop following the input now: the remaining blocks are only the ramp tail."""
         self.input_blocks = min(self.input_blocks, self.blocks_done)
@@ -172,33 +186,52 @@ class OfflineRender:
         does nothing once :attr:`done`."""
         if self.done:
             return
-        pipeline, block, frames = self.pipeline, self._block, self.block_frames
+        pipeline, frames = self.pipeline, self.block_frames
         if self.blocks_done == 0:
             pipeline.start()
         if self.blocks_done == self.input_blocks:
             pipeline.stop()
         limit = self.input_blocks if self.blocks_done < self.input_blocks else self.total_blocks
-        count = int(min(STEP_BLOCKS, limit - self.blocks_done))
+        count = int(min(self._step_blocks, limit - self.blocks_done))
         ends_s = (pipeline.sample_index + frames * np.arange(1, count + 1)) / pipeline.fs_hz
         samples = self.source.samples_between(self._pushed_until_s, float(ends_s[-1]))
         self._pushed_until_s = float(ends_s[-1])
         self._finger.append(samples)
-        pushed_by = np.searchsorted(samples["t_s"], ends_s, side="right")  # samples due by each block's end
-        row: dict[str, float] = {}
-        for k in range(count):
-            self._push(samples[pushed_by[k - 1] if k else 0:pushed_by[k]])
-            pipeline.render(block)
-            row = pipeline.last_telemetry_row()
-            for output in self.outputs:
-                output.write(block, row)
-                row.update(output.latest())
-            if self._drive is not None:
-                self._drive.append(block.copy())
+        due = np.searchsorted(samples["t_s"], ends_s, side="right")  # samples due by each block's end
+        drive = self._buffer[:count * frames]
+        try:
+            pipeline.render_blocks(drive, frames, self._finger_rows(samples), due)
+        except SampleError:  # a sample push_finger refuses: block by block, to name it (a ConfigError)
+            self._render_one_by_one(drive, samples, due)
         telemetry = pipeline.drain_telemetry()
+        for output in self.outputs:
+            output.write_blocks(drive, frames, telemetry)
         for name in TEL_NAMES:
             self._rows[name].append(telemetry[name])
-        self.latest = row
+        if self._drive is not None:
+            self._drive.append(drive.copy())
+        self.latest = {name: float(column[-1]) for name, column in telemetry.items()}
+        for output in self.outputs:
+            self.latest.update(output.latest())
         self.blocks_done += count
+
+    def _finger_rows(self, samples: np.ndarray) -> np.ndarray:
+        """``samples`` (FINGER_DTYPE) as finger ring rows ``(t_s, x_mm, y_mm, force_n or NaN, down)``, the
+        force replaced by ``force_n`` when given."""
+        rows = np.empty((len(samples), FINGER_COLS))
+        rows[:, FINGER_T_S] = samples["t_s"]
+        rows[:, FINGER_X_MM] = samples["x_mm"]
+        rows[:, FINGER_Y_MM] = samples["y_mm"]
+        rows[:, FINGER_FORCE_N] = samples["force_n"] if self.force_n is None else self.force_n
+        rows[:, FINGER_DOWN] = np.where(samples["down"], 1.0, 0.0)
+        return rows
+
+    def _render_one_by_one(self, drive: np.ndarray, samples: np.ndarray, due: np.ndarray) -> None:
+        """Push and render block by block (Pipeline.push_finger, Pipeline.render) into ``drive``."""
+        frames = self.block_frames
+        for k in range(len(due)):
+            self._push(samples[due[k - 1] if k else 0:due[k]])
+            self.pipeline.render(drive[k * frames:(k + 1) * frames])
 
     def _push(self, samples: np.ndarray) -> None:
         """Push ``samples`` (FINGER_DTYPE; force NaN: unknown) into the pipeline; a sample the pipeline

@@ -41,6 +41,7 @@ from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, SampleError, TpadError
 from tpad_rt.kernel import layout
 from tpad_rt.kernel.atomics import publish
+from tpad_rt.kernel.batch import render_blocks
 from tpad_rt.kernel.render import render_block
 from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, position_range_mm
 from tpad_rt.texture import CompiledTexture
@@ -527,6 +528,60 @@ class Pipeline:
         render_block(out, self.sample_index, *self._arrays)
         self.sample_index += out.size
 
+    def finger_rows_pass(self, rows: np.ndarray, due: np.ndarray, block_frames: int) -> bool:
+        """Whether :meth:`push_finger` would take every finger sample of ``rows`` when
+        :meth:`render_blocks` pushes them (the same rules, checked at once).
+
+        ``rows``: float64 ``[N, FINGER_COLS]`` (force NaN: the default); sample ``i`` is pushed
+        before block ``k``, the first with ``i < due[k]``, when the stream clock stands at that
+        block's first sample.
+        """
+        rows = rows[:int(due[-1])] if len(due) else rows[:0]  # the samples pushed
+        if len(rows) == 0:
+            return True
+        t_s = rows[:, layout.FINGER_T_S]
+        block = np.searchsorted(due, np.arange(len(rows)), side="right")
+        now_s = (self._arrays.state[layout.STATE_NEXT_INDEX] + block * block_frames) / self.fs_hz
+        (x_low, x_high), (y_low, y_high) = self.position_range_mm
+        x_mm, y_mm = rows[:, layout.FINGER_X_MM], rows[:, layout.FINGER_Y_MM]
+        force_n, down = rows[:, layout.FINGER_FORCE_N], rows[:, layout.FINGER_DOWN]
+        with np.errstate(invalid="ignore"):
+            fine = ((now_s - FINGER_TIME_WINDOW_S <= t_s) & (t_s <= now_s + FINGER_TIME_WINDOW_S)
+                    & (x_low <= x_mm) & (x_mm <= x_high) & (y_low <= y_mm) & (y_mm <= y_high)
+                    & (np.isnan(force_n) | ((0.0 <= force_n) & (force_n <= MAX_FORCE_N)))
+                    & ((down == 0.0) | (down == 1.0)))
+        ordered = bool(t_s[0] >= self._last_t_s) and bool(np.all(np.diff(t_s) >= 0.0))
+        return bool(fine.all()) and ordered
+
+    def render_blocks(self, out: np.ndarray, block_frames: int, rows: np.ndarray, due: np.ndarray) -> None:
+        """Render ``len(due)`` blocks of ``block_frames`` samples into ``out``, pushing ``rows[due[k - 1]:due[k]]``
+        before block ``k``: :meth:`push_finger` and :meth:`render` block by block, in one native call.
+
+        ``rows``: float64 ``[N, FINGER_COLS]`` finger samples ``(t_s, x_mm, y_mm, force_n or NaN,
+        down 1.0/0.0)``; ``due``: int64, non-decreasing, each in ``[0, N]``. Raises ValueError
+        when the shapes do not fit, SampleError (a ValueError; nothing rendered) unless
+        :meth:`finger_rows_pass` holds (push them one by one to learn which sample is bad),
+        TypeError for an ``out`` :meth:`render` refuses.
+        """
+        frames = len(due) * block_frames
+        if not (isinstance(out, np.ndarray) and out.dtype == np.float32 and out.ndim == 1
+                and out.flags.c_contiguous and out.flags.writeable):
+            raise TypeError("out: must be a writable C-contiguous 1-D float32 NumPy array")
+        rows = np.ascontiguousarray(rows, dtype=np.float64)
+        due = np.ascontiguousarray(due, dtype=np.int64)
+        if not (1 <= block_frames <= MAX_BLOCK_FRAMES and out.size >= frames and rows.ndim == 2
+                and rows.shape[1] == layout.FINGER_COLS and due.ndim == 1
+                and (len(due) == 0 or (due[0] >= 0 and due[-1] <= len(rows) and bool(np.all(np.diff(due) >= 0))))):
+            raise ValueError("render_blocks: out, rows or due do not fit (module docstring)")
+        with self._producer:
+            if not self.finger_rows_pass(rows, due, block_frames):
+                raise SampleError("render_blocks: a finger sample push_finger refuses; push them one by one to "
+                                  "learn which")
+            render_blocks(out, block_frames, self.sample_index, rows, due, *self._arrays)
+            if len(rows) and len(due) and due[-1] > 0:
+                self._last_t_s = float(rows[int(due[-1]) - 1, layout.FINGER_T_S])
+        self.sample_index += frames
+
     def last_telemetry_row(self) -> dict[str, float]:
         """The newest telemetry row (the last rendered block's), by ``layout.TEL_NAMES``; not drained."""
         telem, count = self._arrays.telem, self._arrays.telem_count
@@ -554,10 +609,16 @@ class Pipeline:
         drained[layout.TEL_NAMES[layout.TEL_FLAGS]] = rows[:, layout.TEL_FLAGS].astype(np.int64)
         return drained
 
-    def warm_up(self) -> None:
-        """Compile (or load from cache) and run the kernel once on copies of the arrays.
+    def warm_up(self, batch: bool = False) -> None:
+        """Compile (or load from cache) and run the kernel once on copies of the arrays; with ``batch``,
+        :meth:`render_blocks`' kernel too (the offline render's).
 
         The pipeline's own state is untouched; the first real :meth:`render` is then fast.
         """
+        frames = self.options.control_interval + 1
         scratch = KernelArrays(*(array.copy() for array in self._arrays))
-        render_block(np.zeros(self.options.control_interval + 1, dtype=np.float32), self.sample_index, *scratch)
+        render_block(np.zeros(frames, dtype=np.float32), self.sample_index, *scratch)
+        if batch:
+            scratch = KernelArrays(*(array.copy() for array in self._arrays))
+            render_blocks(np.zeros(frames, dtype=np.float32), frames, self.sample_index,
+                          np.zeros((0, layout.FINGER_COLS)), np.zeros(1, dtype=np.int64), *scratch)

@@ -47,6 +47,9 @@ from realtime_driver import RENDER_STREAM, render_stream  # noqa: E402
 
 from tpad_rt.config import load_texture  # noqa: E402
 from tpad_rt.device import Device  # noqa: E402
+from tpad_rt.inputs import open_input  # noqa: E402
+from tpad_rt.offline import OfflineRender  # noqa: E402
+from tpad_rt.outputs.sim import SimOutput  # noqa: E402
 from tpad_rt.pipeline import Pipeline, RenderOptions  # noqa: E402
 from tpad_rt.realtime import CallbackTable  # noqa: E402
 from tpad_rt.texture import compile_texture  # noqa: E402
@@ -63,6 +66,9 @@ TEXTURES = {
     "temporal": "temporal_pulse.yaml",
     "layers": "layers_window.yaml",
 }
+#: The offline section: ``tpad-rt render textures/grating.yaml --input OFFLINE_INPUT`` (sim://) at these blocks.
+OFFLINE_INPUT = "scripted://swipe?speed_mm_s=100&repeat=3&back_and_forth=1"
+OFFLINE_BLOCKS = (16, 64, 256, 1024)
 #: Control intervals compared for the grating (kernel only).
 INTERVALS = (16, 32, 64, 128)
 Run = Callable[[], int]
@@ -79,11 +85,13 @@ class Plan:
     numpy_s: float
     numpy_runs: int
     agreement_s: float
+    offline_runs: int
 
 
-FULL = Plan(kernel_s=10.0, kernel_runs=31, pipeline_s=2.0, pipeline_runs=11, numpy_s=0.25, numpy_runs=5, agreement_s=1.0)
+FULL = Plan(kernel_s=10.0, kernel_runs=31, pipeline_s=2.0, pipeline_runs=11, numpy_s=0.25, numpy_runs=5, agreement_s=1.0,
+            offline_runs=21)
 QUICK = Plan(kernel_s=0.25, kernel_runs=5, pipeline_s=0.1, pipeline_runs=3, numpy_s=0.03, numpy_runs=2,
-             agreement_s=0.1)
+             agreement_s=0.1, offline_runs=3)
 
 
 def finger_path(duration_s: float) -> np.ndarray:
@@ -167,6 +175,23 @@ class Case:
 
         return run
 
+    def offline(self, block: int) -> Run:
+        """A fresh ``tpad-rt render`` loop (OfflineRender into sim://) over OFFLINE_INPUT, warmed up untimed."""
+        source = open_input(OFFLINE_INPUT)
+        pipeline = Pipeline(self.device, self.compiled, fs_hz=FS_HZ, options=self.options)
+        tail_s = self.options.ramp_ms * 1e-3 + (self.options.control_interval + block) / FS_HZ
+        render = OfflineRender(pipeline, source, [SimOutput(self.device, FS_HZ)], block_frames=block,
+                               input_s=float(source.duration_s or 0.0), tail_s=tail_s)
+        render.warm_up()
+
+        def run() -> int:
+            while not render.done:
+                render.step()
+            source.close()
+            return render.blocks_done * block
+
+        return run
+
     def agreement(self, seconds: float, block: int = 64) -> dict[str, float | bool]:
         """Driver samples == Pipeline.render's (bit for bit); NumPy's largest difference over the largest sample."""
         total = round(seconds * FS_HZ / block) * block
@@ -201,6 +226,7 @@ def measure(plan: Plan, log: Callable[[str], None]) -> dict[str, object]:
             })
             log(f"{kind:9s} block {block:5d}: kernel {kernel['median']:6.2f} ns/sample, "
                 f"Pipeline.render {pipeline['median']:7.1f}, numpy {numpy['median']:8.0f}")
+    offline = measure_offline(plan, log)
     sweep = []
     for interval in INTERVALS:
         case = Case(device, ROOT / "textures" / TEXTURES["grating"], RenderOptions(control_interval=interval))
@@ -208,7 +234,23 @@ def measure(plan: Plan, log: Callable[[str], None]) -> dict[str, object]:
             kernel = ns_per_sample(lambda: case.kernel(block, plan.kernel_s), plan.kernel_runs)
             sweep.append({"control_interval": interval, "block": block, "kernel_ns_per_sample": kernel})
             log(f"grating, control_interval {interval:3d}, block {block:4d}: kernel {kernel['median']:6.2f} ns/sample")
-    return {"rows": rows, "control_interval_sweep": sweep}
+    return {"rows": rows, "offline": offline, "control_interval_sweep": sweep}
+
+
+def measure_offline(plan: Plan, log: Callable[[str], None]) -> list[dict[str, object]]:
+    """The offline section: OfflineRender into sim:// against the kernel's @cfunc path, grating, per block."""
+    device = Device.default()
+    offline: list[dict[str, object]] = []
+    grating = Case(device, ROOT / "textures" / TEXTURES["grating"], RenderOptions())
+    for block in OFFLINE_BLOCKS:
+        kernel = ns_per_sample(lambda: grating.kernel(block, plan.kernel_s), plan.kernel_runs)
+        whole = ns_per_sample(lambda: grating.offline(block), plan.offline_runs)
+        offline.append({"block": block, "kernel_ns_per_sample": kernel, "offline_ns_per_sample": whole,
+                        "offline_over_kernel": whole["median"] / kernel["median"],
+                        "offline_x_real_time": 1e9 / FS_HZ / whole["median"]})
+        log(f"offline render, block {block:4d}: {whole['median']:6.2f} ns/sample "
+            f"({1e9 / FS_HZ / whole['median']:.0f}x real time), kernel {kernel['median']:6.2f}")
+    return offline
 
 
 def machine() -> dict[str, object]:
@@ -248,6 +290,14 @@ def markdown(report: dict[str, object]) -> str:
             f"| {band(row['pipeline_ns_per_sample'], 1)} | {band(row['numpy_ns_per_sample'], 0)} "
             f"| {row['numpy_over_kernel']:.0f} |"
         )
+    lines += ["", f"Offline render (`tpad-rt render textures/grating.yaml --input \"{OFFLINE_INPUT}\"`, sim://: "
+              "OfflineRender's step loop, the plate simulated, telemetry kept) next to the kernel above in the "
+              "same run:", "",
+              "| block | offline ns/sample | x RT | kernel ns/sample | offline / kernel |",
+              "| ---: | ---: | ---: | ---: | ---: |"]
+    for row in report.get("offline", []):
+        lines.append(f"| {row['block']} | {band(row['offline_ns_per_sample'], 2)} | {row['offline_x_real_time']:.0f} "
+                     f"| {band(row['kernel_ns_per_sample'], 2)} | {row['offline_over_kernel']:.2f} |")
     lines += ["", "Kernel vs control interval (grating):", "",
               "| control_interval | block | kernel ns/sample |", "| ---: | ---: | ---: |"]
     for row in report["control_interval_sweep"]:
@@ -265,10 +315,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="short runs (rougher figures)")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for kernel.json/.md")
+    parser.add_argument("--offline-only", action="store_true",
+                        help="measure the offline section only; keep the rest of kernel.json as it is")
     args = parser.parse_args(argv)
     plan = QUICK if args.quick else FULL
-    report = {"quick": args.quick, "fs_hz": FS_HZ, "plan": asdict(plan), "machine": machine(),
-              **measure(plan, lambda line: print(line, flush=True))}
+    log = lambda line: print(line, flush=True)  # noqa: E731
+    if args.offline_only:
+        report = json.loads((args.out / "kernel.json").read_text())
+        report["offline"] = measure_offline(plan, log)
+        report["offline_machine"] = machine()
+    else:
+        report = {"quick": args.quick, "fs_hz": FS_HZ, "plan": asdict(plan), "machine": machine(),
+                  **measure(plan, log)}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "kernel.json").write_text(json.dumps(report, indent=1) + "\n")
     (args.out / "kernel.md").write_text(markdown(report))

@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
         with compile_notice():  # the first run compiles the kernels: say so at once
             session = open_session(args, stack, keep_drive=out.suffix.lower() == ".npz",
                                    wav_path=out if out.suffix.lower() == ".wav" else None)
-            session.render.pipeline.warm_up()
+            session.render.warm_up()
         started = time.perf_counter()
         _run_with_progress(session.render, console)
         wall_s = time.perf_counter() - started
@@ -253,7 +253,7 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
     avg_budget = metadata["power_avg_w"]
     speed = result.seconds / max(wall_s, 1e-9)
     lines = [
-        f"rendered {result.seconds:.3f} s of audio in {wall_s:.2f} s ({speed:.1f}x real time), "
+        f"rendered {result.seconds:.3f} s of audio in {wall_s:.3g} s ({speed:.1f}x real time), "
         f"{len(flags)} blocks of {result.block_frames} at {result.fs_hz} Hz",
         f"drive: peak {blocks['voltage_v'].max(initial=0.0):.2f} V of {metadata['max_voltage_v']:g} V max",
         f"power: mean {blocks['power_w'].mean():.3f} W, peak {blocks['power_w'].max(initial=0.0):.3f} W "

@@ -19,8 +19,15 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+
+from tpad_rt.kernel.cache_stamp import stamp_cache
+from tpad_rt.kernel.jit import njit
+from tpad_rt.physics import friction
+from tpad_rt.physics.friction import relative_friction_core
+
+# felt_friction compiles friction's core in: this module's cache is stamped with that file too.
+stamp_cache(__file__, friction.__file__)
 
 # --- state: float64[SIM_STATE_SIZE], carried across blocks --------------------
 SIM_X_M = 0                   # displacement (m)
@@ -38,7 +45,7 @@ COEF_INV_OMEGA_S = 6          # 1 / w0, to put velocity in metres for the envelo
 COEF_SIZE = 7
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def resonator_coefficients(f0_hz: float, q: float, gain_m_per_v: float, fs_hz: float, coef: np.ndarray) -> None:
     """Fill ``coef`` for resonance ``f0_hz``, quality factor ``q`` (> 0.5), steady gain ``gain_m_per_v``.
 
@@ -73,7 +80,7 @@ def resonator_coefficients(f0_hz: float, q: float, gain_m_per_v: float, fs_hz: f
     coef[COEF_INV_OMEGA_S] = 1.0 / omega
 
 
-@numba.njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True)
 def resonate(
     drive: np.ndarray, volts_per_full_scale: float, coef: np.ndarray, state: np.ndarray, envelope_m: np.ndarray
 ) -> float:
@@ -105,3 +112,37 @@ def resonate(
     state[SIM_X_M] = x_m
     state[SIM_V_M_S] = v_m_s
     return total_m / max(drive.shape[0], 1)
+
+
+@njit(cache=True, nogil=True)
+def resonate_blocks(
+    drive: np.ndarray,
+    block_frames: int,
+    volts_per_full_scale: float,
+    coefs: np.ndarray,
+    coef_rows: np.ndarray,
+    state: np.ndarray,
+    envelope_m: np.ndarray,
+    amplitude_m: np.ndarray,
+) -> None:
+    """:func:`resonate` over consecutive blocks of ``block_frames`` samples of ``drive``, block ``k`` with the
+    coefficients ``coefs[coef_rows[k]]``; its mean envelope (m) into ``amplitude_m[k]``.
+
+    ``coefs``: float64 ``[M, COEF_SIZE]``; ``coef_rows``: int64, one per block, each in
+    ``[0, M)``; ``envelope_m`` at least ``block_frames`` long. No input checks.
+    """
+    for k in range(coef_rows.shape[0]):
+        begin = k * block_frames
+        amplitude_m[k] = resonate(drive[begin:begin + block_frames], volts_per_full_scale, coefs[coef_rows[k]],
+                                  state, envelope_m)
+
+
+@njit(cache=True, nogil=True)
+def felt_friction(
+    amplitude_m: np.ndarray, speed_m_s: np.ndarray, freq_hz: float, mu0: float, poisson: float, psi_star: float,
+    mu_rel: np.ndarray,
+) -> None:
+    """``mu_rel[k]``: the relative friction at vibration amplitude ``amplitude_m[k]`` (m) and finger speed
+    ``speed_m_s[k]`` (m/s), by :func:`tpad_rt.physics.friction.relative_friction_core` (paper Eqs. 2-3)."""
+    for k in range(amplitude_m.shape[0]):
+        mu_rel[k] = relative_friction_core(amplitude_m[k], freq_hz, speed_m_s[k], mu0, poisson, psi_star)

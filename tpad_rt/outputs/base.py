@@ -20,6 +20,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -76,6 +77,15 @@ class Output(ABC):
 
         Raises BackendError when the backend fails (a full disk, a lost device).
         """
+
+    def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
+                     blocks: Mapping[str, npt.NDArray[Any]]) -> None:
+        """:meth:`write` each of the consecutive blocks of ``block_frames`` samples in ``samples``, block ``k``
+        with the telemetry row ``{name: blocks[name][k]}``; an output that can take them at once overrides it
+        (the offline render calls it once for many blocks). Raises as :meth:`write`."""
+        for k in range(len(samples) // block_frames):
+            row = {name: float(column[k]) for name, column in blocks.items()}
+            self.write(samples[k * block_frames:(k + 1) * block_frames], row)
 
     def measurements(self) -> dict[str, npt.NDArray[np.float64]]:
         """Per-block arrays the output measured so far, by name (none by default)."""

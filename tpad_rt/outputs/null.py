@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -26,6 +27,11 @@ class NullOutput(Output):
 
     def write(self, samples: npt.NDArray[np.float32], block: Mapping[str, float]) -> None:
         """Count ``samples``."""
+        self.samples_written += len(samples)
+
+    def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
+                     blocks: Mapping[str, npt.NDArray[Any]]) -> None:
+        """Count every block's samples."""
         self.samples_written += len(samples)
 
 

@@ -11,17 +11,16 @@ slower (or unknown).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.config.device_schema import MAX_Q, MIN_Q
 from tpad_rt.device import Device
-from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, resonate, resonator_coefficients
+from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, felt_friction, resonate_blocks, resonator_coefficients
 from tpad_rt.outputs.base import Consumes, Output, OutputKind, Runs
-from tpad_rt.physics.friction import relative_friction_core
 from tpad_rt.urls import Option, Url, UrlForm, number
 
 _Q_NUMBER = number(MIN_Q, low_closed=False, high=MAX_Q)
@@ -51,53 +50,81 @@ class SimOutput(Output):
         self.device = device
         self.q = q
         self._state = np.zeros(SIM_STATE_SIZE)
-        self._coef = np.zeros(COEF_SIZE)
-        self._coef_force_n = math.nan  # the force self._coef was computed for
+        self._coefs: dict[float, np.ndarray] = {}  # resonator coefficients by contact force (N)
         self._envelope_m = np.zeros(0)
-        self._amplitude_um: list[float] = []
-        self._achieved_mu: list[float] = []
+        self._amplitude_um: list[np.ndarray] = []
+        self._achieved_mu: list[np.ndarray] = []
+
+    def _coef(self, force_n: float) -> np.ndarray:
+        """The resonator coefficients at contact force ``force_n`` (N, >= 0), computed once per force."""
+        coef = self._coefs.get(force_n)
+        if coef is None:
+            device = self.device
+            q = self.q if self.q is not None else float(device.quality_factor(force_n))
+            coef = self._coefs[force_n] = np.zeros(COEF_SIZE)
+            resonator_coefficients(device.resonance_hz, q, float(device.amplitude_m_per_v(force_n)),
+                                   float(self.fs_hz), coef)
+        return coef
+
+    def _speeds_m_s(self, speed_mm_s: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """Finger speeds (m/s) for the friction model: raised to the device's floor, the floor where unknown."""
+        speed_m_s = speed_mm_s * 1e-3
+        floor_m_s = self.device.speed_floor_m_s
+        return np.where(np.isfinite(speed_m_s), np.maximum(speed_m_s, floor_m_s), floor_m_s)
 
     def write(self, samples: npt.NDArray[np.float32], block: Mapping[str, float]) -> None:
         """Drive the plate with ``samples`` (at least one); ``block`` must carry ``force_n`` (N) and ``speed_mm_s``.
 
         A force below 0 (or NaN) counts as 0: the device tables are clamped at their ends anyway.
         """
-        force_n = float(block["force_n"])
-        force_n = force_n if force_n >= 0.0 else 0.0
+        self.write_blocks(samples, len(samples), {name: np.array([block[name]], dtype=np.float64)
+                                                  for name in ("force_n", "speed_mm_s")})
+
+    def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
+                     blocks: Mapping[str, npt.NDArray[Any]]) -> None:
+        """Drive the plate with consecutive blocks of ``block_frames`` samples, block ``k`` at contact force
+        ``blocks["force_n"][k]`` (N; below 0 or NaN counts as 0) and finger speed ``blocks["speed_mm_s"][k]``;
+        one native call per force the blocks hold."""
+        force_n = np.asarray(blocks["force_n"], dtype=np.float64)
+        count = len(force_n)
+        force_n = np.where(force_n >= 0.0, force_n, 0.0)
+        forces, coef_rows = np.unique(force_n, return_inverse=True)
+        coefs = np.array([self._coef(float(force)) for force in forces]).reshape(len(forces), COEF_SIZE)
+        if len(self._envelope_m) < block_frames:
+            self._envelope_m = np.zeros(block_frames)
         device = self.device
-        if force_n != self._coef_force_n:
-            q = self.q if self.q is not None else float(device.quality_factor(force_n))
-            resonator_coefficients(device.resonance_hz, q, float(device.amplitude_m_per_v(force_n)),
-                                   float(self.fs_hz), self._coef)
-            self._coef_force_n = force_n
-        if len(self._envelope_m) < len(samples):
-            self._envelope_m = np.zeros(len(samples))
-        amplitude_m = resonate(samples, device.volts_per_full_scale, self._coef, self._state, self._envelope_m)
-        speed_m_s = float(block["speed_mm_s"]) * 1e-3
-        speed_m_s = max(speed_m_s, device.speed_floor_m_s) if math.isfinite(speed_m_s) else device.speed_floor_m_s
+        amplitude_m = np.zeros(count)
+        resonate_blocks(samples, block_frames, device.volts_per_full_scale, coefs, coef_rows.astype(np.int64),
+                        self._state, self._envelope_m, amplitude_m)
+        speed_m_s = self._speeds_m_s(np.asarray(blocks["speed_mm_s"], dtype=np.float64))
+        achieved_mu = np.zeros(count)
+        felt_friction(amplitude_m, speed_m_s, device.resonance_hz, device.mu0, device.poisson, device.psi_star,
+                      achieved_mu)
         self._amplitude_um.append(amplitude_m * 1e6)
-        self._achieved_mu.append(relative_friction_core(
-            amplitude_m, device.resonance_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
+        self._achieved_mu.append(achieved_mu)
 
     def warm(self) -> None:
         """Run the plate model and the friction model once on scratch arrays (nothing recorded)."""
-        coef, state = np.zeros(COEF_SIZE), np.zeros(SIM_STATE_SIZE)
+        coef, state = np.zeros((1, COEF_SIZE)), np.zeros(SIM_STATE_SIZE)
         device = self.device
-        resonator_coefficients(device.resonance_hz, 100.0, 1e-8, float(self.fs_hz), coef)
-        resonate(np.zeros(1, dtype=np.float32), device.volts_per_full_scale, coef, state, np.zeros(1))
-        relative_friction_core(1e-6, device.resonance_hz, 0.1, device.mu0, device.poisson, device.psi_star)
+        resonator_coefficients(device.resonance_hz, 100.0, 1e-8, float(self.fs_hz), coef[0])
+        amplitude_m, mu_rel = np.zeros(1), np.zeros(1)
+        resonate_blocks(np.zeros(1, dtype=np.float32), 1, device.volts_per_full_scale, coef, np.zeros(1, np.int64),
+                        state, np.zeros(1), amplitude_m)
+        felt_friction(amplitude_m, np.full(1, 0.1), device.resonance_hz, device.mu0, device.poisson,
+                      device.psi_star, mu_rel)
 
     def latest(self) -> dict[str, float]:
         """``plate_amplitude_um`` and ``achieved_mu`` of the last block written (none before the first)."""
         if not self._achieved_mu:
             return {}
-        return {"plate_amplitude_um": self._amplitude_um[-1], "achieved_mu": self._achieved_mu[-1]}
+        return {"plate_amplitude_um": float(self._amplitude_um[-1][-1]), "achieved_mu": float(self._achieved_mu[-1][-1])}
 
     def measurements(self) -> dict[str, npt.NDArray[np.float64]]:
         """``plate_amplitude_um`` (mean envelope, um) and ``achieved_mu`` per block written."""
         return {
-            "plate_amplitude_um": np.array(self._amplitude_um, dtype=np.float64),
-            "achieved_mu": np.array(self._achieved_mu, dtype=np.float64),
+            "plate_amplitude_um": np.concatenate(self._amplitude_um) if self._amplitude_um else np.zeros(0),
+            "achieved_mu": np.concatenate(self._achieved_mu) if self._achieved_mu else np.zeros(0),
         }
 
 

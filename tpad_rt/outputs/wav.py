@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Mapping
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +74,11 @@ class WavOutput(Output):
         except OSError as error:
             raise BackendError(f"wav: cannot write {self.path} ({error.strerror})") from None
 
+    def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
+                     blocks: Mapping[str, npt.NDArray[Any]]) -> None:
+        """Append every block's samples in one :meth:`write` (the telemetry rows are not stored)."""
+        self.write(samples, {})
+
     def write(self, samples: npt.NDArray[np.float32], block: Mapping[str, float]) -> None:
         """Append ``samples``; BackendError when the file would pass the 4 GiB RIFF limit, a write fails,
         the file was closed, or a sample is not finite or beyond full scale (the file is then closed)."""
@@ -85,7 +91,7 @@ class WavOutput(Output):
             self.close()
             raise BackendError(
                 f"wav: {self.path}: {bad_sample_message(written + bad, float(values[bad]))}; the file was "
-                f"closed holding the {written} samples before this block"
+                f"closed holding the {written} samples written before this write"
             )
         data = values.tobytes()
         if self.data_bytes + len(data) > MAX_DATA_BYTES:
