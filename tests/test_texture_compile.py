@@ -91,3 +91,20 @@ def test_a_hand_built_compiled_texture_gets_the_exact_form() -> None:
     assert compiled.prog.dtype == np.int64 and compiled.prog.shape == (1, layout.TEX_PROG_COLS)
     assert compiled.params.dtype == np.float64 and not compiled.img.flags.writeable
     assert compiled.evaluate(1.0, 2.0).item() == 1.0
+
+
+def test_evaluate_passes_the_kernel_the_array_types_the_pipeline_does() -> None:
+    """numba compiles the texture kernel once per array type: evaluate() must pass writable arrays, as the
+    pipeline does, or a first run compiles the whole texture kernel twice (about 4 s). They are the memory
+    behind the read-only public arrays."""
+    import numba
+
+    from tpad_rt.device import Device
+    from tpad_rt.pipeline import Pipeline
+
+    texture = load_compiled(EXAMPLES[0])
+    arrays = Pipeline(Device.default(), texture).arrays
+    for kernel_array, pipeline_array, public in zip(texture._kernel_arrays, (arrays.prog, arrays.params, arrays.img),
+                                                    (texture.prog, texture.params, texture.img)):
+        assert numba.typeof(kernel_array) == numba.typeof(pipeline_array)
+        assert np.shares_memory(kernel_array, public) and not public.flags.writeable

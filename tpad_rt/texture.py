@@ -20,7 +20,7 @@ reciprocals of periods and radii, pixel scales, the bumps' centres sorted by x,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -71,11 +71,11 @@ _PROFILES = {
 _STACK_EFFECT = {layout.OP_COMBINE: -1}
 
 
-def _read_only(array: npt.ArrayLike, dtype: type) -> np.ndarray:
-    """A C-contiguous, read-only copy of ``array`` with exactly ``dtype``."""
-    result: np.ndarray = np.array(array, dtype=dtype, order="C")
-    result.setflags(write=False)
-    return result
+def _read_only_view(array: np.ndarray) -> np.ndarray:
+    """A read-only view of ``array`` (which stays writable)."""
+    view = array.view()
+    view.setflags(write=False)
+    return view
 
 
 @dataclass(frozen=True)
@@ -93,11 +93,20 @@ class CompiledTexture:
     stack_depth: int
     kind: str
     description: str
+    #: Writable arrays behind the read-only ``prog, params, img`` (the same memory), for
+    #: :meth:`evaluate`: numba compiles a kernel once per array type, and read-only arrays
+    #: are another type than the pipeline's writable ones, so passing these makes
+    #: :meth:`evaluate` reuse the texture kernel ``render_block`` compiles (about 4 s of a
+    #: first run). The kernel never writes them.
+    _kernel_arrays: tuple[np.ndarray, np.ndarray, np.ndarray] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "prog", _read_only(self.prog, np.int64).reshape(-1, layout.TEX_PROG_COLS))
-        object.__setattr__(self, "params", _read_only(self.params, np.float64))
-        object.__setattr__(self, "img", _read_only(self.img, np.float64))
+        kernel = (np.array(self.prog, dtype=np.int64, order="C").reshape(-1, layout.TEX_PROG_COLS),
+                  np.array(self.params, dtype=np.float64, order="C"),
+                  np.array(self.img, dtype=np.float64, order="C"))
+        object.__setattr__(self, "_kernel_arrays", kernel)
+        for name, array in zip(("prog", "params", "img"), kernel):
+            object.__setattr__(self, name, _read_only_view(array))
 
     def evaluate(
         self,
@@ -118,7 +127,8 @@ class CompiledTexture:
         out = np.empty(flat[0].size, dtype=np.float64)
         stack = np.empty(self.stack_depth, dtype=np.float64)
         x, y, ux_, uy_, t = flat
-        eval_texture_points(self.prog, self.params, self.img, stack, x, y, ux_, uy_, t, out)
+        prog, params, img = self._kernel_arrays
+        eval_texture_points(prog, params, img, stack, x, y, ux_, uy_, t, out)
         return out.reshape(arrays[0].shape)
 
 
