@@ -1,7 +1,8 @@
-"""The offline render's native batch (Pipeline.render_blocks, Output.write_blocks) against a naive reference:
+"""The offline render's native batch (Pipeline.render_blocks, SimOutput.write_blocks) against a naive reference:
 finger samples pushed one by one with Pipeline.push_finger, one Pipeline.render per block, and the simulated
-plate advanced block by block with the sim kernel's resonate and the friction model's core. Every sample,
-telemetry column and plate measurement must be the same to the bit."""
+plate advanced block by block by SimOutput.write (the real-time path: the sim kernel's resonate and the
+friction model's core, one block at a time). Every sample, telemetry column and plate measurement must be the
+same to the bit."""
 
 from __future__ import annotations
 
@@ -16,11 +17,9 @@ from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, SampleError
 from tpad_rt.inputs import open_input
 from tpad_rt.kernel import layout
-from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, resonate, resonator_coefficients
 from tpad_rt.offline import OfflineRender, RenderResult
 from tpad_rt.outputs.sim import SimOutput
 from tpad_rt.pipeline import Pipeline
-from tpad_rt.physics.friction import relative_friction_core
 from tpad_rt.texture import load_compiled
 
 TEXTURES = Path(__file__).resolve().parents[1] / "textures"
@@ -51,9 +50,8 @@ def _reference(texture: str, url: str, block: int, input_s: float, force_n: floa
     device = Device.default()
     pipeline = Pipeline(device, load_compiled(TEXTURES / texture), fs_hz=RATE_HZ)
     input_blocks = _blocks(input_s, block)
-    coefs: dict[float, np.ndarray] = {}
-    state, envelope = np.zeros(SIM_STATE_SIZE), np.zeros(block)
-    drive, rows, amplitude_um, achieved_mu = [], [], [], []
+    plate = SimOutput(device, RATE_HZ)
+    drive, rows = [], []
     pushed_until_s = -math.inf
     pipeline.start()
     with open_input(url) as source:
@@ -69,23 +67,11 @@ def _reference(texture: str, url: str, block: int, input_s: float, force_n: floa
             out = np.zeros(block, dtype=np.float32)
             pipeline.render(out)
             row = pipeline.last_telemetry_row()
-            force = row["force_n"] if row["force_n"] >= 0.0 else 0.0
-            if force not in coefs:
-                coefs[force] = np.zeros(COEF_SIZE)
-                resonator_coefficients(device.resonance_hz, float(device.quality_factor(force)),
-                                       float(device.amplitude_m_per_v(force)), float(RATE_HZ), coefs[force])
-            amplitude_m = resonate(out, device.volts_per_full_scale, coefs[force], state, envelope)
-            speed_m_s = row["speed_mm_s"] * 1e-3
-            speed_m_s = max(speed_m_s, device.speed_floor_m_s) if math.isfinite(speed_m_s) else device.speed_floor_m_s
+            plate.write(out, row)
             drive.append(out)
             rows.append(row)
-            amplitude_um.append(amplitude_m * 1e6)
-            achieved_mu.append(relative_friction_core(amplitude_m, device.resonance_hz, speed_m_s, device.mu0,
-                                                      device.poisson, device.psi_star))
     columns = {name: np.array([row[name] for row in rows]) for name in layout.TEL_NAMES}
-    columns["plate_amplitude_um"] = np.array(amplitude_um)
-    columns["achieved_mu"] = np.array(achieved_mu)
-    return np.concatenate(drive), columns
+    return np.concatenate(drive), {**columns, **plate.measurements()}
 
 
 @pytest.mark.parametrize(("texture", "url", "block", "input_s", "force_n"), [

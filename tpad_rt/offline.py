@@ -175,7 +175,7 @@ class OfflineRender:
         outputs' (nothing is rendered or written)."""
         self.pipeline.warm_up(batch=True)
         for output in self.outputs:
-            output.warm()
+            output.warm(batch=True)
 
     def stop_early(self) -> None:
         """Stop following the input now: the remaining blocks are only the ramp tail."""

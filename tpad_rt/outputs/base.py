@@ -95,8 +95,9 @@ class Output(ABC):
         """The last block's measurements, by name (none by default); cheap, for status lines."""
         return {}
 
-    def warm(self) -> None:
-        """Compile (or load from numba's cache) what :meth:`write` runs, changing nothing; nothing by default.
+    def warm(self, batch: bool = False) -> None:
+        """Compile (or load from numba's cache) what :meth:`write` runs (with ``batch``, what
+        :meth:`write_blocks` runs), changing nothing; nothing by default.
 
         A real-time driver calls it before the clock starts, so a first run does not spend its
         first second compiling while blocks fall due.

@@ -11,6 +11,7 @@ slower (or unknown).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -19,7 +20,15 @@ import numpy.typing as npt
 
 from tpad_rt.config.device_schema import MAX_Q, MIN_Q
 from tpad_rt.device import Device
-from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, felt_friction, resonate_blocks, resonator_coefficients
+from tpad_rt.kernel.sim import (
+    COEF_SIZE,
+    SIM_STATE_SIZE,
+    felt_friction,
+    resonate,
+    resonate_blocks,
+    resonator_coefficients,
+)
+from tpad_rt.physics.friction import relative_friction_core
 from tpad_rt.outputs.base import Consumes, Output, OutputKind, Runs
 from tpad_rt.urls import Option, Url, UrlForm, number
 
@@ -52,8 +61,8 @@ class SimOutput(Output):
         self._state = np.zeros(SIM_STATE_SIZE)
         self._coefs: dict[float, np.ndarray] = {}  # resonator coefficients by contact force (N)
         self._envelope_m = np.zeros(0)
-        self._amplitude_um: list[np.ndarray] = []
-        self._achieved_mu: list[np.ndarray] = []
+        self._amplitude_um: list[float] = []
+        self._achieved_mu: list[float] = []
 
     def _coef(self, force_n: float) -> np.ndarray:
         """The resonator coefficients at contact force ``force_n`` (N, >= 0), computed once per force."""
@@ -67,7 +76,8 @@ class SimOutput(Output):
         return coef
 
     def _speeds_m_s(self, speed_mm_s: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        """Finger speeds (m/s) for the friction model: raised to the device's floor, the floor where unknown."""
+        """Finger speeds (m/s) for the friction model: raised to the device's floor, the floor where unknown
+        (what :meth:`write` does for one block)."""
         speed_m_s = speed_mm_s * 1e-3
         floor_m_s = self.device.speed_floor_m_s
         return np.where(np.isfinite(speed_m_s), np.maximum(speed_m_s, floor_m_s), floor_m_s)
@@ -77,14 +87,23 @@ class SimOutput(Output):
 
         A force below 0 (or NaN) counts as 0: the device tables are clamped at their ends anyway.
         """
-        self.write_blocks(samples, len(samples), {name: np.array([block[name]], dtype=np.float64)
-                                                  for name in ("force_n", "speed_mm_s")})
+        force_n = float(block["force_n"])
+        force_n = force_n if force_n >= 0.0 else 0.0
+        if len(self._envelope_m) < len(samples):
+            self._envelope_m = np.zeros(len(samples))
+        device = self.device
+        amplitude_m = resonate(samples, device.volts_per_full_scale, self._coef(force_n), self._state, self._envelope_m)
+        speed_m_s = float(block["speed_mm_s"]) * 1e-3
+        speed_m_s = max(speed_m_s, device.speed_floor_m_s) if math.isfinite(speed_m_s) else device.speed_floor_m_s
+        self._amplitude_um.append(amplitude_m * 1e6)
+        self._achieved_mu.append(relative_friction_core(
+            amplitude_m, device.resonance_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
 
     def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
                      blocks: Mapping[str, npt.NDArray[Any]]) -> None:
         """Drive the plate with consecutive blocks of ``block_frames`` samples, block ``k`` at contact force
         ``blocks["force_n"][k]`` (N; below 0 or NaN counts as 0) and finger speed ``blocks["speed_mm_s"][k]``;
-        one native call per force the blocks hold."""
+        natively, with the rules of :meth:`write` (the offline render's path; tests compare the two)."""
         force_n = np.asarray(blocks["force_n"], dtype=np.float64)
         count = len(force_n)
         force_n = np.where(force_n >= 0.0, force_n, 0.0)
@@ -100,31 +119,37 @@ class SimOutput(Output):
         achieved_mu = np.zeros(count)
         felt_friction(amplitude_m, speed_m_s, device.resonance_hz, device.mu0, device.poisson, device.psi_star,
                       achieved_mu)
-        self._amplitude_um.append(amplitude_m * 1e6)
-        self._achieved_mu.append(achieved_mu)
+        self._amplitude_um.extend((amplitude_m * 1e6).tolist())
+        self._achieved_mu.extend(achieved_mu.tolist())
 
-    def warm(self) -> None:
-        """Run the plate model and the friction model once on scratch arrays (nothing recorded)."""
+    def warm(self, batch: bool = False) -> None:
+        """Run the plate model and the friction model of :meth:`write` (with ``batch``, of :meth:`write_blocks`)
+        once on scratch arrays (nothing recorded)."""
         coef, state = np.zeros((1, COEF_SIZE)), np.zeros(SIM_STATE_SIZE)
         device = self.device
         resonator_coefficients(device.resonance_hz, 100.0, 1e-8, float(self.fs_hz), coef[0])
-        amplitude_m, mu_rel = np.zeros(1), np.zeros(1)
-        resonate_blocks(np.zeros(1, dtype=np.float32), 1, device.volts_per_full_scale, coef, np.zeros(1, np.int64),
-                        state, np.zeros(1), amplitude_m)
-        felt_friction(amplitude_m, np.full(1, 0.1), device.resonance_hz, device.mu0, device.poisson,
-                      device.psi_star, mu_rel)
+        silence = np.zeros(1, dtype=np.float32)
+        if batch:
+            amplitude_m, mu_rel = np.zeros(1), np.zeros(1)
+            resonate_blocks(silence, 1, device.volts_per_full_scale, coef, np.zeros(1, np.int64), state, np.zeros(1),
+                            amplitude_m)
+            felt_friction(amplitude_m, np.full(1, 0.1), device.resonance_hz, device.mu0, device.poisson,
+                          device.psi_star, mu_rel)
+        else:
+            resonate(silence, device.volts_per_full_scale, coef[0], state, np.zeros(1))
+            relative_friction_core(1e-6, device.resonance_hz, 0.1, device.mu0, device.poisson, device.psi_star)
 
     def latest(self) -> dict[str, float]:
         """``plate_amplitude_um`` and ``achieved_mu`` of the last block written (none before the first)."""
         if not self._achieved_mu:
             return {}
-        return {"plate_amplitude_um": float(self._amplitude_um[-1][-1]), "achieved_mu": float(self._achieved_mu[-1][-1])}
+        return {"plate_amplitude_um": self._amplitude_um[-1], "achieved_mu": self._achieved_mu[-1]}
 
     def measurements(self) -> dict[str, npt.NDArray[np.float64]]:
         """``plate_amplitude_um`` (mean envelope, um) and ``achieved_mu`` per block written."""
         return {
-            "plate_amplitude_um": np.concatenate(self._amplitude_um) if self._amplitude_um else np.zeros(0),
-            "achieved_mu": np.concatenate(self._achieved_mu) if self._achieved_mu else np.zeros(0),
+            "plate_amplitude_um": np.array(self._amplitude_um, dtype=np.float64),
+            "achieved_mu": np.array(self._achieved_mu, dtype=np.float64),
         }
 
 
