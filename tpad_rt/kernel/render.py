@@ -186,8 +186,9 @@ COMPILED_SOURCES = stamp_cache(__file__, layout.__file__, texture_eval.__file__,
 # into (numba deep-copies the callee's IR at every call site); now render_block compiles
 # once, in about 10 s, and the @cfunc and the serial streamer call it (docs/kernel.md
 # "Compilation"). The per-segment helpers stay inlined at IR level: cheap to copy.
-_kernel = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+_kernel = njit(cache=True, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
 _inline = njit(cache=True, nogil=True, error_model="numpy", _nrt=False, inline="always")
+_entry = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 
 
 @_kernel
@@ -857,7 +858,7 @@ def _write_telemetry(
     telem_count[0] += 1
 
 
-@_kernel
+@_entry
 def render_block(
     out: np.ndarray,
     start_index: int,
