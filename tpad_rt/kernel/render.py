@@ -180,12 +180,15 @@ COMPILED_SOURCES = stamp_cache(__file__, layout.__file__, texture_eval.__file__,
 # _nrt=False (numba's one option, private, that turns its runtime off for a function; these two
 # decorators and texture_eval's are the only places it is used): without numba's
 # reference-counted runtime (nothing here allocates), a call
-# passing arrays costs no reference-count calls, so the helpers are ordinary functions
-# that LLVM inlines. Inlining them at numba IR level instead (inline="always") made the
+# passing arrays costs no reference-count calls, so the helpers are ordinary functions,
+# forceinline=True: marked for LLVM to inline always (LLVM's own heuristics left the
+# control step's calls in place, about 2 ns per sample at the default control interval).
+# Inlining them at numba IR level instead (inline="always") made the
 # first compile 24 s for render_block and 60 s more for the audio @cfunc it was inlined
 # into (numba deep-copies the callee's IR at every call site); now render_block compiles
-# once, in about 10 s, and the @cfunc and the serial streamer call it (docs/kernel.md
-# "Compilation"). The per-segment helpers stay inlined at IR level: cheap to copy.
+# once, in about 10 s, and the @cfunc, the serial streamer and the offline batch call it
+# (_entry: not forced inline into them; docs/kernel.md "Compilation"). The per-segment
+# helpers stay inlined at IR level: cheap to copy.
 _kernel = njit(cache=True, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
 _inline = njit(cache=True, nogil=True, error_model="numpy", _nrt=False, inline="always")
 _entry = njit(cache=True, nogil=True, error_model="numpy", _nrt=False)

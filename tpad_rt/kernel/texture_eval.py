@@ -103,7 +103,8 @@ _MAX_PIXEL_INDEX = 2.0**52  # (and phases in cycles: floor() of one gives an int
 
 #: ``_nrt=False``: nothing here allocates, and without numba's reference-counted runtime a
 #: call passing arrays costs no reference counting, so the helpers are ordinary functions
-#: LLVM inlines (inlining them at numba IR level cost about 10 s of the first compile).
+#: that ``forceinline`` marks for LLVM to inline always (inlining them at numba IR level
+#: instead cost about 10 s of the first compile).
 #: ``error_model="numpy"``: no division-by-zero checks (``texture.py`` never divides by 0).
 _kernel = njit(cache=True, nogil=True, error_model="numpy", _nrt=False, forceinline=True)
 
