@@ -55,9 +55,9 @@ from tpad_rt.texture import CompiledTexture
 
 
 #: Blocks rendered per :meth:`OfflineRender.step` at most: fewer when the telemetry ring holds fewer, or
-#: when they would hold more than STEP_SAMPLES samples (the step's drive buffer: 1 MiB).
-STEP_BLOCKS = 4096
-STEP_SAMPLES = 1 << 18
+#: when they would hold more than STEP_SAMPLES samples (the step's drive buffer: 2 MiB).
+STEP_BLOCKS = 8192
+STEP_SAMPLES = 1 << 19
 
 
 @dataclass(frozen=True)
