@@ -46,6 +46,20 @@ def test_without_sound_card_or_display_it_plays_a_swipe_on_the_simulated_plate()
     assert len(friction) == 1
     mean_error = float(friction[0].split("mean ")[1].split(",")[0])
     assert mean_error < 0.01  # the simulated plate follows the texture under the finger (render: 0.0024)
+    judged = int(friction[0].split(" over ")[1].split(" touching")[0])
+    callbacks = int(lines[1].split(": ")[1].split(" callbacks")[0])
+    assert 0.9 * callbacks <= judged <= callbacks  # every block is judged (the finger touches throughout)
+    assert "departures: 0 blocks" in friction[0]
+
+
+def test_blocks_the_plate_cannot_follow_are_counted_as_departures() -> None:
+    """A power budget of 0.02 W leaves the plate far from the texture: play counts those blocks."""
+    done = _play("textures/grating.yaml", "--duration", "1", "--power-budget", "0.02")
+    assert done.returncode == 0, done.stderr
+    friction = [line for line in done.stdout.splitlines() if line.startswith("friction |texture under the finger")]
+    departed = int(friction[0].split("departures: ")[1].split(" blocks")[0])
+    judged = int(friction[0].split(" over ")[1].split(" touching")[0])
+    assert departed > 0.2 * judged
 
 
 @pytest.mark.slow

@@ -6,9 +6,12 @@ device first, then the default output), else the simulated plate ``sim://``;
 back-and-forth swipes (:data:`AUTO_SWIPE`). The first line says both choices and why.
 A :class:`~tpad_rt.inputs.live.LiveFeed` feeds the input into the renderer; a status
 panel (finger, target friction and, on ``sim://``, the texture under the finger and
-the friction of a simulated plate driven by the drive samples up to that moment,
-volts, power, underflows, callback load, time)
-refreshes :data:`STATUS_HZ` times a second on a terminal (nothing on a pipe). Play
+the friction of a simulated plate driven by the drive samples, volts, power,
+underflows, callback load, time) refreshes :data:`STATUS_HZ` times a second on a
+terminal (nothing on a pipe). On ``sim://`` every rendered block is judged: the plate,
+simulated over the drive block by block, against the texture under the finger at the
+block's middle; the panel and the summary count the blocks further than
+DEPARTURE_TOLERANCE_MU (as ``tpad-rt render`` does). Play
 ends at ``--duration``, when a finite input ends, or on Ctrl-C (exit status 0): the
 drive ramps to 0 (``Renderer.stop``), a summary follows, and ``--record`` writes the
 recording (the ``tpad-rt render`` format). An error (bad file or URL, missing, lost or
@@ -46,7 +49,7 @@ from tpad_rt.compiling import compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
-from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, texture_at_finger
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures, texture_at_finger
 from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import screen_size_px
@@ -220,55 +223,65 @@ class Session:
     peak_v: float = 0.0
     achieved: float | None = None
     felt: float | None = None
-    friction_errors: list[float] = field(default_factory=list)
+    plate: SimOutput | None = None  # the blocks' simulated plate, continuous while the drive ring holds them
+    plate_next: int = -1  # the sample it takes next
+    judged_blocks: int = 0
+    departed_blocks: int = 0
+    error_sum: float = 0.0
+    error_max: float = 0.0
 
     def elapsed_s(self) -> float:
         """Seconds since play started."""
         return time.monotonic() - self.started
 
-    def take_telemetry(self) -> None:
-        """Drain the renderer's telemetry: keep the last row and the peak volts."""
+    def take_telemetry(self) -> dict[str, np.ndarray]:
+        """Drain the renderer's telemetry: keep the last row and the peak volts; the rows drained."""
         rows = self.renderer.telemetry()
         if len(rows["t"]):
             self.latest = {name: float(column[-1]) for name, column in rows.items()}
             self.peak_v = max(self.peak_v, float(rows["voltage_v"].max()))
+        return rows
 
     def tick(self) -> None:
-        """One status period: drain the telemetry, then sample the simulated plate's friction."""
-        self.take_telemetry()
-        self.achieved = self._achieved_mu()
+        """One status period: drain the telemetry, then judge its blocks on the simulated plate."""
+        self.judge(self.take_telemetry())
 
-    def _achieved_mu(self) -> float | None:
-        """Friction a simulated plate feels (sim:// only, else None), and the texture under the finger then.
-
-        The plate is simulated over PROBE_WARMUP_S of drive, then the block of drive that
-        ends at the newest sample whose time the finger samples cover; the texture under
-        the finger at that block's middle is what the plate should give (not the kernel's
-        target, which is extrapolated ``horizon_ms`` ahead). Their difference is kept for
-        the summary when touching and not saturated.
-        """
+    def judge(self, rows: dict[str, np.ndarray]) -> None:
+        """On ``sim://``: simulate the plate over the drive of the blocks of ``rows`` (telemetry, oldest first)
+        and judge each against the texture under the finger at its middle (felt.departures: touching blocks,
+        the texture clamped to the floor the kernel renders). A gap in the blocks (the drive ring overwritten
+        while the status stalled) restarts the plate after PROBE_WARMUP_S of the drive before it."""
         renderer, table = self.renderer, self.renderer.callback_table
-        if not renderer.output_url.startswith("sim") or table is None or not self.latest:
-            return None
-        fingers = renderer.recent_fingers()
-        if not len(fingers):
-            return None
-        block = renderer.block_frames
-        end = min(table.next_sample, int(fingers["t_s"][-1] * renderer.rate_hz))
-        start = end - round(PROBE_WARMUP_S * renderer.rate_hz) - block
-        if start < 0:
-            return None
-        drive = table.drive[np.arange(start, end) % len(table.drive)]
-        plate = SimOutput(renderer.device, renderer.rate_hz)
-        plate.write(drive[:-block], self.latest)  # ring-up
-        plate.write(drive[-block:], self.latest)  # the block reported: its mean amplitude
-        achieved = plate.latest()["achieved_mu"]
-        middle_s = (end - 0.5 * block) / renderer.rate_hz
-        felt, known = texture_at_finger(fingers, renderer.texture, np.array([middle_s]), renderer.texture_t0_s())
-        self.felt = float(felt[0]) if known[0] else None
-        if self.felt is not None and int(self.latest["saturated"]) & (FLAG_WATCHDOG | FLAG_VOLTAGE | FLAG_POWER) == 0:
-            self.friction_errors.append(abs(self.felt - achieved))
-        return achieved
+        if not renderer.output_url.startswith("sim") or table is None or not len(rows["t"]):
+            return
+        rate_hz, block, ring = renderer.rate_hz, renderer.block_frames, len(table.drive)
+        starts = np.rint(rows["t"] * rate_hz).astype(np.int64)
+        first, end = int(starts[0]), int(starts[-1]) + block
+        if end > table.next_sample or first < table.next_sample - ring:
+            self.plate = None  # not all of it in the ring: judge the next blocks afresh
+            return
+        if self.plate is None or first != self.plate_next:
+            self.plate = SimOutput(renderer.device, rate_hz)
+            ring_up = max(first - round(PROBE_WARMUP_S * rate_hz), table.next_sample - ring, 0)
+            if ring_up < first:
+                self.plate.write(table.drive[np.arange(ring_up, first) % ring], {name: float(column[0])
+                                                                               for name, column in rows.items()})
+            self.plate.take_measurements()
+        self.plate.write_blocks(table.drive[np.arange(first, end) % ring], block, rows)
+        self.plate_next = end
+        achieved = self.plate.take_measurements()["achieved_mu"]
+        middle_s = (starts + 0.5 * block) / rate_hz
+        felt, known = texture_at_finger(renderer.recent_fingers(), renderer.texture, middle_s, renderer.texture_t0_s())
+        felt = np.clip(felt, renderer.options.mu_floor, 1.0)
+        judged = known & ((rows["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0)
+        errors = np.abs(felt - achieved)[judged]
+        self.judged_blocks += len(errors)
+        self.departed_blocks += int(np.count_nonzero(departures(felt, achieved, judged)))
+        if len(errors):
+            self.error_sum += float(errors.sum())
+            self.error_max = max(self.error_max, float(errors.max()))
+        self.achieved = float(achieved[-1])
+        self.felt = float(felt[-1]) if known[-1] else None
 
     def panel(self) -> Table:
         """The live status panel."""
@@ -286,6 +299,8 @@ class Session:
                 grid.add_row("under the finger", f"{self.felt:.2f}  (the texture where the finger last was)")
             if self.achieved is not None:
                 grid.add_row("simulated plate", f"{self.achieved:.2f}  (the friction the simulated plate gives now)")
+                grid.add_row("departures", f"{self.departed_blocks} of {self.judged_blocks} touching blocks further "
+                             f"than {DEPARTURE_TOLERANCE_MU:g} from the texture under the finger")
             grid.add_row("drive", f"{row['voltage_v']:5.1f} V of {self.renderer.device.max_voltage_v:g} V"
                          + ("  SATURATED" if int(row["saturated"]) & (FLAG_VOLTAGE | FLAG_POWER) else ""))
         grid.add_row("power", f"now {row.get('power_w', 0.0):.3f} W, mean {stats['power_mean_w']:.3f} W, "
@@ -343,9 +358,10 @@ class Session:
                 f"bad, {amplifier['amp_frames_rejected']} refused, {amplifier['amp_sequence_gaps']} sequence gaps; "
                 f"{amplifier['amp_underruns']} samples underrun, {amplifier['amp_watchdog_trips']} watchdog trips"
                 + ("" if amplifier["realtime"] else " (no real-time priority for the streamer here)"))
-        if self.friction_errors:
-            errors = np.array(self.friction_errors)
-            lines.append(f"friction |texture under the finger - simulated plate| at {len(errors)} status samples "
-                         f"(touching, not saturated): mean {errors.mean():.4f}, max {errors.max():.4f}; "
-                         f"{np.count_nonzero(errors > DEPARTURE_TOLERANCE_MU)} further than {DEPARTURE_TOLERANCE_MU:g}")
+        if self.judged_blocks:
+            lines.append(f"friction |texture under the finger - simulated plate| over {self.judged_blocks} touching "
+                         f"blocks: mean {self.error_sum / self.judged_blocks:.4f}, max {self.error_max:.4f}; "
+                         f"departures: {self.departed_blocks} blocks "
+                         f"({100 * self.departed_blocks / self.judged_blocks:.1f} %) further than "
+                         f"{DEPARTURE_TOLERANCE_MU:g}")
         return [line.replace("nan", "n/a") for line in lines]

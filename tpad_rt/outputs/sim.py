@@ -145,6 +145,12 @@ class SimOutput(Output):
             return {}
         return {"plate_amplitude_um": self._amplitude_um[-1], "achieved_mu": self._achieved_mu[-1]}
 
+    def take_measurements(self) -> dict[str, npt.NDArray[np.float64]]:
+        """:meth:`measurements`, then forget them (a caller running for long keeps memory flat)."""
+        taken = self.measurements()
+        self._amplitude_um, self._achieved_mu = [], []
+        return taken
+
     def measurements(self) -> dict[str, npt.NDArray[np.float64]]:
         """``plate_amplitude_um`` (mean envelope, um) and ``achieved_mu`` per block written."""
         return {
