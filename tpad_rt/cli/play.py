@@ -157,6 +157,8 @@ def run(args: argparse.Namespace) -> int:
             if args.record is not None:
                 renderer.record(args.record)
             renderer.texture.evaluate(np.zeros(1), np.zeros(1))  # the status line's texture under the finger
+            if renderer.output_url.startswith("sim"):
+                SimOutput(device, renderer.rate_hz).warm(batch=True)  # the status line judges blocks with it
             renderer.start()
             compiling.close()
             with renderer, LiveFeed(source, _pusher(renderer, args.force), renderer.lift,
