@@ -57,6 +57,13 @@ def underflows_allowed(baseline: int) -> int:
     return 2 * baseline + UNDERFLOW_MARGIN
 
 
+def empty_callback_underflows() -> int:
+    """Underflows of the empty native callback over RUN_S (the baseline; run before and after what it judges,
+    since the machine's bursts of other work may fall on either side)."""
+    counted, _ = run_native(cb.silence_callback, RUN_S)
+    return int(counted[tab.STAT_UNDERFLOWS])
+
+
 @pytest.fixture(scope="module")
 def jack() -> Iterator[str]:
     with jack_server(RATE_HZ, BLOCK) as name:
@@ -147,13 +154,14 @@ def renderer_run(renderer: Renderer, seconds: float, activity: Callable[[], None
 
 
 def test_renderer_keeps_the_stream_clock(jack: str) -> None:
-    baseline, _ = run_native(cb.silence_callback, RUN_S)
+    before = empty_callback_underflows()
     with Renderer(output="audio://", texture=GRATING) as renderer:
         stats, expected = renderer_run(renderer, RUN_S, lambda: live_swipe(renderer, 10.0, 50.0, RUN_S))
-    print(stats)
+    baseline = max(before, empty_callback_underflows())
+    print(stats, f"baseline underflows {baseline}")
     assert stats["callbacks_in_run"] == pytest.approx(expected, rel=0.03)
     assert stats["frames"] == stats["callbacks"] * BLOCK
-    assert stats["underflows"] <= underflows_allowed(int(baseline[tab.STAT_UNDERFLOWS]))
+    assert stats["underflows"] <= underflows_allowed(baseline)
     assert stats["compute_us_p50"] > 0 and stats["compute_us_max"] >= stats["compute_us_p99"]
     assert 0 < stats["callback_load_p99"] < 1
     assert stats["blocks"] > 0 and stats["power_peak_w"] <= stats["power_budget_w"]
@@ -191,19 +199,20 @@ def run_python_callback(seconds: float) -> tuple[int, int, float]:
 
 
 def test_gil_load_does_not_starve_the_native_callback(jack: str) -> None:
-    baseline, _ = run_native(cb.silence_callback, RUN_S)
+    before = empty_callback_underflows()
     with GilHog(), Renderer(output="audio://", texture=GRATING) as renderer:
         swipe(renderer, 10.0, 50.0, RUN_S, 0.3)
         stats, expected = renderer_run(renderer, RUN_S)
+    baseline = max(before, empty_callback_underflows())
     python_callbacks, python_underflows, python_expected = run_python_callback(RUN_S)
-    print(f"baseline underflows {baseline[tab.STAT_UNDERFLOWS]}; native under GIL load: "
+    print(f"baseline underflows {baseline}; native under GIL load: "
           f"{stats['callbacks_in_run']} of {expected:.0f} callbacks, {stats['underflows']} underflows; "
           f"Python callback under GIL load: {python_callbacks} of {python_expected:.0f}, "
           f"{python_underflows} underflows")
     assert stats["callbacks_in_run"] == pytest.approx(expected, rel=0.03)
-    assert stats["underflows"] <= underflows_allowed(int(baseline[tab.STAT_UNDERFLOWS]))
+    assert stats["underflows"] <= underflows_allowed(baseline)
     collapsed = (python_callbacks < 0.5 * python_expected
-                 or python_underflows > baseline[tab.STAT_UNDERFLOWS] + 5 * UNDERFLOW_MARGIN)
+                 or python_underflows > baseline + 5 * UNDERFLOW_MARGIN)
     assert collapsed, (python_callbacks, python_expected, python_underflows)
 
 
