@@ -160,19 +160,31 @@ def test_out_of_range_inputs_name_argument_range_and_value(call, message):
     assert str(excinfo.value) == message
 
 
-def test_njit_cores_agree_with_wrappers():
-    # approx, not ==: under NUMBA_DISABLE_JIT=1 the cores run as Python and may differ in the last bit
+def _scalar_reference(u_rms, freq_hz, c0_f, l_h, c_f, r_ohm, r0_ohm):
+    """Impedance and exact power of one operating point, with Python's complex numbers: the circuit solved as
+    written (C0 parallel to R + jX1 behind the shunt), not through Eq. 3's closed form."""
+    omega = 2 * math.pi * freq_hz
+    branch = complex(r_ohm, l_h * omega - 1 / (c_f * omega))
+    c0 = complex(0.0, -1 / (c0_f * omega))
+    z = c0 * branch / (c0 + branch)
+    i_motional = u_rms * z / (r0_ohm + z) / branch
+    return z, abs(i_motional) ** 2 * r_ohm
+
+
+def test_vectorised_functions_equal_a_scalar_reference_point_by_point():
     rng = np.random.default_rng(2)
     freqs = rng.uniform(0.9 * F0_HZ, 1.1 * F0_HZ, 30)
     resistances = rng.uniform(100.0, 5000.0, 30)
     shunts = rng.uniform(0.0, 200.0, 30)
     z = em.impedance(freqs, C0_F, L_H, C_F, resistances)
-    eq6 = em.real_power_eq6(28.28, freqs, C0_F, resistances, shunts)
     exact = em.real_power_exact(28.28, freqs, C0_F, L_H, C_F, resistances, shunts)
     q = em.quality_factor(L_H, C_F, resistances)
     for i in range(30):
-        assert em.impedance_core(freqs[i], C0_F, L_H, C_F, resistances[i]) == pytest.approx(z[i], rel=1e-12)
-        assert em.real_power_eq6_core(28.28, freqs[i], C0_F, resistances[i], shunts[i]) == pytest.approx(eq6[i], rel=1e-12)
-        assert em.real_power_exact_core(28.28, freqs[i], C0_F, L_H, C_F, resistances[i], shunts[i]) == pytest.approx(exact[i], rel=1e-12)
-        assert em.quality_factor_core(L_H, C_F, resistances[i]) == pytest.approx(q[i], rel=1e-12)
-    assert em.resonance_hz_core(L_H, C_F) == pytest.approx(em.resonance_hz(L_H, C_F), rel=1e-12)
+        z_ref, power_ref = _scalar_reference(28.28, freqs[i], C0_F, L_H, C_F, resistances[i], shunts[i])
+        assert z[i] == pytest.approx(z_ref, rel=1e-9)
+        assert exact[i] == pytest.approx(power_ref, rel=1e-9)
+        assert q[i] == pytest.approx(math.sqrt(L_H / C_F) / resistances[i], rel=1e-12)
+        assert em.impedance(freqs[i], C0_F, L_H, C_F, resistances[i]) == z[i]  # scalars broadcast the same
+    assert em.resonance_hz(L_H, C_F) == pytest.approx(1 / (2 * math.pi * math.sqrt(L_H * C_F)), rel=1e-12)
+    assert isinstance(em.quality_factor(L_H, C_F, R_OHM), np.float64)  # a NumPy scalar for scalar inputs
+

@@ -450,6 +450,8 @@ def markdown(report: dict[str, Any]) -> str:
             f"| `start()` returned | {cell(play_runs, 'started_ns')} | {cell(runs, 'started_ns')} |",
             f"| **first sample at the DAC** | **{cell(play_runs, 'first_dac_ns')}** "
             f"| **{cell(runs, 'first_dac_ns')}** |",
+            f"| compile notice printed, empty numba cache | {cell(startup.get('cold_play_runs', []), 'notice_ns')} "
+            "| - |",
             f"| **first sample at the DAC, empty numba cache** ({len(startup.get('cold_runs', []))} runs: the "
             f"first run on a machine compiles the kernels) | **{cell(startup.get('cold_play_runs', []), 'first_dac_ns')}** "
             f"| **{cell(startup.get('cold_runs', []), 'first_dac_ns')}** |",

@@ -292,12 +292,19 @@ def startup_play(block: int) -> dict:
     is wrapped to note the first block once it arrives (after the stream started: it moves nothing)."""
     from time import monotonic_ns
     begin_ns = monotonic_ns()
-    from tpad_rt import cli
+    from tpad_rt import cli, compiling
     from tpad_rt.engine import Renderer
     from tpad_rt.kernel import table as tab
     imported_ns = monotonic_ns()
     original = Renderer.start
     noted: dict = {}
+    begin_notice = compiling._Notice.begin
+
+    def begin(self: compiling._Notice) -> None:  # when the compile notice is printed (first run only)
+        noted.setdefault("notice_ns", monotonic_ns())
+        begin_notice(self)
+
+    compiling._Notice.begin = begin  # type: ignore[method-assign]
 
     def start(self: Renderer) -> None:
         original(self)

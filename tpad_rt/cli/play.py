@@ -45,7 +45,7 @@ from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number
 from tpad_rt.cli.render import add_session_arguments
-from tpad_rt.compiling import compile_notice
+from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
@@ -54,6 +54,8 @@ from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import screen_size_px
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
+from tpad_rt.kernel.render import render_block
+from tpad_rt.kernel.texture_eval import eval_texture_points
 from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
 from tpad_rt.outputs import audio
 from tpad_rt.outputs.sim import SimOutput
@@ -156,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
                           + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
             if args.record is not None:
                 renderer.record(args.record)
+            announce_if_uncached(render_block, eval_texture_points)  # every argument checked: say it at once
             renderer.texture.evaluate(np.zeros(1), np.zeros(1))  # the status line's texture under the finger
             if renderer.output_url.startswith("sim"):
                 SimOutput(device, renderer.rate_hz).warm(batch=True)  # the status line judges blocks with it

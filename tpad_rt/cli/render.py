@@ -32,7 +32,7 @@ from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, T
 
 from tpad_rt import __version__
 from tpad_rt.cli.arguments import Subparsers, number, whole
-from tpad_rt.compiling import compile_notice
+from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures
@@ -41,6 +41,8 @@ from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG,
 )
+from tpad_rt.kernel.batch import render_blocks
+from tpad_rt.kernel.render import render_block
 from tpad_rt.limits import MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, MAX_RECORDING_SAMPLES, MAX_RENDER_S
 from tpad_rt.offline import OfflineRender, RenderResult, check_render_size, input_span_s, texture_under_finger
 from tpad_rt.outputs import open_output
@@ -136,7 +138,6 @@ def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_
     outputs = [stack.enter_context(open_output(args.output, device=device, fs_hz=args.rate))]
     if wav_path is not None:
         outputs.append(stack.enter_context(WavOutput(wav_path, args.rate)))
-    pipeline.warm_up()
     render = OfflineRender(pipeline, source, outputs, block_frames=args.block, input_s=input_s,
                            tail_s=tail_s, force_n=args.force, keep_drive=keep_drive)
     cfg = pipeline.arrays.cfg  # the limits the kernel applies, defaults resolved
@@ -170,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
         with compile_notice():  # the first run compiles the kernels: say so at once
             session = open_session(args, stack, keep_drive=out.suffix.lower() == ".npz",
                                    wav_path=out if out.suffix.lower() == ".wav" else None)
+            announce_if_uncached(render_block, render_blocks)  # every argument checked: say it at once
             session.render.warm_up()
         started = time.perf_counter()
         _run_with_progress(session.render, console)
