@@ -87,8 +87,8 @@ def _function(data: Any) -> Any:
 
 
 def _is_kernel(data: Any) -> bool:
-    """True for a compile of one of tpad-rt's kernels (``tpad_rt.kernel``): not the physics ufuncs a device
-    file's check compiles in a second, before any refusal of a bad argument."""
+    """True for a compile of one of tpad-rt's kernels (``tpad_rt.kernel``), not of other numba code (the
+    physics module's ufuncs, the user's own)."""
     return str(getattr(_function(data), "__module__", "")).startswith(KERNEL_PACKAGE)
 
 
