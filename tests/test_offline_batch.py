@@ -133,3 +133,16 @@ def test_an_input_sample_the_pipeline_refuses_is_named_by_its_time() -> None:
         with pytest.raises(ConfigError, match=r"input sample at t = -0.001 s: t_s: must be >= the previous sample"):
             while not render.done:
                 render.step()
+
+
+def test_the_batch_kernel_stays_within_its_arrays_whatever_due_holds() -> None:
+    """Called directly (Pipeline.render_blocks checks first), the kernel pushes no row past ``rows`` and renders no
+    block past ``out``."""
+    from tpad_rt.kernel.batch import render_blocks
+
+    pipeline = Pipeline(Device.default(), load_compiled(TEXTURES / "grating.yaml"), fs_hz=RATE_HZ)
+    out = np.full(100, 7.0, dtype=np.float32)
+    rows = np.array([[0.0, 10.0, 10.0, math.nan, 1.0]])
+    render_blocks(out, 64, 0, rows, np.array([5, 1000, 10**9], dtype=np.int64), *pipeline.arrays)
+    assert int(pipeline.arrays.finger_count[0]) == 1  # one row, not five
+    assert np.all(np.isfinite(out[:64])) and np.all(out[64:] == 7.0)  # one whole block fits; nothing after it

@@ -58,12 +58,14 @@ def render_blocks(
     ring = finger.shape[0]
     pushed = 0
     for k in range(due.shape[0]):
-        while pushed < due[k]:
+        while pushed < min(due[k], rows.shape[0]):  # never past the rows, whatever due holds
             slot = finger_count[0] % ring
             for column in range(finger.shape[1]):
                 finger[slot, column] = rows[pushed, column]
             finger_count[0] += 1
             pushed += 1
         begin = k * block_frames
+        if begin + block_frames > out.shape[0]:  # never past out, whatever block_frames and due hold
+            return
         render_block(out[begin:begin + block_frames], start_index + begin, cfg, dev, state, power_ring, finger,
                      finger_count, prog, params, img, stack, telem, telem_count)
