@@ -146,3 +146,20 @@ def test_the_batch_kernel_stays_within_its_arrays_whatever_due_holds() -> None:
     render_blocks(out, 64, 0, rows, np.array([5, 1000, 10**9], dtype=np.int64), *pipeline.arrays)
     assert int(pipeline.arrays.finger_count[0]) == 1  # one row, not five
     assert np.all(np.isfinite(out[:64])) and np.all(out[64:] == 7.0)  # one whole block fits; nothing after it
+
+
+def test_a_force_that_varies_from_sample_to_sample_renders_the_same(tmp_path: Path) -> None:
+    """Many contact forces within one step: the plate's coefficients change from block to block."""
+    t_s = np.arange(0.0, 0.3 * SCALE + 0.01, 0.001)
+    x_mm = 20.0 + 100.0 * t_s
+    force_n = 0.3 + 0.25 * np.sin(2 * np.pi * 7.0 * t_s) + 0.001 * np.arange(len(t_s)) % 0.05
+    trajectory = tmp_path / "t.csv"
+    trajectory.write_text("t,x_mm,y_mm,force_n\n" + "".join(
+        f"{t:.6f},{x:.6f},30,{f:.6f}\n" for t, x, f in zip(t_s, x_mm, force_n)))
+    url = f"file://{trajectory}"
+    batched = _batched("grating.yaml", url, 64, 0.3 * SCALE, None)
+    drive, columns = _reference("grating.yaml", url, 64, 0.3 * SCALE, None)
+    assert len(np.unique(columns["force_n"])) > 10
+    assert batched.drive is not None and np.array_equal(batched.drive, drive)
+    for name, column in columns.items():
+        assert np.array_equal(batched.blocks[name], column, equal_nan=True), name

@@ -59,21 +59,23 @@ class SimOutput(Output):
         self.device = device
         self.q = q
         self._state = np.zeros(SIM_STATE_SIZE)
-        self._coefs: dict[float, np.ndarray] = {}  # resonator coefficients by contact force (N)
+        self._coef_force_n = math.nan  # the contact force (N) self._coef_now is for
+        self._coef_now = np.zeros(COEF_SIZE)
         self._envelope_m = np.zeros(0)
         self._amplitude_um: list[float] = []
         self._achieved_mu: list[float] = []
 
     def _coef(self, force_n: float) -> np.ndarray:
-        """The resonator coefficients at contact force ``force_n`` (N, >= 0), computed once per force."""
-        coef = self._coefs.get(force_n)
-        if coef is None:
+        """The resonator coefficients at contact force ``force_n`` (N, >= 0): recomputed when the force changes
+        (only the last force's are kept: an input whose force varies does not grow memory)."""
+        if force_n != self._coef_force_n:
             device = self.device
             q = self.q if self.q is not None else float(device.quality_factor(force_n))
-            coef = self._coefs[force_n] = np.zeros(COEF_SIZE)
+            self._coef_now = np.zeros(COEF_SIZE)
             resonator_coefficients(device.resonance_hz, q, float(device.amplitude_m_per_v(force_n)),
-                                   float(self.fs_hz), coef)
-        return coef
+                                   float(self.fs_hz), self._coef_now)
+            self._coef_force_n = force_n
+        return self._coef_now
 
     def _speeds_m_s(self, speed_mm_s: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         """Finger speeds (m/s) for the friction model: raised to the device's floor, the floor where unknown
