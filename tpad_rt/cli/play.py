@@ -68,7 +68,7 @@ if TYPE_CHECKING:
 AUTO_SWIPE = "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1"
 #: Status refreshes per second.
 STATUS_HZ = 5
-#: Drive (s) the status's simulated plate is run over before the sample it reports (its ring-up).
+#: Drive (s) the status's simulated plate rings up over before the first block it judges (and after a gap).
 PROBE_WARMUP_S = 0.02
 
 
