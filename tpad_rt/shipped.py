@@ -15,6 +15,8 @@ texture_file(ref) -> ref or Path, device_file(ref) -> ref or Path
     ``.yaml``/``.yml`` suffix), else the shipped file of that name; ConfigError naming
     the shipped ones when there is none, or naming the shipped file when a missing path
     ends in a shipped file's name (``textures/grating.yaml`` run outside the repository)
+any_file(ref) -> ref or Path
+    the same for a ref that may name either (``tpad-rt check``): a shipped texture first
 DEFAULT_DEVICE
     ``DEVICES_DIR / "default.yaml"`` (SLG_0.56)
 """
@@ -84,3 +86,27 @@ def texture_file(ref: PathLike) -> PathLike:
 def device_file(ref: PathLike) -> PathLike:
     """The device file ``ref`` names: a path, or a shipped device's name; ConfigError if neither."""
     return _resolve(ref, DEVICES_DIR, "device")
+
+
+def any_file(ref: PathLike) -> PathLike:
+    """The texture or device file ``ref`` names: a path, or a shipped texture's or device's name (a texture
+    first); ConfigError naming both lists when it is none of them, or with the hint of
+    :func:`texture_file` or :func:`device_file` for a missing path ending in a shipped file's name."""
+    path = Path(ref)
+    if path.exists() or path.is_symlink():
+        return ref
+    refused = 0
+    for resolve in (texture_file, device_file):
+        try:
+            resolved = resolve(ref)
+        except ConfigError as error:
+            if "no such file, nor" not in str(error):
+                raise  # a missing path ending in a shipped file's name: its hint
+            refused += 1
+            continue
+        if resolved is not ref:
+            return resolved  # a shipped name
+    if refused == 2:
+        raise ConfigError(f"{os.fspath(ref)}: no such file, nor a shipped texture or device of that name "
+                          f"(textures: {', '.join(texture_names())}; devices: {', '.join(device_names())})")
+    return ref  # a path naming nothing shipped: reading it says it is missing

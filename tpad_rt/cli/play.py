@@ -168,6 +168,7 @@ def run(args: argparse.Namespace) -> int:
                                     clock=renderer.now_s) as feed:
                 session = Session(renderer, console)
                 _loop(session, feed, interrupted, args.duration)
+                session.tick()  # the blocks since the last status period, judged while the renderer runs
     session.take_telemetry()
     for line in session.summary(interrupted.is_set()):
         console.print(line)

@@ -14,7 +14,7 @@ from tpad_rt.config.messages import explain
 from tpad_rt.config.texture_schema import BASE_DIR, IMAGE_PIXELS, TextureFile
 from tpad_rt.config.yaml_io import YamlDocument, load_yaml
 from tpad_rt.errors import ConfigError
-from tpad_rt.shipped import device_file, texture_file
+from tpad_rt.shipped import any_file, device_file, texture_file
 
 PathLike = str | os.PathLike[str]
 
@@ -36,10 +36,11 @@ def load_device(path: PathLike) -> DeviceFile:
 
 
 def load_any(path: PathLike) -> TextureFile | DeviceFile:
-    """A device file (it has ``resonance_hz``) or a texture file (it has ``kind``).
+    """A device file (it has ``resonance_hz``) or a texture file (it has ``kind``), by path or shipped name.
 
     Raises ConfigError listing every problem, or saying that the file is neither.
     """
+    path = any_file(path)
     document = load_yaml(Path(path), str(path))
     if "resonance_hz" in document.data:
         return _validate(DeviceFile, path, document)

@@ -1,0 +1,56 @@
+"""Shipped textures and devices by name (tpad_rt.shipped): what a bare name, a path and a missing path resolve to."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tpad_rt import shipped
+from tpad_rt.errors import ConfigError
+
+
+@pytest.fixture
+def elsewhere(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A working folder outside the repository (relative paths resolve against it), for this test only."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def test_names_list_every_shipped_file() -> None:
+    assert "grating" in shipped.texture_names() and "default" in shipped.device_names()
+    assert len(shipped.texture_names()) == len(list(shipped.TEXTURES_DIR.glob("*.yaml")))
+    assert shipped.DEFAULT_DEVICE.is_file()
+
+
+def test_a_bare_name_is_the_shipped_file(elsewhere: Path) -> None:
+    assert shipped.texture_file("grating") == shipped.TEXTURES_DIR / "grating.yaml"
+    assert shipped.device_file("SLG_0.4") == shipped.DEVICES_DIR / "SLG_0.4.yaml"
+    assert shipped.any_file("SLG_0.4") == shipped.DEVICES_DIR / "SLG_0.4.yaml"
+    assert shipped.any_file("grating") == shipped.TEXTURES_DIR / "grating.yaml"
+
+
+def test_a_file_of_that_name_wins_over_the_shipped_one(elsewhere: Path) -> None:
+    (elsewhere / "grating").write_text("kind: grating\n")
+    assert shipped.texture_file("grating") == "grating"
+    assert shipped.any_file("grating") == "grating"
+
+
+def test_a_path_is_taken_as_given_even_when_missing(elsewhere: Path) -> None:
+    assert shipped.texture_file("foo/bar.yaml") == "foo/bar.yaml"
+    assert shipped.any_file("foo/bar.yaml") == "foo/bar.yaml"
+
+
+@pytest.mark.parametrize(("resolve", "ref", "message"), [
+    (shipped.texture_file, "textures/grating.yaml",
+     "textures/grating.yaml: no such file; the package ships a texture of that name: give just 'grating'"),
+    (shipped.any_file, "devices/SLG_0.4.yaml",
+     "devices/SLG_0.4.yaml: no such file; the package ships a device of that name: give just 'SLG_0.4'"),
+    (shipped.texture_file, "gratin", "gratin: no such file, nor a shipped texture of that name (shipped: "),
+    (shipped.device_file, "SLG_9", "SLG_9: no such file, nor a shipped device of that name (shipped: "),
+    (shipped.any_file, "nosuch", "nosuch: no such file, nor a shipped texture or device of that name (textures: "),
+])
+def test_what_names_nothing_says_what_exists(elsewhere: Path, resolve, ref: str, message: str) -> None:
+    with pytest.raises(ConfigError) as raised:
+        resolve(ref)
+    assert str(raised.value).startswith(message)
