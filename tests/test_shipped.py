@@ -54,3 +54,16 @@ def test_what_names_nothing_says_what_exists(elsewhere: Path, resolve, ref: str,
     with pytest.raises(ConfigError) as raised:
         resolve(ref)
     assert str(raised.value).startswith(message)
+
+
+@pytest.mark.parametrize("ref", ["a" * 5000, "a" * 5000 + ".yaml", "a\0b", "x/" + "y" * 300])
+def test_a_name_the_system_refuses_is_answered_not_raised(elsewhere: Path, ref: str) -> None:
+    """Too long for the file system, or holding a NUL byte: pathlib's exists() raises for these, and a
+    refused name must still end in one ConfigError line (or pass through to the reader's own message)."""
+    for resolve in (shipped.texture_file, shipped.device_file, shipped.any_file):
+        try:
+            resolved = resolve(ref)
+        except ConfigError as error:
+            assert "no such file" in str(error)
+        else:
+            assert resolved == ref  # a path: reading it says what is wrong

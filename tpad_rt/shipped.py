@@ -42,6 +42,12 @@ _SUFFIXES = (".yaml", ".yml")
 PathLike = str | os.PathLike[str]
 
 
+def _present(text: str) -> bool:
+    """Whether something (a file, a folder, a FIFO, a dangling link) is at path ``text``; False for a name the
+    system refuses (too long, a NUL byte): os.path answers where pathlib raises."""
+    return os.path.lexists(text)
+
+
 def _names(folder: Path) -> list[str]:
     """Names (without ``.yaml``) of the YAML files in ``folder``, sorted; empty if it is missing."""
     return sorted(path.stem for path in folder.glob("*.yaml")) if folder.is_dir() else []
@@ -62,16 +68,16 @@ def _resolve(ref: PathLike, folder: Path, what: str) -> PathLike:
     path = Path(ref)
     text = os.fspath(ref)
     looks_like_path = text == "" or os.sep in text or "/" in text or path.suffix.lower() in _SUFFIXES
-    if path.exists() or path.is_symlink():
+    if _present(text):
         return ref
     if looks_like_path:
-        if path.suffix.lower() in _SUFFIXES and (folder / f"{path.stem}.yaml").is_file():
+        if path.suffix.lower() in _SUFFIXES and os.path.isfile(folder / f"{path.stem}.yaml"):
             # textures/grating.yaml outside a clone of the repository: the name reaches the shipped file
             raise ConfigError(f"{text}: no such file; the package ships a {what} of that name: give just "
                               f"'{path.stem}'")
         return ref
     shipped = folder / f"{text}.yaml"
-    if shipped.is_file():
+    if os.path.isfile(shipped):
         return shipped
     names = _names(folder)
     raise ConfigError(f"{text}: no such file, nor a shipped {what} of that name "
@@ -92,8 +98,7 @@ def any_file(ref: PathLike) -> PathLike:
     """The texture or device file ``ref`` names: a path, or a shipped texture's or device's name (a texture
     first); ConfigError naming both lists when it is none of them, or with the hint of
     :func:`texture_file` or :func:`device_file` for a missing path ending in a shipped file's name."""
-    path = Path(ref)
-    if path.exists() or path.is_symlink():
+    if _present(os.fspath(ref)):
         return ref
     refused = 0
     for resolve in (texture_file, device_file):
