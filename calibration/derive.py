@@ -19,9 +19,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from scipy.optimize import brentq
 
+from tpad_rt.config.device_schema import DEVICE_FORMAT_VERSION
+from tpad_rt.config.yaml_io import dump_yaml
 from tpad_rt.physics import electromech, friction, plate
 from tpad_rt.physics.plate import ACTUATOR, PLATE_LENGTH_M, PLATE_MODE, PLATE_WIDTH_M, TABLE1_GLASSES, Layer
 
@@ -37,10 +38,10 @@ VOLTS_PER_FULL_SCALE = 50.0  # illustrative
 C0_NF = 9.88
 SHUNT_OHM = 100.0
 
-# Resonance: the glass-only beam model scaled so that SLG_0.4 (the lowest predicted)
+# Carrier: the glass-only beam model scaled so that SLG_0.4 (the lowest predicted)
 # sits at 22.4 kHz, the lowest resonance the paper reports.
-RESONANCE_ANCHOR_LABEL = "SLG_0.4"
-RESONANCE_ANCHOR_HZ = 22.4e3
+CARRIER_ANCHOR_LABEL = "SLG_0.4"
+CARRIER_ANCHOR_HZ = 22.4e3
 
 # Vibration amplitude (um) at 0 N and 40 V. SLG_0.4 ~6 um, D263_0.4 ~2 um less and
 # 1.8 um the lowest are the paper's (Section IV); the rest are illustrative, chosen
@@ -55,22 +56,33 @@ AMPLITUDE_AT_0N_UM = {
     "Gorilla_0.8": 1.8,
     "BoroFloat_0.7": 2.35,
 }
-# Illustrative fall with force: a(F) = a0 (r + (1 - r) exp(-F / F_SCALE)).
-AMPLITUDE_FLOOR_RATIO = {"SLG_0.4": 0.25}  # falls most (paper, Section IV)
-DEFAULT_AMPLITUDE_FLOOR_RATIO = 0.35
-AMPLITUDE_FORCE_SCALE_N = 0.6
-
-# Real power at 40 V and 0 N: SLG_0.4 < 0.2 W and Gorilla_0.8 ~1 W (paper, Section IV);
-# the others from a power law in n^2 through these two (Eq. 21's dependence on n).
-POWER_ANCHORS_W = {"SLG_0.4": 0.18, "Gorilla_0.8": 1.0}
+# Real power (W) at 40 V and 0 N. SLG_0.4 < 0.2 W and Gorilla_0.8 ~1 W, the highest,
+# are measured (Section IV). The others are illustrative, placed in the order the
+# paper measured (Section IV, Figs. 5-6): thinner draws less; SLG below D263 at 0.4 and
+# 0.56 mm; Gorilla_0.56 close to SLG_0.56; BoroFloat_0.7 well above SLG_0.7. SLG_0.56's
+# puts its R without contact below the 1250 ohm the paper fitted with the spring at 2 N
+# (Section V): contact only adds damping.
+POWER_AT_0N_W = {
+    "SLG_0.4": 0.18,
+    "D263_0.4": 0.30,
+    "SLG_0.56": 0.66,
+    "Gorilla_0.56": 0.68,
+    "D263_0.56": 0.74,
+    "SLG_0.7": 0.80,
+    "BoroFloat_0.7": 0.92,
+    "Gorilla_0.8": 1.0,
+}
 # Motional resistance of SLG_0.56 at 2 N with the artificial finger (paper, Section V).
 R_AT_2N_REFERENCE_LABEL = "SLG_0.56"
 R_AT_2N_OHM = 2150.0
-# Illustrative: Q at 0 N, and L rising / C falling linearly by 2 N (paper: C decreases,
-# L and R increase with force).
-Q_AT_0N = 300.0
+# Illustrative: L rises and C falls linearly by 5 % at 2 N (paper Section V: with force C
+# decreases, L and R increase, R far the most). With one gamma, L = m / gamma^2: a
+# finger adds moving mass.
 L_RISE_BY_2N = 0.05
 C_FALL_BY_2N = 0.05
+# Modal mass of the m x 0 mode: half the plate's mass (a sine-shaped mode: the mean of
+# sin^2 over the plate is 1/2); the actuator strip's mass is left out.
+MODAL_MASS_FRACTION = 0.5
 
 SPEED_FLOOR_MM_S = 5.0  # illustrative
 POWER_BUDGET_MARGIN = 1.2  # illustrative: budget = 1.2 x the 0 N power at 40 V ...
@@ -80,23 +92,26 @@ SOURCE = {
     "label": "measured: paper Table 1",
     "plate": "measured: paper Table 1 (thickness, density, Young's modulus), Section II (130 x 60 mm, 20 x 0 mode)",
     "actuator": "measured: paper Section VI (SMPL60W5T03R112: 0.3 mm, 7.9 g/cm3, 84 GPa)",
-    "resonance_hz": "derived: glass-only Euler-Bernoulli beam (Eq. 16) scaled by one factor so SLG_0.4 = 22.4 kHz, "
-    "the lowest the paper reports (Section II); rounded to 10 Hz",
-    "amplifier.max_voltage_v": "measured: the paper's +/-40 V source (Section II)",
+    "carrier_hz": "derived: glass-only Euler-Bernoulli beam (Eq. 16) scaled by one factor so SLG_0.4 = 22.4 kHz, "
+    "the lowest the paper reports (Section II); rounded to 10 Hz; the motional branch's loaded resonance at 0 N",
+    "amplifier.max_voltage_v": "illustrative: the paper's test drive, its +/-40 V source (Section II), not a measured limit "
+    "of the plate",
     "amplifier.volts_per_full_scale": "illustrative",
-    "calibration.force_n": "measured: the paper's nine contact forces (Section II)",
-    "calibration.amplitude_um_per_v": "illustrative: 0 N amplitude at 40 V from Section IV where stated (SLG_0.4 ~6 um, "
-    "D263_0.4 ~2 um less, lowest 1.8 um), else chosen so f*alpha orders the plates as Section IV does; "
-    "falls with force as a0 (r + (1 - r) exp(-F / 0.6 N)), r = 0.35 (SLG_0.4: 0.25)",
     "circuit.c0_nf": "measured: paper Section V",
     "circuit.shunt_ohm": "measured: paper Sections II and V",
     "circuit.force_n": "measured: the paper's nine contact forces (Section II)",
-    "circuit.motional_r_ohm": "derived: R(0 N) solves the exact circuit for the 0 N power at 40 V "
-    "(SLG_0.4 0.18 W, Gorilla_0.8 1.0 W from Section IV, others by a power law in n^2, Eq. 21); "
-    "illustrative: R(F) = R(0)(1 + g F), g so SLG_0.56 reaches 2150 ohm at 2 N (Section V)",
-    "circuit.motional_l_h": "illustrative: Q = 300 at 0 N, rising 5 % by 2 N",
-    "circuit.motional_c_pf": "derived: tunes the motional branch to resonance_hz at 0 N; illustrative: falls 5 % by 2 N; "
-    "7 significant figures to keep the tuning within 0.01 Hz",
+    "circuit.gamma_n_per_v": "derived: the 0 N motional current at 40 V over omega times the 0 N amplitude at 40 V; "
+    "the amplitude is measured where the paper states it (Section IV: SLG_0.4 ~6 um, D263_0.4 ~2 um less, "
+    "lowest 1.8 um), else illustrative (chosen so f*alpha orders the plates as Section IV does); one gamma "
+    "at every force",
+    "circuit.motional_r_ohm": "derived: R(0 N) solves the exact circuit, on resonance, for the 0 N power at 40 V: "
+    "measured for SLG_0.4 (< 0.2 W: 0.18) and Gorilla_0.8 (~1 W), illustrative for the others, in the paper's "
+    "measured order (Section IV), SLG_0.56's below the 1250 ohm of the spring at 2 N (Section V); "
+    "illustrative: R(F) = R(0)(1 + g F), g so SLG_0.56 reaches 2150 ohm at 2 N (measured, Section V)",
+    "circuit.motional_l_h": "derived: L(0 N) = m / gamma^2, m half the plate's mass (the mode's modal mass; "
+    "actuator left out); illustrative: rising 5 % by 2 N",
+    "circuit.motional_c_pf": "derived: puts the loaded resonance (shunt and C0 included) on carrier_hz at 0 N; "
+    "illustrative: falls 5 % by 2 N; 7 significant figures to keep the tuning within 0.01 Hz",
     "friction_model": "measured: the literature values the paper uses (Section IV, from Vezzoli et al. and Sednaoui et al.)",
     "speed_floor_mm_s": "illustrative",
     "power_budget_w": "illustrative: 1.2 x the 0 N power at 40 V, rounded up to 0.05 W",
@@ -113,43 +128,31 @@ def _beam_resonance_hz(glass: Layer) -> float:
     return float(plate.mode_resonance_hz(glass.thickness_m, glass.density_kg_m3, glass.youngs_pa, length_m, mode_m))
 
 
-def resonance_hz(glass: Layer) -> float:
+def carrier_hz(glass: Layer) -> float:
     """Drive frequency: the beam model scaled to the paper's lowest measured resonance, to 10 Hz."""
-    scale = RESONANCE_ANCHOR_HZ / _beam_resonance_hz(plate.table1_glass(RESONANCE_ANCHOR_LABEL))
+    scale = CARRIER_ANCHOR_HZ / _beam_resonance_hz(plate.table1_glass(CARRIER_ANCHOR_LABEL))
     return round(scale * _beam_resonance_hz(glass), -1)
 
 
-def _n2(glass: Layer) -> float:
-    n = plate.amplification_number(
-        glass.thickness_m, glass.density_kg_m3, glass.youngs_pa,
-        ACTUATOR.thickness_m, ACTUATOR.density_kg_m3, ACTUATOR.youngs_pa,
-    )
-    return float(n) ** 2
+def _thevenin(freq_hz: float) -> complex:
+    """Z_th (ohm): the shunt seen through C0 from the motional branch."""
+    return SHUNT_OHM / (1 + 1j * 2 * math.pi * freq_hz * SHUNT_OHM * C0_NF * 1e-9)
 
 
-def power_target_w(glass: Layer) -> float:
-    """0 N power at 40 V: P = a (n^2)^-k through the two anchors of POWER_ANCHORS_W."""
-    (label_1, p_1), (label_2, p_2) = POWER_ANCHORS_W.items()
-    n2_1, n2_2 = _n2(plate.table1_glass(label_1)), _n2(plate.table1_glass(label_2))
-    k = math.log(p_2 / p_1) / math.log(n2_1 / n2_2)
-    return p_1 * (n2_1 / _n2(glass)) ** k
-
-
-def _power_at_resonance_w(r_ohm: float, freq_hz: float) -> float:
-    """Exact power at 40 V peak into a branch of resistance R tuned to freq_hz (L, C cancel)."""
+def _power_on_resonance_w(r_ohm: float, freq_hz: float) -> float:
+    """Power at 40 V peak into a branch of resistance R whose loaded resonance is freq_hz."""
     omega = 2 * math.pi * freq_hz
-    l_h = Q_AT_0N * r_ohm / omega
-    c_f = 1 / (omega**2 * l_h)
-    u_rms = MAX_VOLTAGE_V / math.sqrt(2)
-    return float(electromech.real_power_exact(u_rms, freq_hz, C0_NF * 1e-9, l_h, c_f, r_ohm, SHUNT_OHM))
+    divider = 1 / abs(1 + 1j * omega * SHUNT_OHM * C0_NF * 1e-9)
+    current_a = MAX_VOLTAGE_V * divider / (r_ohm + _thevenin(freq_hz).real)
+    return current_a**2 * r_ohm / 2
 
 
 def motional_r_at_0n_ohm(glass: Layer) -> float:
-    """R at 0 N that draws power_target_w at resonance, on the branch R > R0 where power falls with R."""
-    freq_hz, target_w = resonance_hz(glass), power_target_w(glass)
+    """R at 0 N that draws POWER_AT_0N_W on resonance, on the branch R > R0 where power falls with R."""
+    freq_hz, target_w = carrier_hz(glass), POWER_AT_0N_W[glass.label]
 
     def excess(r_ohm: float) -> float:
-        return _power_at_resonance_w(r_ohm, freq_hz) - target_w
+        return _power_on_resonance_w(r_ohm, freq_hz) - target_w
 
     if excess(SHUNT_OHM) <= 0:
         raise ValueError(f"{glass.label}: {target_w:.3g} W at 40 V is out of reach with R > R0")
@@ -162,22 +165,29 @@ def _r_growth_per_n() -> float:
     return (R_AT_2N_OHM / r_0 - 1) / 2.0
 
 
-def _amplitude_um_per_v(label: str) -> list[float]:
-    ratio = AMPLITUDE_FLOOR_RATIO.get(label, DEFAULT_AMPLITUDE_FLOOR_RATIO)
-    forces = np.array(FORCES_N)
-    amplitude_um = AMPLITUDE_AT_0N_UM[label] * (ratio + (1 - ratio) * np.exp(-forces / AMPLITUDE_FORCE_SCALE_N))
-    return [_significant(a / MAX_VOLTAGE_V) for a in amplitude_um]
+def gamma_n_per_v(glass: Layer) -> float:
+    """The transduction factor: 0 N motional current at 40 V over omega times the 0 N amplitude at 40 V."""
+    freq_hz, r_ohm = carrier_hz(glass), motional_r_at_0n_ohm(glass)
+    current_a = math.sqrt(2 * _power_on_resonance_w(r_ohm, freq_hz) / r_ohm)
+    return current_a / (2 * math.pi * freq_hz * AMPLITUDE_AT_0N_UM[glass.label] * 1e-6)
 
 
-def _motional_tables(glass: Layer, g_per_n: float) -> dict[str, list[float]]:
-    """L (H), C (pF) and R (ohm) at FORCES_N; C from the rounded L, so L C is as intended."""
-    omega = 2 * math.pi * resonance_hz(glass)
+def modal_mass_kg(glass: Layer) -> float:
+    """MODAL_MASS_FRACTION of the plate's mass (kg)."""
+    return MODAL_MASS_FRACTION * glass.density_kg_m3 * glass.thickness_m * PLATE_LENGTH_M * PLATE_WIDTH_M
+
+
+def _motional_tables(glass: Layer, gamma: float, g_per_n: float) -> dict[str, list[float]]:
+    """L (H), C (pF) and R (ohm) at FORCES_N; C from the rounded L, so that the loaded resonance is as intended."""
+    freq_hz = carrier_hz(glass)
+    omega = 2 * math.pi * freq_hz
     forces = np.array(FORCES_N)
     r_ohm = motional_r_at_0n_ohm(glass) * (1 + g_per_n * forces)
-    l_h = Q_AT_0N * r_ohm[0] / omega * (1 + L_RISE_BY_2N * forces / 2)
-    c_f = 1 / (omega**2 * l_h[0]) * (1 - C_FALL_BY_2N * forces / 2)
-    l_rounded = np.array([_significant(x) for x in l_h])
-    c_pf = c_f * l_h / l_rounded * 1e12
+    l_h = modal_mass_kg(glass) / gamma**2 * (1 + L_RISE_BY_2N * forces / 2)
+    l_rounded = np.array([_significant(x, 6) for x in l_h])
+    # Loaded resonance on the carrier at 0 N: w L - 1 / (w C) + Im Z_th = 0.
+    c_0_f = 1 / (omega * (omega * l_rounded[0] + _thevenin(freq_hz).imag))
+    c_pf = c_0_f * (1 - C_FALL_BY_2N * forces / 2) * 1e12
     return {
         "motional_l_h": l_rounded.tolist(),
         "motional_c_pf": [_significant(x, 7) for x in c_pf],
@@ -197,9 +207,11 @@ def _power_budget_w(freq_hz: float, motional: dict[str, list[float]]) -> float:
 
 def device_document(glass: Layer, description: str, g_per_n: float) -> dict[str, Any]:
     """The device file for ``glass`` as a mapping, keys in docs/formats.md order."""
-    freq_hz = resonance_hz(glass)
-    motional = _motional_tables(glass, g_per_n)
+    freq_hz = carrier_hz(glass)
+    gamma = gamma_n_per_v(glass)
+    motional = _motional_tables(glass, gamma, g_per_n)
     return {
+        "format_version": DEVICE_FORMAT_VERSION,
         "label": glass.label,
         "description": description,
         "plate": {
@@ -216,10 +228,10 @@ def device_document(glass: Layer, description: str, g_per_n: float) -> dict[str,
             "density_g_cm3": ACTUATOR.density_g_cm3,
             "youngs_modulus_gpa": ACTUATOR.youngs_modulus_gpa,
         },
-        "resonance_hz": freq_hz,
+        "carrier_hz": freq_hz,
         "amplifier": {"volts_per_full_scale": VOLTS_PER_FULL_SCALE, "max_voltage_v": MAX_VOLTAGE_V},
-        "calibration": {"force_n": list(FORCES_N), "amplitude_um_per_v": _amplitude_um_per_v(glass.label)},
-        "circuit": {"c0_nf": C0_NF, "shunt_ohm": SHUNT_OHM, "force_n": list(FORCES_N), **motional},
+        "circuit": {"c0_nf": C0_NF, "shunt_ohm": SHUNT_OHM, "gamma_n_per_v": _significant(gamma, 6),
+                    "force_n": list(FORCES_N), **motional},
         "friction_model": {"mu0": friction.MU0, "poisson": friction.POISSON, "psi_star": friction.PSI_STAR},
         "speed_floor_mm_s": SPEED_FLOOR_MM_S,
         "power_budget_w": _power_budget_w(freq_hz, motional),
@@ -228,20 +240,9 @@ def device_document(glass: Layer, description: str, g_per_n: float) -> dict[str,
     }
 
 
-class _Dumper(yaml.SafeDumper):
-    """Block mappings, flow (one-line) lists."""
-
-
-def _flow_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
-    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True)
-
-
-_Dumper.add_representer(list, _flow_list)
-
-
 def render(document: dict[str, Any]) -> str:
     """The file text: the header comment, then the YAML."""
-    return HEADER + yaml.dump(document, Dumper=_Dumper, sort_keys=False, width=1000, allow_unicode=True)
+    return dump_yaml(document, HEADER)
 
 
 def generated_files(out_dir: Path = DEVICES_DIR) -> dict[Path, str]:

@@ -43,7 +43,7 @@ def hog(stop: threading.Event) -> None:
 def main(url: str, seconds: float, gil_threads: int) -> None:
     device = Device.default()
     target = parse_serial_url(url)
-    link = AmpLink.open(target, carrier_hz=device.resonance_hz)
+    link = AmpLink.open(target, carrier_hz=device.carrier_hz)
     info = link.info
     assert info is not None
     pipeline = Pipeline(device, load_compiled(GRATING), target.envelope_hz, envelope_output=True)

@@ -133,7 +133,7 @@ def impedance(carrier_hz: float) -> complex:
     return DEVICE.shunt_ohm + 1 / (1j * omega * DEVICE.c0_f + 1 / motional)
 
 
-RESONANCE_MHZ = round(DEVICE.resonance_hz * 1000)
+RESONANCE_MHZ = round(DEVICE.carrier_hz * 1000)
 FULL_SCALE_MV = round(DEVICE.max_voltage_v * 1250)
 MAX_MV = round(DEVICE.max_voltage_v * 1000)
 

@@ -233,14 +233,14 @@ def test_capture_carrier_envelope_and_stop_ramp(jack: str, tmp_path: Path) -> No
         time.sleep(1.0)  # the swipe, then part of the hold (finger still, drive steady)
         renderer.stop()
     samples = capture.result()
-    envelope = np.abs(carrier_baseband(samples, device.resonance_hz, window))
+    envelope = np.abs(carrier_baseband(samples, device.carrier_hz, window))
     active = np.flatnonzero(envelope > 0.5 * envelope.max())
     # The carrier's frequency from the phase advance between windows of the swipe's 0.5 s: an xrun slips
     # the capture against the stream by whole periods, a jump in a window or two, so take the median.
-    baseband = carrier_baseband(samples, device.resonance_hz, window)[active[0] + 150:active[0] + 150 + 1500]
+    baseband = carrier_baseband(samples, device.carrier_hz, window)[active[0] + 150:active[0] + 150 + 1500]
     phase_steps = np.angle(baseband[1:] * np.conj(baseband[:-1]))
     offset_hz = float(np.median(phase_steps)) / (2 * np.pi * window / RATE_HZ)
-    assert abs(offset_hz) < 0.5, f"carrier {device.resonance_hz + offset_hz:.2f} Hz, not {device.resonance_hz} Hz"
+    assert abs(offset_hz) < 0.5, f"carrier {device.carrier_hz + offset_hz:.2f} Hz, not {device.carrier_hz} Hz"
     ripple = envelope[active[0] + 150:active[0] + 150 + 1800]  # 0.6 s at 3000 windows/s
     ripple_spectrum = np.abs(np.fft.rfft(ripple - ripple.mean()))
     ripple_hz = np.fft.rfftfreq(len(ripple), window / RATE_HZ)[np.argmax(ripple_spectrum)]
@@ -275,7 +275,7 @@ def test_set_texture_keeps_the_carrier_phase(jack: str, tmp_path: Path) -> None:
     swapped = np.flatnonzero(np.round(blocks["target_mu"], 3) == 0.5)
     assert len(swapped), "the square grating's target never reached the kernel"
     swap_sample = round(float(blocks["t"][swapped[0]]) * RATE_HZ) - round(float(blocks["t"][0]) * RATE_HZ)
-    baseband = carrier_baseband(recording.drive, device.resonance_hz, window)
+    baseband = carrier_baseband(recording.drive, device.carrier_hz, window)
     magnitudes = np.abs(baseband)
     steady = np.flatnonzero(magnitudes > 0.2 * magnitudes.max())
     swap = swap_sample // window

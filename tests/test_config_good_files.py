@@ -122,13 +122,14 @@ def test_device_file() -> None:
     device = load_device(GOOD_FILES / "device.yaml")
     assert isinstance(device, DeviceFile) and load_any(GOOD_FILES / "device.yaml") == device
     assert device.label == "SLG_0.56" and device.plate.mode == (20, 0)
-    assert device.calibration.force_n == [0.0, 0.5, 1.0, 2.0]
+    assert device.format_version == 2 and device.carrier_hz == 28000.0
+    assert device.circuit.force_n == [0.0, 1.0, 2.0] and device.circuit.gamma_n_per_v == 0.125
     assert device.circuit.motional_r_ohm == [800.0, 1500.0, 2150.0]
     assert device.amplifier.max_voltage_v == 80.0
     defaults = (device.friction_model.mu0, device.friction_model.poisson, device.friction_model.psi_star)
     assert defaults == (0.25, 0.33, 4.69)
     assert device.speed_floor_mm_s == 5.0 and device.preemphasis is True
-    assert set(device.source) == {"calibration", "circuit"}
+    assert set(device.source) == {"circuit"}
 
 
 def test_models_are_frozen() -> None:

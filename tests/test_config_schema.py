@@ -33,8 +33,8 @@ def test_texture_schema_is_a_union_on_kind() -> None:
 def test_device_schema_names() -> None:
     schema = schema_json("device")
     assert set(schema["required"]) == {
-        "label", "description", "plate", "actuator", "resonance_hz", "amplifier",
-        "calibration", "circuit", "power_budget_w", "source",
+        "format_version", "label", "description", "plate", "actuator", "carrier_hz", "amplifier",
+        "circuit", "power_budget_w", "source",
     }  # fmt: skip
     assert set(schema["properties"]) == set(schema["required"]) | {"friction_model", "speed_floor_mm_s", "preemphasis"}
 

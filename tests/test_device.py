@@ -50,14 +50,13 @@ def test_every_calibration_file_loads_with_si_values(name):
     assert (device.plate.length_m, device.plate.width_m) == pytest.approx((0.130, 0.060))
     assert device.plate.mode == (20, 0)
     assert device.actuator.density_kg_m3 == pytest.approx(7900.0)
-    assert 22.4e3 <= device.resonance_hz <= 46e3
+    assert 22.4e3 <= device.carrier_hz <= 46e3
     assert device.c0_f == pytest.approx(9.88e-9) and device.shunt_ohm == 100.0
     assert device.max_voltage_v == 40.0 and device.volts_per_full_scale == 50.0
     assert (device.mu0, device.poisson, device.psi_star) == (0.25, 0.33, 4.69)
     assert device.speed_floor_m_s == pytest.approx(5e-3)
     assert device.preemphasis is True
     assert list(device.force_table_n) == [0, 0.2, 0.4, 0.5, 0.6, 0.8, 1.0, 1.5, 2.0]
-    assert np.array_equal(device.motional_force_table_n, device.force_table_n)
 
 
 def test_files_say_which_values_are_measured_derived_or_illustrative():
@@ -72,9 +71,9 @@ def test_default_is_slg_056(slg056):
     default = Device.default()
     assert default.label == "SLG_0.56"
     assert "default" in default.description
-    assert default.resonance_hz == slg056.resonance_hz
+    assert default.carrier_hz == slg056.carrier_hz
     assert np.array_equal(default.motional_r_ohm_table, slg056.motional_r_ohm_table)
-    assert np.array_equal(default.amplitude_m_per_v_table, slg056.amplitude_m_per_v_table)
+    assert default.gamma_n_per_v == slg056.gamma_n_per_v
 
 
 def test_default_missing_is_a_clear_config_error(monkeypatch, tmp_path):
@@ -85,8 +84,8 @@ def test_default_missing_is_a_clear_config_error(monkeypatch, tmp_path):
 
 def test_a_bad_file_is_a_config_error(tmp_path):
     bad = tmp_path / "bad.yaml"
-    bad.write_text((DEVICES / "SLG_0.56.yaml").read_text().replace("resonance_hz: 31360.0", "resonance_hz: -5"))
-    with pytest.raises(ConfigError, match="resonance_hz"):
+    bad.write_text((DEVICES / "SLG_0.56.yaml").read_text().replace("carrier_hz: 31360.0", "carrier_hz: -5"))
+    with pytest.raises(ConfigError, match="carrier_hz"):
         Device.from_file(bad)
 
 
@@ -108,7 +107,7 @@ def test_slg056_motional_resistance_at_2n_is_the_papers_2150_ohm(slg056):
 
 def test_l_rises_c_falls_r_rises_with_force(devices):
     for device in devices.values():
-        l_h, c_f, r_ohm = device.motional(device.motional_force_table_n)
+        l_h, c_f, r_ohm = device.motional(device.force_table_n)
         assert np.all(np.diff(l_h) > 0) and np.all(np.diff(c_f) < 0) and np.all(np.diff(r_ohm) > 0)
 
 
@@ -126,28 +125,80 @@ def test_power_budget_covers_the_0n_power_at_40v(devices):
         assert device.power_budget_w < 1.2 * _power_40v_w(device, 0.0) + 0.05
 
 
-def test_motional_branch_is_tuned_to_the_drive_frequency_at_0n_with_q_300(devices):
+def test_the_loaded_motional_resonance_sits_on_the_carrier_at_0n_and_contact_detunes_it(devices):
     for device in devices.values():
-        l_h, c_f, r_ohm = device.motional(0.0)
-        assert electromech.resonance_hz(l_h, c_f) == pytest.approx(device.resonance_hz, abs=0.05)
-        assert device.quality_factor(0.0) == pytest.approx(300.0, rel=1e-3)
+        assert device.motional_resonance_hz(0.0) == pytest.approx(device.carrier_hz, abs=0.01)
+        assert device.detuning_factor(0.0) == pytest.approx(1.0, abs=1e-6)
+        # L up 5 %, C down 5 % by 2 N: the branch resonates 0.125 % higher
+        assert device.motional_resonance_hz(2.0) / device.carrier_hz - 1 == pytest.approx(1.25e-3, rel=0.02)
+        assert device.detuning_factor(2.0) > 1.01
+
+
+def test_one_gamma_ties_amplitude_to_power_at_every_force_by_energy_balance(devices):
+    """P = |I_g|^2 R / 2 and X = |I_g| / (gamma w): P / X^2 = gamma^2 w^2 R / 2, with one gamma at every force."""
+    forces = np.linspace(0.0, 2.0, 41)
+    for device in devices.values():
+        omega = 2 * math.pi * device.carrier_hz
+        ratio = device.steady_power_w_per_v2(forces) / device.amplitude_m_per_v(forces) ** 2
+        r_ohm = device.motional(forces)[2]
+        np.testing.assert_allclose(ratio, device.gamma_n_per_v**2 * omega**2 * r_ohm / 2, rtol=1e-12)
+
+
+def test_motional_inductance_is_the_modal_mass_over_gamma_squared(devices):
+    for device in devices.values():
+        plate = device.plate
+        half_mass_kg = 0.5 * plate.density_kg_m3 * plate.thickness_m * plate.length_m * plate.width_m
+        assert device.motional(0.0)[0] == pytest.approx(half_mass_kg / device.gamma_n_per_v**2, rel=1e-5)
+
+
+def test_slg04_q_is_what_the_papers_amplitude_and_power_need_by_energy_balance(devices):
+    # The issue's independent check: 6 um and 0.18 W at 22.4 kHz need Q of about 1080
+    assert devices["SLG_0.4"].quality_factor(0.0) == pytest.approx(1080, rel=0.01)
+
+
+def test_the_files_hold_the_papers_measured_orders(devices):
+    power = {label: float(d.steady_power_w_per_v2(0.0)) * PEAK_40V_SQUARED for label, d in devices.items()}
+    amplitude_um = {label: float(d.amplitude_m_per_v(0.0)) * 40e6 for label, d in devices.items()}
+    assert power["SLG_0.4"] < 0.2 and power["Gorilla_0.8"] == pytest.approx(1.0, rel=2e-3)
+    assert power["BoroFloat_0.7"] > power["SLG_0.7"]
+    assert power["Gorilla_0.56"] == pytest.approx(power["SLG_0.56"], rel=0.05)
+    assert power["D263_0.4"] > power["SLG_0.4"] and power["D263_0.56"] > power["SLG_0.56"]
+    assert power["SLG_0.4"] < power["SLG_0.56"] < power["SLG_0.7"]
+    assert power["Gorilla_0.56"] < power["Gorilla_0.8"]
+    assert all(1.8 * (1 - 1e-3) <= value <= 6.0 * (1 + 1e-3) for value in amplitude_um.values())
+    slg056 = devices["SLG_0.56"]
+    assert slg056.motional(2.0)[2] == 2150.0 and slg056.motional(0.0)[2] < 1250.0
 
 
 def test_power_is_the_exact_circuit_at_a_1v_peak_drive_at_the_carrier(slg056):
     l_h, c_f, r_ohm = slg056.motional(0.7)
     expected = electromech.real_power_exact(1 / math.sqrt(2), 31360.0, 9.88e-9, l_h, c_f, r_ohm, 100.0)
-    assert slg056.power_w_per_v2(0.7) == pytest.approx(expected, rel=1e-12)
+    assert slg056.steady_power_w_per_v2(0.7) == pytest.approx(expected, rel=1e-12)
+    assert slg056.power_w_per_v2(0.7) == pytest.approx(expected * slg056.detuning_factor(0.7), rel=1e-12)
     # Eq. 6 adds |Z| and R0 as magnitudes (Eq. 5): with the paper's C0 and R0 at ~31 kHz
-    # (|X0| = 514 ohm) and R ~ 1.7 kohm that underestimates the power by about a quarter
-    eq6 = electromech.real_power_eq6(1 / math.sqrt(2), slg056.resonance_hz, 9.88e-9, r_ohm, 100.0)
-    assert 1.2 < slg056.power_w_per_v2(0.7) / eq6 < 1.3
+    # (|X0| = 514 ohm) and R ~ 1.4 kohm that underestimates the power by about a fifth
+    eq6 = electromech.real_power_eq6(1 / math.sqrt(2), slg056.carrier_hz, 9.88e-9, r_ohm, 100.0)
+    assert 1.15 < slg056.steady_power_w_per_v2(0.7) / eq6 < 1.3
+
+
+def test_the_power_bound_is_the_most_any_drive_frequency_draws(devices):
+    """The detuning factor's bound is the steady power at the loaded resonance: scanned, the envelope model is
+    within 1e-6 below it (the kernel's caps keep SAFETY_MARGIN, 1e-6 relative, beneath) and 1e-3 above."""
+    for device in devices.values():
+        for force in (0.0, 1.0, 2.0):
+            l_h, c_f, r_ohm = (float(value) for value in device.motional(force))
+            resonance = float(device.motional_resonance_hz(force))
+            freqs = np.linspace(resonance - 300.0, resonance + 300.0, 60001)
+            current = electromech.motional_current(1.0, freqs, device.c0_f, l_h, c_f, r_ohm, device.shunt_ohm)
+            most_w = float(np.max(np.abs(current) ** 2 * r_ohm / 2))
+            assert most_w * (1 - 1e-6) <= device.power_w_per_v2(force) <= most_w * (1 + 1e-3)
+            assert device.power_w_per_v2(force) >= device.steady_power_w_per_v2(force)
 
 
 def test_interpolation_is_linear_and_clamped_at_the_table_ends(slg056):
-    table = slg056.amplitude_m_per_v_table
-    assert slg056.amplitude_m_per_v(0.3) == pytest.approx((table[1] + table[2]) / 2)
-    assert slg056.amplitude_m_per_v(5.0) == table[-1]
-    assert slg056.amplitude_m_per_v(0.0) == table[0]
+    assert slg056.amplitude_m_per_v(5.0) == slg056.amplitude_m_per_v(2.0)
+    l_table = slg056.motional_l_h_table
+    assert slg056.motional(0.3)[0] == pytest.approx((l_table[1] + l_table[2]) / 2)
     r_table = slg056.motional_r_ohm_table
     assert slg056.motional(1.75)[2] == pytest.approx((r_table[-2] + r_table[-1]) / 2)
     assert slg056.motional(100.0)[2] == r_table[-1]
@@ -167,9 +218,13 @@ def test_negative_force_is_rejected(slg056):
         slg056.amplitude_m_per_v([0.5, -0.1])
 
 
-def test_envelope_time_constant_is_q_over_pi_f0(slg056):
-    # Q = 300 at 0 N, f0 = 31.36 kHz: 300 / (pi * 31360) = 3.045 ms
-    assert slg056.envelope_time_constant_s(0.0) == pytest.approx(3.045e-3, rel=1e-3)
+def test_envelope_time_constant_is_the_loaded_branchs(slg056):
+    # tau = 2 L / (R + Re Z_th), Z_th = R0 / (1 + j w R0 C0): the shunt seen through C0 adds ~98 ohm of damping
+    l_h, _, r_ohm = slg056.motional(0.0)
+    w_r0_c0 = 2 * math.pi * 31360.0 * 100.0 * 9.88e-9
+    assert slg056.envelope_time_constant_s(0.0) == pytest.approx(2 * l_h / (r_ohm + 100.0 / (1 + w_r0_c0**2)),
+                                                                 rel=1e-12)
+    assert slg056.envelope_time_constant_s(0.0) < slg056.quality_factor(0.0) / (math.pi * 31360.0)
     assert slg056.envelope_time_constant_s(2.0) < slg056.envelope_time_constant_s(0.0)
 
 
@@ -241,16 +296,17 @@ def test_plate_amplitude_refuses_bad_arguments(slg056, arguments, message):
         slg056.plate_amplitude_m(*arguments)
 
 
-def test_amplitudes_at_0n_and_40v_follow_the_paper(devices):
+def test_amplitudes_at_0n_and_40v_follow_the_paper(devices):  # gamma is derived from them
     amplitude_um = {label: float(d.amplitude_m_per_v(0.0)) * 40 * 1e6 for label, d in devices.items()}
-    assert amplitude_um["SLG_0.4"] == pytest.approx(6.0)  # paper: about 6 um, the highest
-    assert amplitude_um["SLG_0.4"] - amplitude_um["D263_0.4"] == pytest.approx(2.0)  # about 2 um more
-    assert min(amplitude_um.values()) == pytest.approx(1.8)  # paper: 1.8 to 6 um
+    # to the files' rounding (gamma and L to 6 significant digits)
+    assert amplitude_um["SLG_0.4"] == pytest.approx(6.0, rel=1e-3)  # paper: about 6 um, the highest
+    assert amplitude_um["SLG_0.4"] - amplitude_um["D263_0.4"] == pytest.approx(2.0, abs=1e-2)  # about 2 um more
+    assert min(amplitude_um.values()) == pytest.approx(1.8, rel=1e-3)  # paper: 1.8 to 6 um
     assert max(amplitude_um, key=amplitude_um.get) == "SLG_0.4"
 
 
 def test_vibration_velocity_orders_the_plates_as_section_iv_says(devices):
-    velocity = {label: d.resonance_hz * float(d.amplitude_m_per_v(0.0)) for label, d in devices.items()}
+    velocity = {label: d.carrier_hz * float(d.amplitude_m_per_v(0.0)) for label, d in devices.items()}
     assert velocity["SLG_0.7"] > velocity["SLG_0.56"]
     assert velocity["Gorilla_0.8"] > velocity["Gorilla_0.56"]
     assert velocity["SLG_0.4"] >= velocity["D263_0.4"]
@@ -261,7 +317,7 @@ def test_vibration_velocity_orders_the_plates_as_section_iv_says(devices):
 def test_amplitude_falls_with_force_most_for_slg04(devices):
     drop_at_1n = {label: float(d.amplitude_m_per_v(1.0) / d.amplitude_m_per_v(0.0)) for label, d in devices.items()}
     for device in devices.values():
-        assert np.all(np.diff(device.amplitude_m_per_v_table) < 0)
+        assert np.all(np.diff(device.amplitude_m_per_v(device.force_table_n)) < 0)
     assert min(drop_at_1n, key=drop_at_1n.get) == "SLG_0.4"
 
 

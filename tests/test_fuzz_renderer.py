@@ -185,7 +185,7 @@ def test_nan_through_a_jack_server_leaves_the_output_finite_and_the_next_swipe_d
     assert np.all(np.isfinite(samples)) and np.max(np.abs(samples)) <= LIMIT_FS
     assert stats["faults"] >= 1 and "finger" in stats["fault_causes"] and stats["fault_blocks"] >= 1
     assert np.any(telemetry["saturated"] & FLAG_FAULT)
-    envelope = np.abs(carrier_baseband(samples, DEVICE.resonance_hz, window))
+    envelope = np.abs(carrier_baseband(samples, DEVICE.carrier_hz, window))
     # The grating ripples the envelope within a swipe: a swipe is a run of 40 ms windows with drive.
     reach = np.array([envelope[k:k + 40].max() for k in range(len(envelope) - 40)])
     on = reach > 0.3 * envelope.max()

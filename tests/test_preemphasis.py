@@ -105,7 +105,7 @@ def test_the_plate_model_maps_the_preemphasised_envelope_of_a_step_back_to_the_c
     options = RenderOptions(control_interval=ENVELOPE_CONTROL_INTERVAL, default_force_n=FORCE_N, smoothing_ms=1.0)
     pipeline = Pipeline(device, _pulses(tmp_path, 0.85), fs_hz=ENVELOPE_HZ, options=options, envelope_output=True)
     full_scale_v = 50.0
-    pipeline.set_drive_scale(full_scale_v, device.max_voltage_v, device.resonance_hz)
+    pipeline.set_drive_scale(full_scale_v, device.max_voltage_v, device.carrier_hz)
     pipeline.start()
     block = np.zeros(ENVELOPE_BLOCK, dtype=np.float32)
     drive, commanded, flags = [], [], 0
@@ -125,7 +125,7 @@ def test_the_plate_model_maps_the_preemphasised_envelope_of_a_step_back_to_the_c
     assert first == pytest.approx(ENVELOPE_HZ / PULSE_HZ / 2, abs=ENVELOPE_CONTROL_INTERVAL + 1)
     gain = float(device.amplitude_m_per_v(FORCE_N))
     settled = slice(first + round(0.03 * ENVELOPE_HZ), None)
-    assert gain * drive_v.max() > 2 * level_m  # the drive overshoots: a static mapping would more than double the level
+    assert gain * drive_v.max() > 1.4 * level_m  # the drive overshoots: a static mapping would give 1.4x the level
     assert gain * drive_v[settled].mean() == pytest.approx(level_m, rel=1e-3)
 
     plate_m = device.plate_amplitude_m(drive_v, ENVELOPE_HZ, FORCE_N)
@@ -162,7 +162,7 @@ def _envelope_of_a_fall(tmp_path: Path, braking: bool) -> tuple[np.ndarray, np.n
     device = Device.default()
     options = RenderOptions(control_interval=ENVELOPE_CONTROL_INTERVAL, default_force_n=FORCE_N, braking=braking)
     pipeline = Pipeline(device, _pulses(tmp_path, 0.85), fs_hz=ENVELOPE_HZ, options=options, envelope_output=True)
-    pipeline.set_drive_scale(device.max_voltage_v, device.max_voltage_v, device.resonance_hz)
+    pipeline.set_drive_scale(device.max_voltage_v, device.max_voltage_v, device.carrier_hz)
     pipeline.start()
     block = np.zeros(ENVELOPE_BLOCK, dtype=np.float32)
     drive = []

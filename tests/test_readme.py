@@ -21,8 +21,8 @@ def test_the_readme_has_its_three_python_snippets() -> None:
 
 
 #: What the physics snippet prints, line by line; each is also the comment on its line in the README.
-PHYSICS_PRINTS = ("0.2997", "2.232e-06", "4.111e-08 m/V, 0.0002569 W/V^2, tau 2.79 ms",
-                  "[0.00000000e+00 2.73235237e-08 5.40417001e-08]", "[]")
+PHYSICS_PRINTS = ("0.2997", "2.232e-06", "5.08e-08 m/V, 0.0003295 W/V^2, tau 1.55 ms",
+                  "[0.00000000e+00 6.01509429e-08 1.17927744e-07]", "[]")
 
 
 def test_the_physics_snippet_prints_what_its_comments_say() -> None:

@@ -65,7 +65,7 @@ def grating(swipes: Callable[[int], tuple[Recording, str]]) -> tuple[Recording, 
 
 
 #: The acceptance swipe, and a faster one the default device cannot follow everywhere (saturates).
-SPEEDS = pytest.mark.parametrize(("speed_mm_s", "saturates"), [(100, False), (130, True)])
+SPEEDS = pytest.mark.parametrize(("speed_mm_s", "saturates"), [(100, False), (180, True)])
 
 
 def _envelope_v(recording: Recording) -> np.ndarray:
@@ -73,8 +73,8 @@ def _envelope_v(recording: Recording) -> np.ndarray:
     carrier (the drive is ``e sin(2 pi f0 n / fs)``; negative ``e`` is braking, in anti-phase),
     averaged over five carrier periods so the 2 f0 term cancels."""
     n = np.arange(len(recording.drive))
-    product = 2.0 * recording.drive.astype(np.float64) * np.sin(2 * np.pi * DEVICE.resonance_hz * n / recording.fs_hz)
-    width = round(5 * recording.fs_hz / DEVICE.resonance_hz)
+    product = 2.0 * recording.drive.astype(np.float64) * np.sin(2 * np.pi * DEVICE.carrier_hz * n / recording.fs_hz)
+    width = round(5 * recording.fs_hz / DEVICE.carrier_hz)
     return np.convolve(product, np.ones(width) / width, "same") * DEVICE.volts_per_full_scale
 
 
@@ -97,7 +97,7 @@ def test_carrier_is_the_device_resonance(swipes: Callable[[int], tuple[Recording
     left, centre, right = np.log(spectrum[peak - 1:peak + 2])
     offset = 0.5 * (left - right) / (left - 2 * centre + right)  # parabolic peak interpolation
     carrier_hz = (peak + offset) * recording.fs_hz / len(drive)
-    assert carrier_hz == pytest.approx(DEVICE.resonance_hz, abs=0.5)
+    assert carrier_hz == pytest.approx(DEVICE.carrier_hz, abs=0.5)
 
 
 def _lift_s(speed_mm_s: int) -> float:
@@ -114,7 +114,9 @@ def test_envelope_period_is_period_over_speed(swipes: Callable[[int], tuple[Reco
     period_s = load_texture(GRATING).period_mm / speed_mm_s
     assert len(edges_s) > 0.9 * _lift_s(speed_mm_s) / period_s
     assert (edges_s[-1] - edges_s[0]) / (len(edges_s) - 1) == pytest.approx(period_s, rel=1e-3)
-    assert np.diff(edges_s) == pytest.approx(np.full(len(edges_s) - 1, period_s), rel=0.01)  # control steps
+    # each edge lands on a control step: a period between two edges is off by up to two steps
+    control_s = recording.metadata["render_options"]["control_interval"] / recording.fs_hz
+    assert np.diff(edges_s) == pytest.approx(np.full(len(edges_s) - 1, period_s), abs=2 * control_s)
 
 
 def _plate_m(recording: Recording, force_n: float) -> np.ndarray:
@@ -124,7 +126,7 @@ def _plate_m(recording: Recording, force_n: float) -> np.ndarray:
 
 
 def _friction(amplitude_m: np.ndarray, speed_m_s: float) -> np.ndarray:
-    return relative_friction(np.maximum(amplitude_m, 1e-15), DEVICE.resonance_hz, speed_m_s,
+    return relative_friction(np.maximum(amplitude_m, 1e-15), DEVICE.carrier_hz, speed_m_s,
                              DEVICE.mu0, DEVICE.poisson, DEVICE.psi_star)
 
 
@@ -180,24 +182,34 @@ def test_envelope_maps_back_to_the_texture_friction_where_not_saturated(
 @SPEEDS
 def test_simulated_plate_agrees_with_the_drive_analysis(swipes: Callable[[int], tuple[Recording, str]],
                                                          speed_mm_s: int, saturates: bool) -> None:
-    """sim:// (the resonator kernel) and the envelope analysis above see the same plate and friction."""
+    """sim:// (the resonator kernel) and the envelope analysis above see the same plate and friction.
+
+    They differ by the detuning the finger's 0.5 N brings (the loaded resonance 2.5 Hz above the carrier,
+    ``D tau`` = 0.024): the resonator's envelope turns through a quadrature component of about ``D tau`` times
+    each change of level, which the real first-order model lacks. Elsewhere they agree to 0.2 %.
+    """
     recording, _ = swipes(speed_mm_s)
     blocks = recording.blocks
     per_block = (len(blocks["t"]), -1)
     inside = blocks["t"] > 0.01  # the analytic signal rings at the drive's abrupt start
     plate_m = _plate_m(recording, 0.5).reshape(per_block).mean(axis=1)
     largest_m = plate_m.max()
-    assert blocks["plate_amplitude_um"][inside] * 1e-6 == pytest.approx(plate_m[inside], abs=2e-3 * largest_m)
+    detuning_tau = (2 * math.pi * abs(float(DEVICE.motional_resonance_hz(0.5)) - DEVICE.carrier_hz)
+                    * float(DEVICE.envelope_time_constant_s(0.5)))
+    assert 0.01 < detuning_tau < 0.05
+    tolerance_m = (2e-3 + detuning_tau) * largest_m
+    assert blocks["plate_amplitude_um"][inside] * 1e-6 == pytest.approx(plate_m[inside], abs=tolerance_m)
+    assert np.median(np.abs(blocks["plate_amplitude_um"][inside] * 1e-6 - plate_m[inside])) < 2e-3 * largest_m
     touching = inside & ((blocks["saturated"] & FLAG_WATCHDOG) == 0)
     expected_mu = _friction(plate_m[touching], speed_mm_s * 1e-3)
-    assert blocks["achieved_mu"][touching] == pytest.approx(expected_mu, abs=1e-3)
+    assert blocks["achieved_mu"][touching] == pytest.approx(expected_mu, abs=1e-3 + 0.5 * detuning_tau)
 
 
 def test_recording_and_summary(grating: tuple[Recording, str]) -> None:
     recording, stdout = grating
     meta = recording.metadata
     assert meta["texture_path"] == "textures/grating.yaml" and meta["device_label"] == "SLG_0.56"
-    assert meta["carrier_hz"] == DEVICE.resonance_hz and meta["block_frames"] == 64
+    assert meta["carrier_hz"] == DEVICE.carrier_hz and meta["block_frames"] == 64
     assert meta["input_url"] == SWIPE and meta["output_url"] == "sim://"
     assert recording.fs_hz == 192000 and recording.has_sim
     tail_blocks = math.ceil((5e-3 * 192000 + 32 + 64) / 64)  # ramp, control interval, one block
@@ -207,7 +219,7 @@ def test_recording_and_summary(grating: tuple[Recording, str]) -> None:
     lines = stdout.splitlines()
     assert lines[0].startswith("rendered 1.106 s of audio in ")
     assert re.fullmatch(r"drive: peak \d+\.\d\d V of 40 V max", lines[1])
-    assert lines[2].startswith("power: mean ") and "(cap 0.55 W, average budget 0.55 W over 1 s)" in lines[2]
+    assert lines[2].startswith("power: mean ") and "(cap 0.8 W, average budget 0.8 W over 1 s)" in lines[2]
     assert lines[3].startswith("saturated: ") and "finger touching in" in lines[3]
     assert lines[4].startswith("friction |texture under the finger - achieved| (simulated plate")
     mean_error = float(lines[4].split("mean ")[1].split(",")[0])

@@ -25,6 +25,7 @@ from tpad_rt.config.device_schema import MAX_Q, MIN_FORCE_STEP_N, MIN_Q
 from tpad_rt.config.fields import MAX_ANGLE_DEG, MAX_COORDINATE_MM, MAX_LENGTH_MM, MIN_LENGTH_MM
 from tpad_rt.config.texture_schema import MAX_FREQUENCY_HZ, MAX_GAIN, MAX_HEIGHT_MM, MIN_FREQUENCY_HZ
 from tpad_rt.device import Device
+from tpad_rt.physics import electromech
 from tpad_rt.kernel import layout
 from tpad_rt.limits import MAX_FORCE_N
 from tpad_rt.outputs.sim import SimOutput
@@ -160,48 +161,56 @@ def _forces(draw: st.DrawFn) -> list[float]:
 
 
 @st.composite
-def _circuit(draw: st.DrawFn, forces: list[float]) -> dict[str, Any]:
-    """A circuit across the ranges whose Q stays in (MIN_Q, MAX_Q] between every two knots.
+def _circuit(draw: st.DrawFn, forces: list[float], carrier_hz: float) -> dict[str, Any]:
+    """A circuit across the ranges whose Q stays in (MIN_Q, MAX_Q] between every two knots, which resonates,
+    loaded, within a factor 2 of ``carrier_hz`` and rings there (Device.derived_problems).
 
-    L and C vary by at most 2x around a base drawn over their whole ranges; R is then drawn
-    where the schema's bounds on Q hold between every two knots.
+    C is drawn over its whole range, L so that the branch resonates near the carrier (both
+    varying by at most 1.4x across the knots); R is then drawn where the schema's bounds on
+    Q hold between every two knots; C0 and the shunt over their whole ranges.
     """
     n = len(forces)
-    l0, c0 = draw(_number(1e-6, 1e4, log=True)), draw(_number(1e-3, 1e6, log=True))
-    l_h = [min(max(l0 * draw(st.floats(0.5, 2.0)), 1e-6), 1e4) for _ in range(n)]
-    c_pf = [min(max(c0 * draw(st.floats(0.5, 2.0)), 1e-3), 1e6) for _ in range(n)]
+    omega = 2 * math.pi * carrier_hz
+    c_base_pf = draw(_number(1e-3, 1e6, log=True))
+    l0 = 1 / (omega**2 * c_base_pf * 1e-12) * draw(st.floats(0.6, 1.6))
+    assume(1e-6 <= l0 <= 1e4)
+    l_h = [min(max(l0 * draw(st.floats(0.85, 1.2)), 1e-6), 1e4) for _ in range(n)]
+    c_pf = [min(max(c_base_pf * draw(st.floats(0.85, 1.2)), 1e-3), 1e6) for _ in range(n)]
     # The schema bounds Q between knots by the smallest L with the largest C and R, and the reverse.
     lowest, highest = math.sqrt(min(l_h) / (max(c_pf) * 1e-12)), math.sqrt(max(l_h) / (min(c_pf) * 1e-12))
     r_low = max(1e-3, highest / MAX_Q * (1 + 1e-9))
     r_high = min(1e7, lowest / MIN_Q * (1 - 1e-9))
     assume(r_low < r_high)
     r_ohm = [draw(_number(r_low, r_high, log=True)) for _ in range(n)]
-    return {"c0_nf": draw(_number(1e-3, 1e5, log=True)), "shunt_ohm": draw(_number(1e-3, 1e6, log=True)),
-            "force_n": forces, "motional_l_h": l_h, "motional_c_pf": c_pf, "motional_r_ohm": r_ohm}
+    circuit = {"c0_nf": draw(_number(1e-3, 1e5, log=True)), "shunt_ohm": draw(_number(1e-3, 1e6, log=True)),
+               "gamma_n_per_v": draw(_number(1e-6, 1e3, log=True)),
+               "force_n": forces, "motional_l_h": l_h, "motional_c_pf": c_pf, "motional_r_ohm": r_ohm}
+    # The shunt seen through C0 must neither damp the branch below ringing nor pull its resonance away.
+    c0_f = circuit["c0_nf"] * 1e-9
+    for l_value, c_value, r_value in zip(l_h, c_pf, r_ohm):
+        resonance = float(electromech.loaded_resonance_hz(c0_f, l_value, c_value * 1e-12, circuit["shunt_ohm"]))
+        tau = float(electromech.loaded_time_constant_s(carrier_hz, c0_f, l_value, r_value, circuit["shunt_ohm"]))
+        assume(0.55 * carrier_hz <= resonance <= 1.8 * carrier_hz and math.pi * resonance * tau > 0.55)
+    return circuit
 
 
 @st.composite
 def _device(draw: st.DrawFn) -> dict[str, Any]:
     """A device file across the whole accepted ranges."""
     full_scale_v = draw(_number(0.1, 10_000.0, log=True))
-    calibration = draw(_forces())
-    circuit_forces = calibration if draw(st.booleans()) else draw(_forces())
-    for force in circuit_forces:
-        assume(all(known == force or abs(known - force) >= MIN_FORCE_STEP_N for known in calibration))
+    carrier_hz = draw(_number(1000.0, 200_000.0))
     material = {"thickness_mm": draw(_number(0.01, 100.0, log=True)), "density_g_cm3": draw(_number(0.1, 50.0)),
                 "youngs_modulus_gpa": draw(_number(0.01, 2000.0, log=True))}
     return {
-        "label": "random", "description": "a random device across the accepted ranges",
+        "format_version": 2, "label": "random", "description": "a random device across the accepted ranges",
         "plate": {"material": "glass", **material, "length_mm": draw(_number(1.0, 1000.0)),
                   "width_mm": draw(_number(1.0, 1000.0)),
                   "mode": [draw(st.integers(1, 1000)), draw(st.integers(0, 1000))]},
         "actuator": material,
-        "resonance_hz": draw(_number(1000.0, 200_000.0)),
+        "carrier_hz": carrier_hz,
         "amplifier": {"volts_per_full_scale": full_scale_v,
                       "max_voltage_v": draw(_number(0.1, full_scale_v) if full_scale_v > 0.1 else st.just(0.1))},
-        "calibration": {"force_n": calibration,
-                        "amplitude_um_per_v": [draw(_number(1e-6, 100.0, log=True)) for _ in calibration]},
-        "circuit": draw(_circuit(circuit_forces)),
+        "circuit": draw(_circuit(draw(_forces()), carrier_hz)),
         "friction_model": {"mu0": draw(_number(0.01, 10.0, log=True)),
                            "poisson": draw(st.sampled_from([0.0, 0.5 - 2**-53])
                                            | st.floats(0.0, 0.5, exclude_max=True)),
@@ -228,7 +237,7 @@ def test_every_valid_file_renders_finite_in_limit_output(tmp_path_factory: pytes
     texture = load_compiled(_written(folder, "texture.yaml",
                                      {"description": "random", **data.draw(_texture(folder), "texture")}))
     device = Device.from_file(_written(folder, "device.yaml", data.draw(_device(), "device")))
-    fs_hz = max(192_000, math.ceil(device.resonance_hz / MAX_CARRIER_FRACTION))
+    fs_hz = max(192_000, math.ceil(device.carrier_hz / MAX_CARRIER_FRACTION))
     pipeline = Pipeline(device, texture, fs_hz)
     sim = SimOutput(device, fs_hz)
     length_mm, width_mm = device.plate.length_m * 1e3, device.plate.width_m * 1e3

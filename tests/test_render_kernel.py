@@ -320,7 +320,7 @@ def test_carrier_is_one_continuous_sinusoid_across_blocks_and_texture_swaps() ->
     rendered = render_kernel(scenario, blocks=(17, 64, 301))
     window = 96
     settling = int(0.01 * FS_HZ)
-    sin, cos = exact_carrier(np.arange(n), device().resonance_hz, FS_HZ)
+    sin, cos = exact_carrier(np.arange(n), device().carrier_hz, FS_HZ)
     starts = [f for f in range(settling, n - window, window // 2 + 1) if not swap - window < f < swap + settling]
     assert any(f < swap for f in starts) and any(f > swap for f in starts)
     for first in starts:
@@ -442,7 +442,7 @@ def test_power_cap_and_average_budget_hold_and_are_flagged() -> None:
 def demodulate(samples: np.ndarray, first: int, count: int) -> float:
     """Envelope volts over ``samples[first:first + count]``: least-squares amplitude of the exact carrier."""
     part = np.arange(first, first + count)
-    sin, cos = exact_carrier(part, device().resonance_hz, FS_HZ)
+    sin, cos = exact_carrier(part, device().carrier_hz, FS_HZ)
     (a, b), *_ = np.linalg.lstsq(np.column_stack([sin, cos]), samples[part].astype(np.float64), rcond=None)
     return math.hypot(a, b) * device().volts_per_full_scale
 
@@ -465,7 +465,7 @@ def test_grating_swipe_envelope_maps_back_to_the_friction_levels(low: float) -> 
             continue
         volts = demodulate(rendered.samples, int(mid_s * FS_HZ), 480)
         amplitude_m = volts * device().amplitude_m_per_v(force_n)
-        mu = relative_friction(amplitude_m, device().resonance_hz, speed_mm_s / 1000, device().mu0,
+        mu = relative_friction(amplitude_m, device().carrier_hz, speed_mm_s / 1000, device().mu0,
                                device().poisson, device().psi_star)
         assert mu == pytest.approx(expected, rel=0.02), f"plateau {plateau}"
 

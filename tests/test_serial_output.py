@@ -53,7 +53,7 @@ def applied_by_index(recording: dict[str, np.ndarray]) -> tuple[np.ndarray, np.n
 
 def achieved_friction(recording: dict[str, np.ndarray], speed_mm_s: float, force_n: float) -> np.ndarray:
     """The friction the emulated plate's vibration gives a finger at ``speed_mm_s`` (paper Eqs. 2-3)."""
-    return relative_friction(recording["plate_amplitude_um"] * 1e-6, DEVICE.resonance_hz, speed_mm_s * 1e-3,
+    return relative_friction(recording["plate_amplitude_um"] * 1e-6, DEVICE.carrier_hz, speed_mm_s * 1e-3,
                              DEVICE.mu0, DEVICE.poisson, DEVICE.psi_star)
 
 
@@ -62,7 +62,7 @@ def envelope_friction(recording: dict[str, np.ndarray], speed_mm_s: float, force
     (Device.plate_amplitude_m: the plate's first-order envelope, which undoes the pre-emphasis) and the friction
     model (paper Eqs. 2-3), for a finger at ``speed_mm_s`` pressing with ``force_n``; one value per sample."""
     amplitude_m = DEVICE.plate_amplitude_m(recording["envelope_v"], float(recording["envelope_hz"]), force_n)
-    return relative_friction(np.abs(amplitude_m), DEVICE.resonance_hz, speed_mm_s * 1e-3, DEVICE.mu0, DEVICE.poisson,
+    return relative_friction(np.abs(amplitude_m), DEVICE.carrier_hz, speed_mm_s * 1e-3, DEVICE.mu0, DEVICE.poisson,
                              DEVICE.psi_star)
 
 
@@ -82,7 +82,7 @@ def test_play_through_serial_renders_the_grating_on_the_emulated_plate(tmp_path:
     assert done.returncode == 0, done.stderr
     assert f"input {AUTO_SWIPE} (no display)" in done.stdout, done.stdout  # the finger the levels are checked at
     swipe = open_input(AUTO_SWIPE)
-    assert recording["carrier_hz"].min() == recording["carrier_hz"].max() == pytest.approx(DEVICE.resonance_hz,
+    assert recording["carrier_hz"].min() == recording["carrier_hz"].max() == pytest.approx(DEVICE.carrier_hz,
                                                                                              abs=0.01)
     assert recording["frames_bad"] == 0 and recording["sequence_gaps"] == 0
     index, _ = applied_by_index(recording)
@@ -152,7 +152,7 @@ def test_the_amplifier_applies_what_the_renderer_rendered_at_its_index(tmp_path:
     assert 10.0 < np.abs(recording["envelope_v"]).max() <= 32.0, "the swipe must drive the plate, within its clamp"
     assert float(recording["full_scale_mv"]) == 40000.0 != DEVICE.volts_per_full_scale * 1000
     assert stats["amp_frames_bad"] == 0 and stats["amp_sequence_gaps"] == 0 and stats["rx_bad"] == 0
-    assert stats["carrier_hz"] == pytest.approx(DEVICE.resonance_hz, abs=0.01)
+    assert stats["carrier_hz"] == pytest.approx(DEVICE.carrier_hz, abs=0.01)
 
 
 def test_corrupted_and_dropped_bytes_are_counted_never_applied_and_the_stream_recovers(tmp_path: Path) -> None:

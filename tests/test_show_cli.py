@@ -49,15 +49,15 @@ def _maps(texture: str, speed_mm_s: float = 100.0, force_n: float = 0.5):  # typ
 
 
 def test_maps_cover_the_plate_and_invert_the_friction_model() -> None:
-    device, maps = _maps("grating.yaml", force_n=1.0)  # 1 N: the low level needs ~48 V
+    device, maps = _maps("grating.yaml", force_n=2.0)  # 2 N: the low level needs ~49 V
     assert maps.friction.shape == (60, 130) == maps.volts.shape == maps.power_w.shape
     assert maps.x_mm[0] == 0.5 and maps.y_mm[-1] == 59.5
-    amplitude_m = maps.volts_asked * device.amplitude_m_per_v(1.0)
-    achieved = relative_friction(amplitude_m, device.resonance_hz, 0.1, device.mu0, device.poisson, device.psi_star)
+    amplitude_m = maps.volts_asked * device.amplitude_m_per_v(2.0)
+    achieved = relative_friction(amplitude_m, device.carrier_hz, 0.1, device.mu0, device.poisson, device.psi_star)
     assert np.allclose(achieved, maps.friction, atol=1e-12)
     assert np.array_equal(maps.saturated, maps.volts_asked > device.max_voltage_v)
     assert maps.volts.max() == device.max_voltage_v and maps.saturated.any()
-    assert np.allclose(maps.power_w, device.power_w_per_v2(1.0) * maps.volts**2)
+    assert np.allclose(maps.power_w, device.power_w_per_v2(2.0) * maps.volts**2)
 
 
 def test_a_slow_finger_is_inverted_at_the_speed_floor() -> None:

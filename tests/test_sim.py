@@ -16,7 +16,7 @@ from tpad_rt.outputs.sim import SimOutput
 from tpad_rt.physics.friction import relative_friction
 
 DEVICE = Device.default()
-F0_HZ = DEVICE.resonance_hz
+F0_HZ = DEVICE.carrier_hz
 VOLTS_PER_FS = DEVICE.volts_per_full_scale
 
 
@@ -29,7 +29,7 @@ def _sine(volts: np.ndarray | float, freq_hz: float, fs_hz: int, samples: int) -
 def _envelope(drive: np.ndarray, q: float, gain_m_per_v: float, fs_hz: int, block: int | None = None) -> np.ndarray:
     """The kernel's envelope (m) for ``drive``, rendered in blocks of ``block`` samples (default: one)."""
     coef, state, envelope = np.zeros(COEF_SIZE), np.zeros(SIM_STATE_SIZE), np.zeros(len(drive))
-    resonator_coefficients(F0_HZ, q, gain_m_per_v, fs_hz, coef)
+    resonator_coefficients(F0_HZ, q, gain_m_per_v, F0_HZ, fs_hz, coef)
     step = block or len(drive)
     for start in range(0, len(drive), step):
         resonate(drive[start:start + step], VOLTS_PER_FS, coef, state, envelope[start:start + step])

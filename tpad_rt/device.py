@@ -1,13 +1,17 @@
-"""One TPaD's calibration in SI units: resonance, gains, circuit and limits.
+"""One TPaD's model in SI units: carrier, circuit, transduction factor and limits.
 
 A :class:`Device` is built from a device file (docs/formats.md "Device files") by
 :meth:`Device.from_file`, from an already validated :class:`tpad_rt.config.DeviceFile`
 by :meth:`Device.from_spec`, or from the shipped ``devices/default.yaml`` by
-:meth:`Device.default`. Its methods evaluate the force-dependent tables (linear
-interpolation, clamped at the table ends; vectorised over ``force_n``): these are
-what the real-time kernel tabulates. :meth:`Device.plate_amplitude_m` runs a drive
-envelope through them: the amplitude it gives the plate (a pre-emphasised drive maps
-back to the level it was shaped for).
+:meth:`Device.default`.
+
+One model: the Butterworth-Van Dyke circuit (C0, shunt R0, and L, C, R against
+contact force, interpolated linearly and clamped at the table ends) with one
+transduction factor ``gamma`` (``i_g = gamma dX/dt``). Amplitude per volt, power per
+squared volt, the envelope's time constant and the motional resonance all follow from
+it at the carrier driven (:mod:`tpad_rt.physics.electromech`); these are what the
+real-time kernel tabulates. :meth:`Device.plate_amplitude_m` runs a drive envelope
+through the first-order envelope model the kernel's shaper assumes.
 """
 
 from __future__ import annotations
@@ -22,20 +26,20 @@ import numpy.typing as npt
 from tpad_rt import shipped
 from tpad_rt.config import DeviceFile, load_device
 from tpad_rt.config.breadcrumb import breadcrumb
+from tpad_rt.config.device_schema import MIN_Q
 from tpad_rt.errors import ConfigError
 from tpad_rt.physics import electromech
-from tpad_rt.physics._validate import FloatOrArray, checked, finite, non_negative
-
-#: Where the device files of the paper's TPaDs live (in the source tree).
+from tpad_rt.physics._validate import ComplexOrArray, FloatOrArray, checked, finite, non_negative
 
 #: Forces spread evenly over the tables at which :meth:`Device.derived_problems` checks (besides the knots).
 DERIVED_CHECK_POINTS = 4097
+#: The loaded motional resonance must lie within this factor of the carrier at every force: a TPaD is driven
+#: near its resonance (the shipped plates: within 0.13 %), and the simulated plate resonates there.
+RESONANCE_CARRIER_FACTOR = 2.0
 
 _Table = npt.NDArray[np.float64]
 _TABLE_FIELDS = (
     "force_table_n",
-    "amplitude_m_per_v_table",
-    "motional_force_table_n",
     "motional_l_h_table",
     "motional_c_f_table",
     "motional_r_ohm_table",
@@ -66,24 +70,23 @@ class Actuator:
 
 @dataclass(frozen=True, eq=False)
 class Device:
-    """A TPaD's calibration, SI units; the ``*_table`` fields are read-only float64 arrays.
+    """A TPaD's model, SI units; the ``*_table`` fields are read-only float64 arrays indexed by ``force_table_n``.
 
-    ``amplitude_m_per_v_table`` (m per peak volt) is indexed by ``force_table_n``;
-    the motional branch tables by their own ``motional_force_table_n``.
+    ``carrier_hz`` is the frequency the runtime drives at; ``gamma_n_per_v`` the
+    transduction factor (N/V, the same as C/m).
     """
 
     label: str
     description: str
     plate: Plate
     actuator: Actuator
-    resonance_hz: float
+    carrier_hz: float
     volts_per_full_scale: float
     max_voltage_v: float
-    force_table_n: _Table
-    amplitude_m_per_v_table: _Table
     c0_f: float
     shunt_ohm: float
-    motional_force_table_n: _Table
+    gamma_n_per_v: float
+    force_table_n: _Table
     motional_l_h_table: _Table
     motional_c_f_table: _Table
     motional_r_ohm_table: _Table
@@ -125,14 +128,13 @@ class Device:
                 density_kg_m3=actuator.density_g_cm3 * 1e3,
                 youngs_pa=actuator.youngs_modulus_gpa * 1e9,
             ),
-            resonance_hz=spec.resonance_hz,
+            carrier_hz=spec.carrier_hz,
             volts_per_full_scale=spec.amplifier.volts_per_full_scale,
             max_voltage_v=spec.amplifier.max_voltage_v,
-            force_table_n=np.asarray(spec.calibration.force_n, dtype=np.float64),
-            amplitude_m_per_v_table=np.multiply(spec.calibration.amplitude_um_per_v, 1e-6),
             c0_f=circuit.c0_nf * 1e-9,
             shunt_ohm=circuit.shunt_ohm,
-            motional_force_table_n=np.asarray(circuit.force_n, dtype=np.float64),
+            gamma_n_per_v=circuit.gamma_n_per_v,
+            force_table_n=np.asarray(circuit.force_n, dtype=np.float64),
             motional_l_h_table=np.asarray(circuit.motional_l_h, dtype=np.float64),
             motional_c_f_table=np.multiply(circuit.motional_c_pf, 1e-12),
             motional_r_ohm_table=np.asarray(circuit.motional_r_ohm, dtype=np.float64),
@@ -163,37 +165,82 @@ class Device:
                               "(reinstall tpad-rt); pass a device file instead")
         return cls.from_file(path)
 
-    def amplitude_m_per_v(self, force_n: npt.ArrayLike) -> FloatOrArray:
-        """Plate vibration amplitude (m) per peak drive volt at contact force ``force_n`` (N, >= 0)."""
-        return np.interp(non_negative("force_n", force_n), self.force_table_n, self.amplitude_m_per_v_table)
-
     def motional(self, force_n: npt.ArrayLike) -> tuple[FloatOrArray, FloatOrArray, FloatOrArray]:
         """Motional branch ``(L in H, C in F, R in ohm)`` at contact force ``force_n`` (N, >= 0)."""
         forces = non_negative("force_n", force_n)
         return tuple(  # type: ignore[return-value]
-            np.interp(forces, self.motional_force_table_n, table)
+            np.interp(forces, self.force_table_n, table)
             for table in (self.motional_l_h_table, self.motional_c_f_table, self.motional_r_ohm_table)
         )
 
-    def power_w_per_v2(self, force_n: npt.ArrayLike) -> FloatOrArray:
-        """Real power (W) per squared peak drive volt at the carrier, exact circuit (paper Eqs. 2-6).
+    def motional_current_a_per_v(self, force_n: npt.ArrayLike, freq_hz: float | None = None) -> ComplexOrArray:
+        """Steady complex motional current (A peak) per peak drive volt at ``freq_hz`` (default: the carrier)."""
+        l_h, c_f, r_ohm = self.motional(force_n)
+        freq = self.carrier_hz if freq_hz is None else freq_hz
+        return electromech.motional_current(1.0, freq, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
 
-        Drive of 1 V peak (``u_rms = 1/sqrt(2)``) at ``resonance_hz``, the frequency the
-        runtime drives at, through the shunt into the motional branch at contact force
-        ``force_n``. Multiply by ``V**2`` for a peak drive of ``V`` volts.
+    def amplitude_m_per_v(self, force_n: npt.ArrayLike, freq_hz: float | None = None) -> FloatOrArray:
+        """Steady plate vibration amplitude (m) per peak drive volt at contact force ``force_n`` (N, >= 0).
+
+        ``|I_g| / (gamma omega)`` at ``freq_hz`` (default: the carrier), the exact circuit,
+        detuning included.
+        """
+        freq = self.carrier_hz if freq_hz is None else freq_hz
+        amplitude: FloatOrArray = (np.abs(self.motional_current_a_per_v(force_n, freq))
+                                   / (self.gamma_n_per_v * 2.0 * math.pi * freq))
+        return amplitude
+
+    def steady_power_w_per_v2(self, force_n: npt.ArrayLike, freq_hz: float | None = None) -> FloatOrArray:
+        """Steady real power (W) into the motional branch per squared peak drive volt, ``|I_g|^2 R / 2``.
+
+        At ``freq_hz`` (default: the carrier), through the shunt and C0 (paper Eqs. 2-6,
+        solved exactly). Multiply by ``V**2`` for a peak drive of ``V`` volts.
+        """
+        r_ohm = self.motional(force_n)[2]
+        power: FloatOrArray = np.abs(self.motional_current_a_per_v(force_n, freq_hz)) ** 2 * r_ohm / 2.0
+        return power
+
+    def detuning_factor(self, force_n: npt.ArrayLike) -> FloatOrArray:
+        """How far a transient's motional power can exceed the steady power at the carrier (>= 1).
+
+        :func:`tpad_rt.physics.electromech.detuning_factor`: 1 where the carrier sits on the
+        loaded resonance, ``1 + (detuning x tau)^2`` off it.
         """
         l_h, c_f, r_ohm = self.motional(force_n)
-        return electromech.real_power_exact(
-            1 / math.sqrt(2), self.resonance_hz, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm
-        )
+        return electromech.detuning_factor(self.carrier_hz, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
+
+    def power_w_per_v2(self, force_n: npt.ArrayLike) -> FloatOrArray:
+        """The most real power (W) per squared peak drive volt that a drive at the carrier can draw.
+
+        :meth:`steady_power_w_per_v2` times :meth:`detuning_factor`: a drive whose envelope
+        stays within ``V`` volts never draws more than ``V**2`` times this, through any
+        transient. It is what the kernel's power caps and its power telemetry use (equal to
+        the steady power where the carrier is on the motional resonance).
+        """
+        bound: FloatOrArray = self.steady_power_w_per_v2(force_n) * self.detuning_factor(force_n)
+        return bound
 
     def quality_factor(self, force_n: npt.ArrayLike) -> FloatOrArray:
-        """Quality factor ``sqrt(L / C) / R`` of the motional branch at contact force ``force_n``."""
+        """Unloaded quality factor ``sqrt(L / C) / R`` of the motional branch at contact force ``force_n``."""
         return electromech.quality_factor(*self.motional(force_n))
 
     def envelope_time_constant_s(self, force_n: npt.ArrayLike) -> FloatOrArray:
-        """Time constant (s) of the vibration envelope, ``Q / (pi f0)`` with ``f0 = resonance_hz``."""
-        return self.quality_factor(force_n) / (math.pi * self.resonance_hz)
+        """Time constant (s) of the vibration envelope: ``2 L / (R + Re Z_th)``, the branch loaded by the
+        shunt and C0 at the carrier (:func:`tpad_rt.physics.electromech.loaded_time_constant_s`)."""
+        l_h, _, r_ohm = self.motional(force_n)
+        return electromech.loaded_time_constant_s(self.carrier_hz, self.c0_f, l_h, r_ohm, self.shunt_ohm)
+
+    def motional_resonance_hz(self, force_n: npt.ArrayLike) -> FloatOrArray:
+        """Resonance (Hz) of the motional branch loaded by the shunt and C0 at contact force ``force_n``: the
+        frequency a drive should follow to stay on resonance (``--track``)."""
+        l_h, c_f, _ = self.motional(force_n)
+        return electromech.loaded_resonance_hz(self.c0_f, l_h, c_f, self.shunt_ohm)
+
+    def loaded_quality_factor(self, force_n: npt.ArrayLike) -> FloatOrArray:
+        """Quality factor of the loaded branch, ``pi f_r tau``, with ``f_r`` :meth:`motional_resonance_hz` and
+        ``tau`` :meth:`envelope_time_constant_s`: the resonator the simulated plate is."""
+        q: FloatOrArray = math.pi * self.motional_resonance_hz(force_n) * self.envelope_time_constant_s(force_n)
+        return q
 
     def plate_amplitude_m(
         self, drive_v: npt.ArrayLike, rate_hz: float, force_n: float, initial_m: float = 0.0
@@ -202,7 +249,7 @@ class Device:
 
         The model the kernel's pre-emphasis assumes (docs/kernel.md "Per sample"): at
         contact force ``force_n`` the plate's envelope ``p`` follows the drive envelope
-        ``u`` (peak volts at the carrier, the resonance) as ``tau dp/dt = G u - p``, with
+        ``u`` (peak volts at the carrier) as ``tau dp/dt = G u - p``, with
         ``G = amplitude_m_per_v(force_n)`` and ``tau = envelope_time_constant_s(force_n)``.
         So the steady amplitude is ``G u``, and a pre-emphasised drive, which overshoots at
         every change, maps back to the level it was shaped for. Sample ``k`` of
@@ -241,18 +288,21 @@ class Device:
         return np.asarray(amplitude, dtype=np.float64)
 
     def derived_problems(self) -> list[str]:
-        """One ``key: what is wrong`` line per derived table not finite and > 0 at some force; empty if fine.
+        """One ``key: what is wrong`` line per derived quantity out of bounds at some force; empty if fine.
 
-        Checked at every knot of the force tables and at DERIVED_CHECK_POINTS forces spread
-        evenly over them (the kernel's force grid is at most 4096 intervals): amplitude per
-        volt, power per squared volt at the carrier, envelope time constant.
+        Checked at every knot of the force table and at DERIVED_CHECK_POINTS forces spread
+        evenly over it (the kernel's force grid is at most 4096 intervals): amplitude per
+        volt, power per squared volt at the carrier and envelope time constant must be
+        finite and > 0; the loaded resonance must lie within RESONANCE_CARRIER_FACTOR of the
+        carrier, and the loaded quality factor above MIN_Q (the plate must ring, as
+        ``sim://`` simulates it).
         """
-        knots = np.union1d(self.force_table_n, self.motional_force_table_n)
+        knots = self.force_table_n
         forces = np.union1d(knots, np.linspace(knots[0], knots[-1], DERIVED_CHECK_POINTS))
         tables = (
-            ("calibration.amplitude_um_per_v", "plate amplitude per volt (m/V)", self.amplitude_m_per_v),
+            ("circuit", "plate amplitude per volt at the carrier (m/V)", self.amplitude_m_per_v),
             ("circuit", "power per squared volt at the carrier (W/V^2)", self.power_w_per_v2),
-            ("circuit", "envelope time constant Q / (pi f0) (s)", self.envelope_time_constant_s),
+            ("circuit", "envelope time constant 2 L / (R + Re Z_th) (s)", self.envelope_time_constant_s),
         )
         problems = []
         for key, what, table in tables:
@@ -265,4 +315,22 @@ class Device:
                     f"{forces[bad[0]]:g} N: these values are outside what tpad-rt can render "
                     "(docs/formats.md \"Ranges, and why\")"
                 )
+        if problems:
+            return problems
+        with np.errstate(all="ignore"):
+            ratio = np.asarray(self.motional_resonance_hz(forces), dtype=np.float64) / self.carrier_hz
+            loaded_q = np.asarray(self.loaded_quality_factor(forces), dtype=np.float64)
+        off = np.flatnonzero(~((ratio >= 1 / RESONANCE_CARRIER_FACTOR) & (ratio <= RESONANCE_CARRIER_FACTOR)))
+        if off.size:
+            problems.append(
+                f"circuit: the loaded motional resonance 1 / (2 pi sqrt(L C)), shunt and C0 included, must lie within "
+                f"a factor {RESONANCE_CARRIER_FACTOR:g} of carrier_hz ({self.carrier_hz:g} Hz): a TPaD is driven near "
+                f"its resonance; got {ratio[off[0]] * self.carrier_hz:.6g} Hz at {forces[off[0]]:g} N"
+            )
+        damped = np.flatnonzero(~(loaded_q > MIN_Q))
+        if damped.size:
+            problems.append(
+                f"circuit: the loaded quality factor (the shunt seen through C0 damps the branch) must stay above "
+                f"{MIN_Q:g}, got {loaded_q[damped[0]]:.3g} at {forces[damped[0]]:g} N: the plate would not ring"
+            )
         return problems

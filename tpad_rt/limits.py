@@ -7,7 +7,8 @@ defends itself again with its own (looser) bounds in :mod:`tpad_rt.kernel.layout
 API map
 -------
 MAX_RATE_HZ, MAX_BLOCK_FRAMES, MAX_RENDER_S, MAX_INPUT_S, MAX_RECORDING_SAMPLES,
-MAX_RENDER_BLOCKS, MAX_STALL_TIMEOUT_S, MAX_FORCE_N, FINGER_TIME_WINDOW_S, MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_ROWS
+MAX_RENDER_BLOCKS, MAX_STALL_TIMEOUT_S, MAX_FORCE_N, FINGER_TIME_WINDOW_S, MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_ROWS,
+MAX_MEASUREMENT_BYTES, MAX_MEASUREMENT_ROWS
     the limits (units in the names)
 DEFAULT_PLATE_MM
     the plate (length, width) assumed without a device file
@@ -50,3 +51,7 @@ def position_range_mm(plate_length_mm: float, plate_width_mm: float) -> tuple[tu
     plate length (width) beyond each edge (a pointer sliding off the plate), no further.
     """
     return (-plate_length_mm, 2.0 * plate_length_mm), (-plate_width_mm, 2.0 * plate_width_mm)
+#: Largest calibration measurement CSV (bytes) and most rows in one (an analyser sweeps at most tens of
+#: thousands of points; this is many sweeps of them).
+MAX_MEASUREMENT_BYTES = 32 * 2**20
+MAX_MEASUREMENT_ROWS = 500_000

@@ -49,9 +49,10 @@ from tpad_rt.texture import CompiledTexture
 #: Highest carrier frequency, as a fraction of the sample rate, the pipeline renders.
 MAX_CARRIER_FRACTION = 0.45
 #: Force-grid intervals: at most this many (a grid holding every table knot is sought up
-#: to it) and at least this many (the power and tau tables are smooth between knots).
+#: to it) and at least this many (amplitude, power and tau are smooth between knots: on
+#: 4096 intervals over the shipped 0-2 N, linear interpolation is within 2e-8 of them).
 MAX_GRID_INTERVALS = 4096
-MIN_GRID_INTERVALS = 1024
+MIN_GRID_INTERVALS = 4096
 #: Relative tolerance for a force-table knot to count as lying on a grid point.
 _KNOT_TOLERANCE = 1e-9
 
@@ -219,15 +220,14 @@ class KernelArrays(NamedTuple):
 def force_grid(device: Device) -> tuple[float, float, int]:
     """``(start_n, step_n, intervals)``: the uniform force grid the device tables are sampled on.
 
-    It spans every knot of the calibration and circuit force tables. When all knots lie
-    on a common grid of at most ``MAX_GRID_INTERVALS`` intervals (true of every shipped
-    device: multiples of 0.1 N), the grid is that one, so linear interpolation on it
-    reproduces ``np.interp`` of the amplitude table exactly (to rounding). That grid is
-    then halved until it has at least ``MIN_GRID_INTERVALS`` intervals, because power
-    and envelope time constant, smooth functions of the interpolated circuit, are
-    sampled on it too. Without a common grid: ``MAX_GRID_INTERVALS`` intervals.
+    It spans every knot of the circuit's force table. When all knots lie on a common
+    grid of at most ``MAX_GRID_INTERVALS`` intervals (true of every shipped device:
+    multiples of 0.1 N), the grid is that one, so every knot is a grid point. That grid
+    is then halved until it has at least ``MIN_GRID_INTERVALS`` intervals, because
+    amplitude, power and envelope time constant, smooth functions of the interpolated
+    circuit, are sampled on it. Without a common grid: ``MAX_GRID_INTERVALS`` intervals.
     """
-    knots = np.union1d(device.force_table_n, device.motional_force_table_n)
+    knots = device.force_table_n
     start_n = float(knots[0])
     span_n = float(knots[-1]) - start_n
     if span_n == 0.0:
@@ -249,9 +249,10 @@ def force_grid(device: Device) -> tuple[float, float, int]:
 def device_tables(device: Device) -> tuple[np.ndarray, float, float]:
     """``(dev, start_n, step_n)``: the kernel's device tables on :func:`force_grid`'s grid.
 
-    ``dev[DEV_AMP_M_PER_V]`` plate amplitude per peak volt (m/V), ``dev[DEV_POWER_W_PER_V2]``
-    exact-circuit power at 1 V peak at the carrier (W), ``dev[DEV_TAU_S]`` envelope time
-    constant (s); forces ``start_n + k * step_n``.
+    ``dev[DEV_AMP_M_PER_V]`` plate amplitude per peak volt at the carrier (m/V),
+    ``dev[DEV_POWER_W_PER_V2]`` the most power a drive of 1 V peak at the carrier can draw
+    (W, :meth:`Device.power_w_per_v2`: the exact circuit, detuning included),
+    ``dev[DEV_TAU_S]`` the loaded envelope time constant (s); forces ``start_n + k * step_n``.
     """
     start_n, step_n, intervals = force_grid(device)
     forces_n = start_n + step_n * np.arange(intervals + 1)
@@ -268,10 +269,10 @@ def _check_rate(device: Device, fs_hz: float, envelope_output: bool) -> None:
     problem = _number_problem(fs_hz, f"in (0, {MAX_RATE_HZ}]", lambda v: 0 < v <= MAX_RATE_HZ)
     if problem:
         raise ConfigError(f"fs_hz: {problem}")
-    needed_hz = device.resonance_hz / MAX_CARRIER_FRACTION
+    needed_hz = device.carrier_hz / MAX_CARRIER_FRACTION
     if fs_hz < needed_hz and not envelope_output:
         raise ConfigError(
-            f"fs_hz: device {device.label}'s carrier ({device.resonance_hz:g} Hz) needs a sample rate of at "
+            f"fs_hz: device {device.label}'s carrier ({device.carrier_hz:g} Hz) needs a sample rate of at "
             f"least {math.ceil(needed_hz)} Hz (carrier <= {MAX_CARRIER_FRACTION} x fs), got {fs_hz:g}"
         )
 
@@ -336,7 +337,7 @@ class Pipeline:
         cfg = np.zeros(layout.CFG_SIZE)
         for index, value in {
             layout.CFG_FS_HZ: self.fs_hz,
-            layout.CFG_CARRIER_HZ: device.resonance_hz,
+            layout.CFG_CARRIER_HZ: device.carrier_hz,
             layout.CFG_VOLTS_PER_FS: device.volts_per_full_scale,
             layout.CFG_MAX_VOLTAGE_V: device.max_voltage_v,
             layout.CFG_POWER_CAP_W: cap_w,

@@ -116,7 +116,7 @@ class NumpyPipeline:
         floored = speed_m_s < device.speed_floor_m_s
         speed_m_s = np.maximum(speed_m_s, device.speed_floor_m_s)
         with np.errstate(divide="ignore"):  # mu' = 1: -log1p(-1) = inf, amplitude 0
-            alpha_m = speed_m_s / (device.resonance_hz * device.mu0 * (1.0 + device.poisson) * device.psi_star
+            alpha_m = speed_m_s / (device.carrier_hz * device.mu0 * (1.0 + device.poisson) * device.psi_star
                                    * -np.log1p(-mu))
         amplitude_per_v = self._device(finger["force_n"])[0]
         return {**finger, "target_mu": mu, "floored": floored, "command_v": alpha_m / amplitude_per_v}
@@ -155,7 +155,7 @@ class NumpyPipeline:
             held["command_v"] = cap_v
             flags |= bound
         gain = tau_s / (options.smoothing_ms * 1e-3) if self.preemphasis else 0.0
-        phase = n * self.device.resonance_hz / self.fs_hz
+        phase = n * self.device.carrier_hz / self.fs_hz
         self.step = dict(command_v=held["command_v"], cap_v=cap_v, gain=gain, p1=p1_w, flags=flags,
                          gate=bool(commands["active"][k]) and self.running, theta0=2 * math.pi * (phase % 1.0),
                          envelope=[])
@@ -168,7 +168,7 @@ class NumpyPipeline:
         drive_v = np.clip(v + (1.0 - step["gain"]) * (self.smoothed_v - v) * self.decay**j, 0.0, step["cap_v"])
         direction = 1.0 if step["gate"] else -1.0
         envelope = np.clip(self.ramp + direction * j, 0.0, self.ramp_samples) / self.ramp_samples * drive_v
-        carrier = np.sin(step["theta0"] + (j - 1) * (2 * math.pi * self.device.resonance_hz / self.fs_hz))
+        carrier = np.sin(step["theta0"] + (j - 1) * (2 * math.pi * self.device.carrier_hz / self.fs_hz))
         out[:] = envelope / self.device.volts_per_full_scale * carrier
         step["envelope"].append(envelope)
         return float(envelope.max()), step["p1"] * float(np.dot(envelope, envelope))

@@ -98,7 +98,7 @@ class _Stream:
         self.ramp_samples = max(1, round(options.ramp_ms / 1000 * fs_hz))
         self.k_smooth = 1 - math.exp(-1 / (options.smoothing_ms / 1000 * fs_hz))
         self.preemphasis = device.preemphasis if options.preemphasis is None else options.preemphasis
-        self.carrier = Fraction(device.resonance_hz) / Fraction(fs_hz)
+        self.carrier = Fraction(device.carrier_hz) / Fraction(fs_hz)
         self.step_powers: list[float] = []
         self.finger = _Finger(False)
         self.target_mu = 0.0
@@ -122,7 +122,7 @@ class _Stream:
             speed_m_s = speed_mm_s / 1000
             if speed_m_s < device.speed_floor_m_s:
                 speed_m_s, flags = device.speed_floor_m_s, SPEED_FLOOR
-            alpha_m = amplitude_for(self.target_mu, device.resonance_hz, speed_m_s, device.mu0, device.poisson,
+            alpha_m = amplitude_for(self.target_mu, device.carrier_hz, speed_m_s, device.mu0, device.poisson,
                                     device.psi_star)
             self.command_v = float(alpha_m / device.amplitude_m_per_v(max(finger.force_n, 0.0)))
         else:

@@ -69,7 +69,8 @@ from tpad_rt.amp.wire import Code, Fault, State, Type
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, printable
 from tpad_rt.files import check_writable_target
-from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, resonate, resonator_coefficients
+from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, resonate
+from tpad_rt.outputs.sim import plate_resonator
 from tpad_rt.physics import electromech
 
 FIRMWARE = "tpad-emu 1.0"
@@ -161,8 +162,9 @@ class Circuit:
 class Plate:
     """The device's plate driven by the carrier the envelope modulates, at ``sim_rate_hz``.
 
-    The resonator is :mod:`tpad_rt.kernel.sim`'s at the device's resonance, with its
-    quality factor and gain at contact force ``force_n`` (N). The carrier's phase runs on
+    The resonator is ``sim://``'s (:func:`tpad_rt.outputs.sim.plate_resonator`) at contact
+    force ``force_n`` (N): the loaded motional resonance and quality factor, the device's
+    gain at its carrier. The carrier's phase runs on
     across batches and carrier changes (A2: it never jumps).
     """
 
@@ -171,8 +173,7 @@ class Plate:
         self._volts_per_full_scale = device.volts_per_full_scale
         self._coef = np.zeros(COEF_SIZE)
         self._state = np.zeros(SIM_STATE_SIZE)
-        resonator_coefficients(device.resonance_hz, float(device.quality_factor(force_n)),
-                               float(device.amplitude_m_per_v(force_n)), float(sim_rate_hz), self._coef)
+        plate_resonator(device, force_n, sim_rate_hz, self._coef)
         self._phase_cycles = 0.0
         resonate(np.zeros(0, np.float32), 1.0, self._coef, self._state, np.zeros(0))  # compile or load it now
 
@@ -199,9 +200,9 @@ def amplifier_info(device: Device, circuit: Circuit) -> wire.Info:
     """INFO for ``device``: clamp at its max_voltage_v, full scale 1.25 x that, carriers around its resonance."""
     max_mv = round(device.max_voltage_v * 1000)
     step = CARRIER_STEP_MHZ
-    low_mhz = min(CARRIER_RANGE_HZ[0] * 1000, math.floor(device.resonance_hz * 1000 / step) * step)
-    high_mhz = max(CARRIER_RANGE_HZ[1] * 1000, math.ceil(device.resonance_hz * 1000 / step) * step)
-    resonance_ma = circuit.current_ma(max_mv, round(device.resonance_hz * 1000))
+    low_mhz = min(CARRIER_RANGE_HZ[0] * 1000, math.floor(device.carrier_hz * 1000 / step) * step)
+    high_mhz = max(CARRIER_RANGE_HZ[1] * 1000, math.ceil(device.carrier_hz * 1000 / step) * step)
+    resonance_ma = circuit.current_ma(max_mv, round(device.carrier_hz * 1000))
     return wire.Info(
         firmware=FIRMWARE, serial=f"EMU-{os.getpid()}", envelope_rates_hz=ENVELOPE_RATES_HZ,
         carrier_min_mhz=low_mhz, carrier_max_mhz=high_mhz, carrier_step_mhz=step,

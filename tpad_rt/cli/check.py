@@ -15,6 +15,7 @@ from rich.text import Text
 
 from tpad_rt.cli.arguments import Subparsers
 from tpad_rt.config import DeviceFile, TextureFile, load_any
+from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 
 
@@ -38,6 +39,8 @@ def run(args: argparse.Namespace) -> int:
     for name in args.files:
         try:
             model = load_any(name)
+            if isinstance(model, DeviceFile):  # what play and render also refuse: derived values out of bounds
+                Device.from_spec(model, name)
         except ConfigError as error:
             bad += 1
             for line in error.errors:

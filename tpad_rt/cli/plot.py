@@ -14,18 +14,17 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from tpad_rt.cli.arguments import Subparsers
-from tpad_rt.errors import BackendError, ConfigError, printable
-from tpad_rt.files import check_writable_target, ensure_regular
+from tpad_rt.errors import ConfigError, printable
+from tpad_rt.figures import figure_target, pyplot, save
+from tpad_rt.files import ensure_regular
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
 from tpad_rt.recording import Recording, read_recording
 
-_FORMATS = (".png", ".pdf", ".svg")
 _TARGET, _ACHIEVED, _LIMIT, _AVERAGE = "#1f5fa8", "#e07b00", "#c0392b", "#6a3d9a"
 _SATURATED, _LIFTED, _DEPARTED = "#e74c3c", "#7f8c8d", "#8e44ad"
 
@@ -49,16 +48,10 @@ def add_parser(subparsers: Subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     """Plot the recording; 0 on success. ConfigError for a bad, missing or non-regular recording, or an
     image name that is not a figure or names an existing non-regular file."""
-    out = Path(args.out)
-    if out.suffix.lower() not in _FORMATS:
-        raise ConfigError(f"--out: must end in {', '.join(_FORMATS)}, got '{args.out}'")
-    check_writable_target(out, "figures")
+    out = figure_target("--out", args.out)
     ensure_regular(args.recording, "recordings")
     figure = plot_recording(read_recording(args.recording), along=args.along, start_s=args.start, end_s=args.end)
-    try:
-        figure.savefig(out, dpi=150)
-    except OSError as error:
-        raise BackendError(f"{out}: cannot write the figure ({error.strerror})") from None
+    save(figure, out)
     print(f"wrote {out}")
     return 0
 
@@ -69,10 +62,7 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
 
     ``along`` is ``time`` or ``x``. Raises ConfigError when no block lies in the span.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib import pyplot as plt
+    plt = pyplot()
     from matplotlib.patches import Patch
 
     meta = recording.metadata

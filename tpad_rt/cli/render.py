@@ -145,7 +145,7 @@ def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_
         "texture_path": str(args.texture),
         "texture_description": texture.description,
         "device_label": device.label,
-        "carrier_hz": device.resonance_hz,
+        "carrier_hz": device.carrier_hz,
         "volts_per_full_scale": device.volts_per_full_scale,
         "max_voltage_v": device.max_voltage_v,
         "power_budget_w": float(cfg[CFG_POWER_CAP_W]),

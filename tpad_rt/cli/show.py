@@ -28,12 +28,11 @@ from rich.console import Console
 
 from tpad_rt.cli.arguments import Subparsers
 from tpad_rt.device import Device
-from tpad_rt.errors import BackendError, ConfigError, printable
-from tpad_rt.files import check_writable_target
+from tpad_rt.errors import ConfigError, printable
+from tpad_rt.figures import figure_target, pyplot, save
 from tpad_rt.physics.friction import amplitude_for
 from tpad_rt.texture import CompiledTexture, load_compiled
 
-_FORMATS = (".png", ".pdf", ".svg")
 #: Most grid points a figure evaluates (a 130 x 60 mm plate at 0.02 mm).
 MAX_POINTS = 20_000_000
 _BUDGET_COLOUR = "#00c8ff"
@@ -114,18 +113,12 @@ def run(args: argparse.Namespace) -> int:
     )
     t_s = _checked("--t-s", args.t_s, minimum=0.0)
     resolution_mm = _checked("--resolution-mm", args.resolution_mm, minimum=0.0, inclusive=False)
-    out = Path(args.out)
-    if out.suffix.lower() not in _FORMATS:
-        raise ConfigError(f"--out: must end in {', '.join(_FORMATS)}, got '{args.out}'")
-    check_writable_target(out, "figures")
+    out = figure_target("--out", args.out)
     device = Device.default() if args.device is None else Device.from_file(args.device)
     texture = load_compiled(args.texture)
     maps = plate_maps(texture, device, finger, t_s, resolution_mm)
     figure = draw(maps, texture, device, finger, t_s, source=Path(args.texture).name)
-    try:
-        figure.savefig(out, dpi=150)
-    except OSError as error:
-        raise BackendError(f"{out}: cannot write the figure ({error.strerror or error})") from None
+    save(figure, out)
     _summary(out, maps, device)
     return 0
 
@@ -158,7 +151,7 @@ def plate_maps(
     ux, uy = finger.unit_direction
     friction = texture.evaluate(x_mm[None, :], y_mm[:, None], ux, uy, t_s)
     speed_m_s = max(finger.speed_mm_s * 1e-3, device.speed_floor_m_s)
-    amplitude_m = amplitude_for(friction, device.resonance_hz, speed_m_s, device.mu0, device.poisson, device.psi_star)
+    amplitude_m = amplitude_for(friction, device.carrier_hz, speed_m_s, device.mu0, device.poisson, device.psi_star)
     volts_asked = amplitude_m / device.amplitude_m_per_v(finger.force_n)
     volts = np.minimum(volts_asked, device.max_voltage_v)
     return PlateMaps(
@@ -174,10 +167,7 @@ def plate_maps(
 
 def draw(maps: PlateMaps, texture: CompiledTexture, device: Device, finger: Finger, t_s: float, source: str) -> Any:
     """A matplotlib Figure of the three maps (module docstring), titled with the texture's description."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib import pyplot as plt
+    plt = pyplot()
 
     figure, panels = plt.subplots(3, 1, figsize=(8.6, 11.0), layout="constrained", sharex=True)
     # printable: a control character (a NUL in a description) has no glyph, and matplotlib warns about it

@@ -1,13 +1,18 @@
-"""Device files: one TPaD's plate, actuator, amplifier, calibration and circuit.
+"""Device files (format 2): one TPaD's plate, actuator, carrier, amplifier and circuit model.
 
-Values keep the units of their key names; ``tpad_rt.device`` converts to SI.
+Values keep the units of their key names; ``tpad_rt.device`` converts to SI. The
+circuit (Butterworth-Van Dyke: C0, shunt, and L, C, R per contact force) with one
+transduction factor ``gamma_n_per_v`` is the whole device model: amplitude per volt and
+power per squared volt follow from it at any force and drive frequency
+(docs/formats.md "Device files"). Format 1 files (no ``format_version``, an
+``amplitude_um_per_v`` table beside the circuit) are refused by the loader with the
+command that converts them (``tpad-rt calibrate convert``).
 """
 
 from __future__ import annotations
 
-import bisect
 import math
-from typing import Annotated, ClassVar
+from typing import Annotated, ClassVar, Literal
 
 from annotated_types import Ge, Le, Lt, MinLen
 from pydantic import Strict, model_validator
@@ -25,6 +30,12 @@ _FORCE_SLACK_N = 1e-9
 #: seconds to ring up, far beyond any TPaD.
 MIN_Q = 0.5
 MAX_Q = 1e6
+#: Carriers (Hz) a device file may drive at, and the highest peak volts it may name.
+MIN_CARRIER_HZ = 1000.0
+MAX_CARRIER_HZ = 200_000.0
+MAX_VOLTS = 10_000.0
+#: The device file format this tpad-rt reads and writes.
+DEVICE_FORMAT_VERSION = 2
 
 ThicknessMm = Annotated[float, Strict(), Ge(0.01), Le(100)]
 DensityGCm3 = Annotated[float, Strict(), Ge(0.1), Le(50)]
@@ -32,10 +43,12 @@ YoungsModulusGpa = Annotated[float, Strict(), Ge(0.01), Le(2000)]
 PlateSideMm = Annotated[float, Strict(), Ge(1), Le(1000)]
 #: m of the plate's m x n mode (nodal lines along its length).
 ModeM = Annotated[int, Strict(), Ge(1), Le(1000)]
-Volts = Annotated[float, Strict(), Ge(0.1), Le(10_000)]
+Volts = Annotated[float, Strict(), Ge(0.1), Le(MAX_VOLTS)]
 ForceN = Annotated[float, Strict(), Ge(0), Le(MAX_FORCE_N)]
 ForceTable = Annotated[list[ForceN], MinLen(1)]
-AmplitudeTable = Annotated[list[Annotated[float, Strict(), Ge(1e-6), Le(100)]], MinLen(1)]
+#: The transduction factor gamma (N/V, the same as C/m): i_g = gamma dX/dt.
+GammaNPerV = Annotated[float, Strict(), Ge(1e-6), Le(1e3)]
+CarrierHz = Annotated[float, Strict(), Ge(MIN_CARRIER_HZ), Le(MAX_CARRIER_HZ)]
 InductanceTable = Annotated[list[Annotated[float, Strict(), Ge(1e-6), Le(1e4)]], MinLen(1)]
 CapacitanceTable = Annotated[list[Annotated[float, Strict(), Ge(1e-3), Le(1e6)]], MinLen(1)]
 ResistanceTable = Annotated[list[Annotated[float, Strict(), Ge(1e-3), Le(1e7)]], MinLen(1)]
@@ -98,19 +111,13 @@ class _ForceTables(StrictModel):
         return self
 
 
-class Calibration(_ForceTables):
-    """Plate vibration amplitude per drive volt (peak) at each contact force."""
-
-    tables = ("amplitude_um_per_v",)
-    amplitude_um_per_v: AmplitudeTable
-
-
 class Circuit(_ForceTables):
-    """Butterworth-Van Dyke model: static capacitance, shunt, and motional branch per force."""
+    """Butterworth-Van Dyke model: static capacitance, shunt, transduction factor, motional branch per force."""
 
     tables = ("motional_l_h", "motional_c_pf", "motional_r_ohm")
     c0_nf: Annotated[float, Strict(), Ge(1e-3), Le(1e5)]
     shunt_ohm: Annotated[float, Strict(), Ge(1e-3), Le(1e6)]
+    gamma_n_per_v: GammaNPerV
     motional_l_h: InductanceTable
     motional_c_pf: CapacitanceTable
     motional_r_ohm: ResistanceTable
@@ -146,31 +153,16 @@ class FrictionModel(StrictModel):
 class DeviceFile(StrictModel):
     """One TPaD: how it turns volts into vibration, and its limits."""
 
+    format_version: Literal[2]
     label: Text
     description: Text
     plate: Plate
     actuator: Actuator
-    resonance_hz: Annotated[float, Strict(), Ge(1000), Le(200_000)]
+    carrier_hz: CarrierHz
     amplifier: Amplifier
-    calibration: Calibration
     circuit: Circuit
     friction_model: FrictionModel = FrictionModel()
     speed_floor_mm_s: Annotated[float, Strict(), Ge(0.1), Le(1000)] = 5.0
     power_budget_w: Annotated[float, Strict(), Ge(0.001), Le(1000)]
     preemphasis: Flag = True
     source: Annotated[dict[Text, Text], MinLen(1)]
-
-    @model_validator(mode="after")
-    def _forces_told_apart(self) -> DeviceFile:
-        """Each circuit force equals a calibration force or lies MIN_FORCE_STEP_N from all of them."""
-        known = self.calibration.force_n
-        for index, force in enumerate(self.circuit.force_n):
-            at = bisect.bisect_left(known, force)
-            nearest = min(known[max(at - 1, 0):at + 1], key=lambda candidate: abs(candidate - force))
-            if 0.0 < abs(nearest - force) < MIN_FORCE_STEP_N - _FORCE_SLACK_N:
-                raise rule_error(
-                    f"must equal calibration.force_n's {nearest:g} or differ from it by at least "
-                    f"{MIN_FORCE_STEP_N:g} N, got {force:g}",
-                    "circuit", "force_n", index,
-                )
-        return self

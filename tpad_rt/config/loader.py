@@ -9,11 +9,11 @@ from typing import Any
 from pydantic import TypeAdapter, ValidationError
 
 from tpad_rt.config.breadcrumb import breadcrumb
-from tpad_rt.config.device_schema import DeviceFile
+from tpad_rt.config.device_schema import DEVICE_FORMAT_VERSION, DeviceFile
 from tpad_rt.config.messages import explain
 from tpad_rt.config.texture_schema import BASE_DIR, IMAGE_PIXELS, TextureFile
 from tpad_rt.config.yaml_io import YamlDocument, load_yaml
-from tpad_rt.errors import ConfigError
+from tpad_rt.errors import ConfigError, printable
 from tpad_rt.shipped import any_file, device_file, texture_file
 
 PathLike = str | os.PathLike[str]
@@ -32,23 +32,63 @@ def load_device(path: PathLike) -> DeviceFile:
     """The device file at ``path`` (or the shipped device of that name, :mod:`tpad_rt.shipped`);
     raises ConfigError listing every problem in it."""
     path = device_file(path)
-    return _validate(DeviceFile, path, load_yaml(Path(path), str(path)))
+    return _validate_device(path, load_yaml(Path(path), str(path)))
 
 
 def load_any(path: PathLike) -> TextureFile | DeviceFile:
-    """A device file (it has ``resonance_hz``) or a texture file (it has ``kind``), by path or shipped name.
+    """A device file (it has ``format_version``, or format 1's ``resonance_hz``) or a texture file (it has
+    ``kind``), by path or shipped name.
 
     Raises ConfigError listing every problem, or saying that the file is neither.
     """
     path = any_file(path)
     document = load_yaml(Path(path), str(path))
-    if "resonance_hz" in document.data:
-        return _validate(DeviceFile, path, document)
+    if _DEVICE_KEYS & set(document.data):
+        return _validate_device(path, document)
     if "kind" in document.data:
         return _validate(TextureFile, path, document)
     raise ConfigError(
-        breadcrumb(str(path), (), "neither a texture (which has a 'kind' key) nor a device (which has 'resonance_hz')")
+        breadcrumb(str(path), (), "neither a texture (which has a 'kind' key) nor a device (which has "
+                   "'format_version')")
     )
+
+
+#: Keys that only device files have: format 2's version, format 1's carrier.
+_DEVICE_KEYS = {"format_version", "resonance_hz"}
+
+
+def device_format_problem(data: dict[str, Any], path: PathLike) -> str | None:
+    """Why the device document at ``path`` of another format cannot be read, saying what to do; None for
+    format 2.
+
+    Format 1 (no ``format_version``) is what tpad-rt wrote before the one-gamma circuit model.
+    """
+    version = data.get("format_version")
+    if version is None and "resonance_hz" in data:
+        return (f"a device file of format 1 (it has no format_version), which tpad-rt no longer reads: its "
+                f"amplitude table and circuit are two models that disagree. Convert it to format "
+                f"{DEVICE_FORMAT_VERSION}, one circuit with one transduction factor: "
+                f"tpad-rt calibrate convert {printable(str(path))} --out NEW.yaml (docs/formats.md \"Format versions\")")
+    if isinstance(version, int) and not isinstance(version, bool) and version > DEVICE_FORMAT_VERSION:
+        return (f"format_version {version} is newer than this tpad-rt reads ({DEVICE_FORMAT_VERSION}): "
+                "upgrade tpad-rt")
+    return None
+
+
+def _validate_device(path: PathLike, document: YamlDocument) -> DeviceFile:
+    """``document`` validated as a format-2 device file; ConfigError saying how to convert another format."""
+    problem = device_format_problem(document.data, path)
+    if problem is not None:
+        raise ConfigError(breadcrumb(str(path), (), problem))
+    return validate_device(path, document)
+
+
+def validate_device(path: PathLike, document: YamlDocument) -> DeviceFile:
+    """``document.data`` validated as a format 2 device file, whatever its ``format_version`` says; ConfigError
+    with one breadcrumb per problem, naming ``path`` and the lines of ``document.root`` (a converted file's
+    values keep their original lines)."""
+    device: DeviceFile = _validate(DeviceFile, path, document)
+    return device
 
 
 def check_file(path: PathLike) -> list[str]:

@@ -256,3 +256,20 @@ def _describe_reader(err: yaml.reader.ReaderError) -> str:
 def _line(err: yaml.MarkedYAMLError) -> int | None:
     mark = err.problem_mark or err.context_mark
     return mark.line + 1 if mark else None
+
+
+class _Dumper(yaml.SafeDumper):
+    """Block mappings, flow (one-line) lists: how tpad-rt writes device files."""
+
+
+def _flow_list(dumper: yaml.SafeDumper, data: list[Any]) -> yaml.Node:
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True)
+
+
+_Dumper.add_representer(list, _flow_list)
+
+
+def dump_yaml(document: dict[str, Any], header: str = "") -> str:
+    """``document`` as YAML text (safe: plain data only), keys in their order, lists on one line, after
+    ``header`` (comment lines, each ending in a newline)."""
+    return header + yaml.dump(document, Dumper=_Dumper, sort_keys=False, width=1000, allow_unicode=True)

@@ -53,7 +53,7 @@ class SerialStreamDriver(Driver):
     def open(self, pipeline: Pipeline) -> None:
         """Open the port, make the handshake, set the carrier to the device's resonance; the amplifier's full
         scale, clamp and achieved carrier go into the pipeline. BackendError as AmpLink.open says."""
-        link = self.link = self._last_link = serial_amp.AmpLink.open(self.target, carrier_hz=self.device.resonance_hz)
+        link = self.link = self._last_link = serial_amp.AmpLink.open(self.target, carrier_hz=self.device.carrier_hz)
         assert link.info is not None
         pipeline.set_drive_scale(link.info.full_scale_v, link.info.max_v, link.carrier_hz)
         self.block_frames = link.frame_samples

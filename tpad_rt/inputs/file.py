@@ -19,19 +19,19 @@ of samples are held, about twice that while the chunks are joined, never the who
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, BinaryIO
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tpad_rt.csv_lines import check_header, data_lines
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.files import open_regular
 from tpad_rt.inputs.base import FINGER_DTYPE, Input, position_range
 from tpad_rt.limits import MAX_FORCE_N, MAX_INPUT_S, MAX_TRAJECTORY_BYTES, MAX_TRAJECTORY_ROWS
-from tpad_rt.urls import Url, UrlForm, did_you_mean
+from tpad_rt.urls import Url, UrlForm
 
 if TYPE_CHECKING:
     from tpad_rt.device import Device
@@ -44,8 +44,6 @@ _OPTIONAL = ("force_n", "down")
 _HEADER = "t,x_mm,y_mm[,force_n][,down]"
 #: Samples parsed into one array before it is kept (about 2 MB).
 _CHUNK_ROWS = 65_536
-#: Longest line (bytes, with its newline): a sample is five short numbers; this bounds one line's fields.
-_MAX_LINE_BYTES = 4096
 
 
 class FileInput(Input):
@@ -88,37 +86,7 @@ def load_trajectory(path: str | Path, device: Device | None = None) -> FileInput
     """
     name = printable(str(path))
     with open_regular(path, "trajectories", MAX_TRAJECTORY_BYTES) as stream:
-        return FileInput(_parse(name, _data_lines(name, stream), _Ranges.of(device)))
-
-
-def _data_lines(path: str, stream: BinaryIO) -> Iterator[tuple[int, list[str]]]:
-    """``(line number, fields)`` of every line that is neither blank nor a comment, as read.
-
-    Raises ConfigError for a line longer than _MAX_LINE_BYTES or not UTF-8.
-    """
-    try:
-        for number, raw in enumerate(iter(lambda: stream.readline(_MAX_LINE_BYTES + 1), b""), start=1):
-            if len(raw) > _MAX_LINE_BYTES:
-                raise ConfigError(f"{path}:{number}: line longer than {_MAX_LINE_BYTES:,} bytes")
-            try:
-                line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
-            except UnicodeDecodeError:
-                raise ConfigError(f"{path}:{number}: not UTF-8 text") from None
-            stripped = line.strip()
-            if stripped and not stripped.startswith("#"):
-                yield number, _fields(path, number, line.rstrip("\r\n"))
-    except OSError as error:
-        raise ConfigError(f"{path}: cannot read: {error.strerror}") from None
-
-
-def _fields(path: str, number: int, line: str) -> list[str]:
-    """The comma-separated fields of ``line``, stripped; ConfigError for a line the csv module refuses
-    (a carriage return inside it: a file whose lines end in CR alone reads as one line)."""
-    try:
-        return [field.strip() for field in next(csv.reader([line]), [])]
-    except csv.Error as error:
-        hint = "; lines must end in LF or CR LF" if "\r" in line else ""
-        raise ConfigError(f"{path}:{number}: not a CSV line ({error}){hint}") from None
+        return FileInput(_parse(name, data_lines(name, stream), _Ranges.of(device)))
 
 
 class _Ranges:
@@ -139,7 +107,7 @@ def _parse(path: str, lines: Iterator[tuple[int, list[str]]], ranges: _Ranges) -
     if first is None:
         raise ConfigError(f"{path}: empty; expected a header line {_HEADER} then one sample per line")
     header_line, header = first
-    columns = _columns(path, header_line, header)
+    columns = check_header(path, header_line, header, _REQUIRED, _OPTIONAL, _HEADER)
     places = [_FIELD_ORDER.index(name) for name in columns]
     chunks: list[np.ndarray] = []
     rows: list[tuple[float, float, float, float, bool]] = []
@@ -172,20 +140,6 @@ def _parse(path: str, lines: Iterator[tuple[int, list[str]]], ranges: _Ranges) -
 
 #: Columns in the order of FINGER_DTYPE's fields (``t`` fills ``t_s``).
 _FIELD_ORDER = ("t", "x_mm", "y_mm", "force_n", "down")
-
-
-def _columns(path: str, line: int, header: list[str]) -> list[str]:
-    known = _REQUIRED + _OPTIONAL
-    for name in header:
-        if name not in known:
-            hint = did_you_mean(name, list(known)) or f" (columns: {', '.join(known)})"
-            raise ConfigError(f"{path}:{line}: header: unknown column '{printable(name)}'{hint}; expected {_HEADER}")
-        if header.count(name) > 1:
-            raise ConfigError(f"{path}:{line}: header: column '{name}' appears twice; expected {_HEADER}")
-    missing = [name for name in _REQUIRED if name not in header]
-    if missing:
-        raise ConfigError(f"{path}:{line}: header: missing column {', '.join(missing)}; expected {_HEADER}")
-    return header
 
 
 def _value(where: str, column: str, text: str, ranges: _Ranges) -> float | bool:

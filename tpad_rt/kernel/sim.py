@@ -1,15 +1,17 @@
 """The simulated plate: a second-order resonator driven by the DAC samples.
 
 The plate's vibrating mode is ``x'' + (w0 / Q) x' + w0**2 x = b u(t)`` with ``x`` the
-vibration amplitude (m), ``u`` the drive (V), ``w0 = 2 pi f0`` the device resonance and
-``Q`` the quality factor at the current contact force. Its envelope
-``sqrt(x**2 + (x' / w0)**2)`` rises and falls with time constant ``Q / (pi f0)``.
+vibration amplitude (m), ``u`` the drive (V), ``w0 = 2 pi f0`` the resonance of the
+device's motional branch as the source loads it, and ``Q`` the loaded quality factor,
+both at the current contact force. Its envelope ``sqrt(x**2 + (x' / w0)**2)`` rises and
+falls with time constant ``Q / (pi f0)``. A carrier off ``f0`` (a finger detunes the
+plate) beats against it in every transient, as the real circuit does.
 
 Discretisation: exact for a drive held constant over each sample (zero-order hold,
 ``Phi = expm(A T)``, ``Gamma = A^-1 (Phi - I) B``), with ``b`` set so that a sampled
-sine at ``f0`` of peak ``V`` gives the steady amplitude ``gain * V`` exactly. That
+sine at the carrier of peak ``V`` gives the steady amplitude ``gain * V`` exactly. That
 normalisation removes the hold's sinc droop at the carrier (4 % at 31 kHz / 192 kHz),
-as a DAC's reconstruction filter does: near ``f0`` the plate sees the samples'
+as a DAC's reconstruction filter does: near the carrier the plate sees the samples'
 band-limited waveform, whose peak is the samples' peak.
 
 Kernels obey docs/kernel.md's rules (njit, cache, nogil, no allocation, state in arrays).
@@ -46,11 +48,13 @@ COEF_SIZE = 7
 
 
 @njit(cache=True, nogil=True)
-def resonator_coefficients(f0_hz: float, q: float, gain_m_per_v: float, fs_hz: float, coef: np.ndarray) -> None:
+def resonator_coefficients(
+    f0_hz: float, q: float, gain_m_per_v: float, carrier_hz: float, fs_hz: float, coef: np.ndarray
+) -> None:
     """Fill ``coef`` for resonance ``f0_hz``, quality factor ``q`` (> 0.5), steady gain ``gain_m_per_v``.
 
     ``gain_m_per_v`` is the steady vibration amplitude (m) per peak volt of a sine at
-    ``f0_hz`` sampled at ``fs_hz``. No input checks.
+    ``carrier_hz`` sampled at ``fs_hz``. No input checks.
     """
     omega = 2.0 * math.pi * f0_hz
     step_s = 1.0 / fs_hz
@@ -66,8 +70,9 @@ def resonator_coefficients(f0_hz: float, q: float, gain_m_per_v: float, fs_hz: f
     # Gamma = A^-1 (Phi - I) B for B = (0, 1), A = ((0, 1), (-w0^2, -2 sigma)).
     gamma_x = (1.0 - phi_vv - 2.0 * sigma * phi_xv) / (omega * omega)
     gamma_v = phi_xv
-    # Steady displacement per unit input at z = exp(j w0 T): x-row of (zI - Phi)^-1 Gamma.
-    z = complex(math.cos(omega * step_s), math.sin(omega * step_s))
+    # Steady displacement per unit input at z = exp(j w_carrier T): x-row of (zI - Phi)^-1 Gamma.
+    carrier_rad = 2.0 * math.pi * carrier_hz * step_s
+    z = complex(math.cos(carrier_rad), math.sin(carrier_rad))
     determinant = z * z - (phi_xx + phi_vv) * z + (phi_xx * phi_vv - phi_xv * phi_vx)
     response = ((z - phi_vv) * gamma_x + phi_xv * gamma_v) / determinant
     scale = gain_m_per_v / abs(response)

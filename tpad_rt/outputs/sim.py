@@ -1,8 +1,11 @@
 """``sim://``: a simulated TPaD driven by the drive samples (no hardware needed).
 
-The plate is the resonator of :mod:`tpad_rt.kernel.sim` at the device's resonance,
-with the device's quality factor at the block's contact force (``?q=`` holds it fixed
-instead) and the calibration gain ``amplitude_m_per_v(force)``. Per block it records
+The plate is the resonator of :mod:`tpad_rt.kernel.sim` (:func:`plate_resonator`): at
+the block's contact force, the device's motional branch as the shunt and C0 load it,
+its resonance and loaded quality factor (``?q=`` holds the quality factor fixed
+instead), with the steady gain ``amplitude_m_per_v(force)`` at the carrier. A carrier
+off that resonance (contact detunes the plate) beats in every transient, as on the real
+circuit. Per block it records
 the plate's mean vibration amplitude ``plate_amplitude_um`` and the relative friction
 the finger would feel, ``achieved_mu``: the forward friction model (paper Eqs. 2-3) at
 that amplitude and the block's finger speed, raised to the device's speed floor when
@@ -51,6 +54,20 @@ FORMS = (UrlForm("sim", "", (Option("q", "device", _quality_factor),)),)
 KIND = OutputKind(Consumes.DAC, Runs.PACED, realtime_only=False)
 
 
+def plate_resonator(device: Device, force_n: float, fs_hz: float, coef: np.ndarray, q: float | None = None) -> None:
+    """Fill ``coef`` (COEF_SIZE) with the simulated plate at contact force ``force_n`` (N, >= 0), sampled at
+    ``fs_hz``: the loaded motional resonance, the loaded quality factor (or ``q``), and the device's steady
+    amplitude per volt at its carrier."""
+    resonator_coefficients(
+        float(device.motional_resonance_hz(force_n)),
+        float(device.loaded_quality_factor(force_n)) if q is None else q,
+        float(device.amplitude_m_per_v(force_n)),
+        device.carrier_hz,
+        float(fs_hz),
+        coef,
+    )
+
+
 class SimOutput(Output):
     """A simulated plate for ``device`` at ``fs_hz`` (Hz); ``q``: fixed quality factor, or None."""
 
@@ -70,10 +87,8 @@ class SimOutput(Output):
         (only the last force's are kept: an input whose force varies does not grow memory)."""
         if force_n != self._coef_force_n:
             device = self.device
-            q = self.q if self.q is not None else float(device.quality_factor(force_n))
             self._coef_now = np.zeros(COEF_SIZE)
-            resonator_coefficients(device.resonance_hz, q, float(device.amplitude_m_per_v(force_n)),
-                                   float(self.fs_hz), self._coef_now)
+            plate_resonator(device, force_n, self.fs_hz, self._coef_now, self.q)
             self._coef_force_n = force_n
         return self._coef_now
 
@@ -99,7 +114,7 @@ class SimOutput(Output):
         speed_m_s = max(speed_m_s, device.speed_floor_m_s) if math.isfinite(speed_m_s) else device.speed_floor_m_s
         self._amplitude_um.append(amplitude_m * 1e6)
         self._achieved_mu.append(relative_friction_core(
-            amplitude_m, device.resonance_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
+            amplitude_m, device.carrier_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
 
     def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
                      blocks: Mapping[str, npt.NDArray[Any]]) -> None:
@@ -119,7 +134,7 @@ class SimOutput(Output):
                         self._state, self._envelope_m, amplitude_m)
         speed_m_s = self._speeds_m_s(np.asarray(blocks["speed_mm_s"], dtype=np.float64))
         achieved_mu = np.zeros(count)
-        felt_friction(amplitude_m, speed_m_s, device.resonance_hz, device.mu0, device.poisson, device.psi_star,
+        felt_friction(amplitude_m, speed_m_s, device.carrier_hz, device.mu0, device.poisson, device.psi_star,
                       achieved_mu)
         self._amplitude_um.extend((amplitude_m * 1e6).tolist())
         self._achieved_mu.extend(achieved_mu.tolist())
@@ -129,17 +144,17 @@ class SimOutput(Output):
         once on scratch arrays (nothing recorded)."""
         coef, state = np.zeros((1, COEF_SIZE)), np.zeros(SIM_STATE_SIZE)
         device = self.device
-        resonator_coefficients(device.resonance_hz, 100.0, 1e-8, float(self.fs_hz), coef[0])
+        resonator_coefficients(device.carrier_hz, 100.0, 1e-8, device.carrier_hz, float(self.fs_hz), coef[0])
         silence = np.zeros(1, dtype=np.float32)
         if batch:
             amplitude_m, mu_rel = np.zeros(1), np.zeros(1)
             resonate_blocks(silence, 1, device.volts_per_full_scale, coef, np.zeros(1, np.int64), state, np.zeros(1),
                             amplitude_m)
-            felt_friction(amplitude_m, np.full(1, 0.1), device.resonance_hz, device.mu0, device.poisson,
+            felt_friction(amplitude_m, np.full(1, 0.1), device.carrier_hz, device.mu0, device.poisson,
                           device.psi_star, mu_rel)
         else:
             resonate(silence, device.volts_per_full_scale, coef[0], state, np.zeros(1))
-            relative_friction_core(1e-6, device.resonance_hz, 0.1, device.mu0, device.poisson, device.psi_star)
+            relative_friction_core(1e-6, device.carrier_hz, 0.1, device.mu0, device.poisson, device.psi_star)
 
     def latest(self) -> dict[str, float]:
         """``plate_amplitude_um`` and ``achieved_mu`` of the last block written (none before the first)."""

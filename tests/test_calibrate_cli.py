@@ -1,0 +1,171 @@
+"""``tpad-rt calibrate``: the worked example's files fitted, built into a device that checks and renders; the
+format 1 converter; every mistake one line and exit status 1."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from cli_run import REPO, tpad_rt
+from tpad_rt.device import Device
+
+EXAMPLE = REPO / "examples" / "calibration"
+KEYS = {"force_n", "c0_nf", "motional_l_h", "motional_c_pf", "motional_r_ohm", "resonance_hz", "q"}
+TRUTH = Device.from_file(REPO / "tpad_rt" / "devices" / "SLG_0.56.yaml")
+
+
+def test_the_shipped_example_files_are_what_the_generator_writes(tmp_path: Path) -> None:
+    result = subprocess.run([sys.executable, str(EXAMPLE / "make_synthetic.py"), "--out", str(tmp_path)],
+                            capture_output=True, text=True, check=False)
+    assert result.returncode == 0, result.stderr
+    for name in ("sweeps.csv", "sweep_0n_polar.csv", "amplitudes.csv"):
+        assert (tmp_path / name).read_text() == (EXAMPLE / name).read_text(), name
+
+
+def test_impedance_json_gives_one_object_per_force_within_2_percent_of_the_device() -> None:
+    run = tpad_rt("calibrate", "impedance", str(EXAMPLE / "sweeps.csv"), "--json")
+    assert run.returncode == 0, run.stderr
+    fits = json.loads(run.stdout)
+    assert [fit["force_n"] for fit in fits] == [0.0, 0.5, 1.0, 1.5, 2.0]
+    for fit in fits:
+        assert KEYS <= set(fit)
+        l_h, c_f, r_ohm = (float(value) for value in TRUTH.motional(fit["force_n"]))
+        expected = [TRUTH.c0_f * 1e9, l_h, c_f * 1e12, r_ohm]
+        got = [fit["c0_nf"], fit["motional_l_h"], fit["motional_c_pf"], fit["motional_r_ohm"]]
+        np.testing.assert_allclose(got, expected, rtol=0.02)
+        assert fit["q"] == pytest.approx(np.sqrt(fit["motional_l_h"] / (fit["motional_c_pf"] * 1e-12))
+                                         / fit["motional_r_ohm"], rel=1e-9)
+
+
+def test_impedance_table_and_plot(tmp_path: Path) -> None:
+    plot = tmp_path / "fit.png"
+    run = tpad_rt("calibrate", "impedance", str(EXAMPLE / "sweep_0n_polar.csv"), "--plot", str(plot))
+    assert run.returncode == 0, run.stderr
+    assert "Butterworth-Van Dyke fit" in run.stdout and "0 (none given)" in run.stdout
+    assert f"wrote {plot}" in run.stdout
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and plot.stat().st_size > 50_000
+
+
+def test_amplitude_recovers_gamma_through_the_sweeps_or_a_device(tmp_path: Path) -> None:
+    for source in (("--impedance", str(EXAMPLE / "sweeps.csv")), ("--device", "SLG_0.56")):
+        run = tpad_rt("calibrate", "amplitude", str(EXAMPLE / "amplitudes.csv"), *source, "--json",
+                      "--plot", str(tmp_path / "gamma.png"))
+        assert run.returncode == 0, run.stderr
+        fit = json.loads(run.stdout)
+        assert fit["gamma_n_per_v"] == pytest.approx(TRUTH.gamma_n_per_v, rel=0.01)
+        assert [force["force_n"] for force in fit["forces"]] == [0.0, 0.5, 1.0, 1.5, 2.0]
+        assert fit["worst_deviation_percent"] < 2.0 and fit["warnings"] == []
+    assert (tmp_path / "gamma.png").stat().st_size > 20_000
+
+
+def test_build_writes_a_device_that_checks_renders_and_says_where_each_value_came_from(tmp_path: Path) -> None:
+    out = tmp_path / "rig.yaml"
+    run = tpad_rt("calibrate", "build", "--impedance", str(EXAMPLE / "sweeps.csv"), "--amplitude",
+                  str(EXAMPLE / "amplitudes.csv"), "--out", str(out), "--like", "SLG_0.56")
+    assert run.returncode == 0, run.stderr
+    assert f"wrote {out}: device rig, carrier 313" in run.stdout
+    document = yaml.safe_load(out.read_text())
+    assert document["format_version"] == 2 and document["label"] == "rig"
+    assert "sweeps.csv" in document["source"]["circuit.motional"] and "amplitudes.csv" in \
+        document["source"]["circuit.gamma_n_per_v"]
+    assert document["source"]["plate"].startswith("from the template device SLG_0.56")
+    built = Device.from_file(out)
+    assert built.carrier_hz == pytest.approx(TRUTH.carrier_hz, abs=3.0)
+    assert built.amplitude_m_per_v(0.0) == pytest.approx(TRUTH.amplitude_m_per_v(0.0), rel=0.02)
+    assert built.power_budget_w == TRUTH.power_budget_w
+    check = tpad_rt("check", str(out))
+    assert check.returncode == 0 and "device: rig" in check.stdout
+    recording = tmp_path / "r.npz"
+    render = tpad_rt("render", "textures/grating.yaml", "--device", str(out), "--input",
+                     "scripted://swipe?speed_mm_s=100", "--output", "sim://", "--out", str(recording))
+    assert render.returncode == 0, render.stderr
+    with np.load(recording) as data:
+        assert float(np.max(data["plate_amplitude_um"])) > 0.5
+
+
+def test_convert_turns_a_format_1_file_into_one_that_loads(tmp_path: Path) -> None:
+    old = REPO / "tests" / "bad_files" / "device_format_1.yaml"
+    out = tmp_path / "new.yaml"
+    run = tpad_rt("calibrate", "convert", str(old), "--out", str(out))
+    assert run.returncode == 0, run.stderr
+    assert "its amplitude table implied gammas" in run.stdout
+    document = yaml.safe_load(out.read_text())
+    assert document["format_version"] == 2 and "carrier_hz" in document and "calibration" not in document
+    assert "converted from format 1" in document["source"]["circuit.gamma_n_per_v"]
+    device = Device.from_file(out)
+    # One gamma: the 0.05 um/V at 0 N the old table gave is kept within the spread the message reports
+    assert device.amplitude_m_per_v(0.0) * 1e6 == pytest.approx(0.05, rel=0.5)
+    again = tpad_rt("calibrate", "convert", str(out), "--out", str(tmp_path / "again.yaml"))
+    again.assert_one_line_error("not a format 1 device file")
+
+
+def _fifo(tmp_path: Path) -> str:
+    path = tmp_path / "fifo.csv"
+    os.mkfifo(path)
+    return str(path)
+
+
+@pytest.mark.parametrize(("args", "expected"), [
+    (("calibrate",), "the following arguments are required: ACTION"),
+    (("calibrate", "impedance"), "the following arguments are required: SWEEP.csv"),
+    (("calibrate", "impedance", "missing.csv"), "missing.csv: cannot read: no such file or directory"),
+    (("calibrate", "impedance", "{fifo}"), "not a regular file (a FIFO); tpad-rt reads impedance sweeps"),
+    (("calibrate", "impedance", "{sweeps}", "--plot", "fit.txt"), "--plot: must end in .png, .pdf, .svg"),
+    (("calibrate", "impedance", "{sweeps}", "{sweeps}"), "a sweep at 0 N again"),
+    (("calibrate", "impedance", "{amplitudes}"), "header: unknown column 'voltage_v'"),
+    (("calibrate", "amplitude", "{amplitudes}"), "one of the arguments --impedance --device is required"),
+    (("calibrate", "amplitude", "{amplitudes}", "--device", "SLG_0.56", "--freq-hz", "nan"),
+     "argument --freq-hz: must be a number in (0, 200000] (Hz), got 'nan'"),
+    (("calibrate", "build", "--impedance", "{sweeps}", "--amplitude", "{amplitudes}", "--out", "/dev/null"),
+     "/dev/null: exists and is not a regular file"),
+    (("calibrate", "build", "--impedance", "{sweeps}", "--amplitude", "{amplitudes}", "--out", "x.yaml",
+      "--like", "nonesuch"), "nonesuch"),
+    (("calibrate", "build", "--impedance", "{sweeps}", "--amplitude", "{amplitudes}", "--out", "x.yaml",
+      "--max-voltage-v", "1e308"), "argument --max-voltage-v: must be a number in [0.1, 10000] (V), got '1e308'"),
+    (("calibrate", "build", "--impedance", "{sweeps}", "--amplitude", "{amplitudes}", "--out", "x.yaml",
+      "--max-voltage-v", "60"), "--max-voltage-v: must be <= the volts_per_full_scale of --like default (50 V), got 60"),
+    (("calibrate", "convert", "{old}", "--out", "/dev/zero"), "/dev/zero: exists and is not a regular file"),
+])
+def test_every_mistake_is_one_line(tmp_path: Path, args: tuple[str, ...], expected: str) -> None:
+    names = {"{sweeps}": str(EXAMPLE / "sweeps.csv"), "{amplitudes}": str(EXAMPLE / "amplitudes.csv"),
+             "{old}": str(REPO / "tests" / "bad_files" / "device_format_1.yaml")}
+    filled = [names.get(arg, _fifo(tmp_path) if arg == "{fifo}" else arg) for arg in args]
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        run = tpad_rt(*filled)
+    finally:
+        os.chdir(cwd)
+    run.assert_one_line_error(expected)
+    assert not (tmp_path / "x.yaml").exists()
+
+
+def test_a_sweep_the_model_does_not_fit_is_one_line(tmp_path: Path) -> None:
+    lines = ["freq_hz,z_real_ohm,z_imag_ohm"] + [f"{30000 + 10 * k},{1.0},{-500.0}" for k in range(100)]
+    flat = tmp_path / "flat.csv"
+    flat.write_text("\n".join(lines) + "\n")
+    tpad_rt("calibrate", "impedance", str(flat)).assert_one_line_error(
+        "flat.csv, 0 N (no force_n column): the model does not fit")
+
+
+def test_an_existing_device_file_is_replaced_only_once_the_new_one_loads(tmp_path: Path) -> None:
+    out = tmp_path / "rig.yaml"
+    shutil.copy(REPO / "tpad_rt" / "devices" / "SLG_0.4.yaml", out)
+    before = out.read_text()
+    run = tpad_rt("calibrate", "build", "--impedance", str(EXAMPLE / "sweeps.csv"), "--amplitude",
+                  str(EXAMPLE / "amplitudes.csv"), "--out", str(out), "--power-budget-w", "0.001")
+    assert run.returncode == 0, run.stderr  # a tiny budget is valid
+    assert out.read_text() != before
+    failed = tpad_rt("calibrate", "build", "--impedance", str(EXAMPLE / "sweeps.csv"), "--amplitude",
+                     str(EXAMPLE / "amplitudes.csv"), "--out", str(out), "--max-voltage-v", "60")
+    failed.assert_one_line_error("--max-voltage-v: must be <=")
+    assert "power_budget_w: 0.001" in out.read_text()
+    assert [path.name for path in tmp_path.iterdir()] == ["rig.yaml"]

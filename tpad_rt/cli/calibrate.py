@@ -1,0 +1,267 @@
+"""``tpad-rt calibrate``: device files from a user's own measurements (docs/calibration.md).
+
+Actions:
+
+- ``impedance SWEEP.csv... [--json] [--plot FILE.png]``: fit the Butterworth-Van Dyke
+  circuit to impedance sweeps, one fit per contact force, with uncertainties;
+- ``amplitude MEAS.csv (--impedance SWEEP.csv... | --device FILE) [--freq-hz F] [--json]
+  [--plot FILE.png]``: fit the one transduction factor gamma, check linearity in volts and
+  how well one gamma explains every force;
+- ``build --impedance SWEEP.csv... --amplitude MEAS.csv --out DEVICE.yaml``: both fits,
+  written as a device file that ``tpad-rt check`` accepts and ``play`` renders;
+- ``convert OLD.yaml --out NEW.yaml``: a format 1 device file as format 2.
+
+Tables go to stdout; warnings (a poorly determined parameter, a force one gamma does not
+explain) to stderr as ``warning: ...`` once the action succeeded. Every mistake (a bad
+file, a sweep the model does not fit, a bad flag, a device that would not load) ends in
+one line on stderr and exit status 1, with nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import sys
+from pathlib import Path
+
+from rich import box
+from rich.console import Console
+from rich.table import Table
+
+from tpad_rt.calibrate.amplitude import Circuit, GammaFit, fit_gamma
+from tpad_rt.calibrate.device_file import BuildOptions, build_document, circuit_of, convert_document, write_device
+from tpad_rt.calibrate.impedance import QUANTITIES, BvdFit, fit_sweep
+from tpad_rt.calibrate.measurements import ImpedanceSweep, read_amplitudes, read_impedance_sweeps
+from tpad_rt.cli.arguments import Subparsers, number
+from tpad_rt.config import load_device
+from tpad_rt.config.device_schema import MAX_CARRIER_HZ, MAX_VOLTS, MIN_CARRIER_HZ
+from tpad_rt.device import Device
+from tpad_rt.errors import ConfigError, printable
+from tpad_rt.files import check_writable_target
+from tpad_rt.figures import figure_target, save
+
+_HEADER = "# written by tpad-rt calibrate {action}: its source entries say where each value came from\n"
+
+
+def add_parser(subparsers: Subparsers) -> None:
+    """Register ``calibrate`` and its actions."""
+    parser = subparsers.add_parser(
+        "calibrate",
+        help="fit a device file to your own measurements: impedance sweeps, amplitudes",
+        description="Turn a rig's own measurements into a device file (docs/calibration.md).",
+    )
+    actions = parser.add_subparsers(dest="action", metavar="ACTION")
+    actions.required = True
+
+    impedance = actions.add_parser(
+        "impedance", help="fit the BVD circuit (C0, L, C, R) to impedance sweeps, one per force",
+        description="Fit C0 in parallel with L, C, R to impedance sweeps (CSV: freq_hz, z_real_ohm and "
+        "z_imag_ohm or z_abs_ohm and z_phase_deg, optional force_n).")
+    impedance.add_argument("sweeps", metavar="SWEEP.csv", nargs="+", help="impedance sweep files")
+    impedance.add_argument("--json", action="store_true", help="print a JSON list, one object per force")
+    impedance.add_argument("--plot", metavar="FILE.png", help="draw |Z|, phase, admittance circle and residuals")
+    impedance.set_defaults(func=run_impedance)
+
+    amplitude = actions.add_parser(
+        "amplitude", help="fit the transduction factor gamma to amplitude measurements",
+        description="Fit one gamma (i_g = gamma dX/dt) to amplitude measurements (CSV: force_n, voltage_v, "
+        "amplitude_um, optional freq_hz) through a circuit from impedance sweeps or a device file.")
+    amplitude.add_argument("measurements", metavar="MEAS.csv", help="amplitude measurement file")
+    source = amplitude.add_mutually_exclusive_group(required=True)
+    source.add_argument("--impedance", metavar="SWEEP.csv", nargs="+", help="impedance sweeps giving the circuit")
+    source.add_argument("--device", metavar="FILE", help="device file giving the circuit")
+    amplitude.add_argument("--freq-hz", type=number(0, False, MAX_CARRIER_HZ, "Hz"),
+                           help="drive frequency of rows without freq_hz (default: the circuit's resonance at "
+                           "its lowest force)")
+    amplitude.add_argument("--json", action="store_true", help="print a JSON object")
+    amplitude.add_argument("--plot", metavar="FILE.png", help="draw amplitude against volts, and gamma per force")
+    amplitude.set_defaults(func=run_amplitude)
+
+    build = actions.add_parser(
+        "build", help="write a device file from impedance sweeps and amplitude measurements",
+        description="Fit the circuit and gamma, and write a format 2 device file with its sources.")
+    build.add_argument("--impedance", metavar="SWEEP.csv", nargs="+", required=True, help="impedance sweeps")
+    build.add_argument("--amplitude", metavar="MEAS.csv", required=True, help="amplitude measurements")
+    build.add_argument("--out", metavar="DEVICE.yaml", required=True, help="device file to write")
+    build.add_argument("--like", metavar="DEVICE", default="default",
+                       help="device (file or shipped name) whose plate, actuator, amplifier and friction model to "
+                       "copy (default: default)")
+    build.add_argument("--label", help="the device's label (default: the output file's name)")
+    build.add_argument("--carrier-hz", type=number(MIN_CARRIER_HZ, True, MAX_CARRIER_HZ, "Hz"),
+                       help="drive frequency (default: the loaded resonance at the lowest force)")
+    build.add_argument("--shunt-ohm", type=number(1e-3, True, 1e6, "ohm"), help="shunt resistor (default: --like's)")
+    build.add_argument("--max-voltage-v", type=number(0.1, True, MAX_VOLTS, "V"),
+                       help="peak drive never exceeded (default: --like's)")
+    build.add_argument("--power-budget-w", type=number(0.001, True, 1000, "W"),
+                       help="average power budget (default: 1.2 x the power at max volts, no contact)")
+    build.set_defaults(func=run_build)
+
+    convert = actions.add_parser(
+        "convert", help="convert a format 1 device file to format 2 (one circuit, one gamma)",
+        description="Read a format 1 device file (amplitude table beside the circuit) and write it as format 2.")
+    convert.add_argument("old", metavar="OLD.yaml", help="format 1 device file")
+    convert.add_argument("--out", metavar="NEW.yaml", required=True, help="format 2 device file to write")
+    convert.set_defaults(func=run_convert)
+
+
+#: Columns the fit tables need: wider than a default 80-column terminal, so they are printed at least this wide.
+_TABLE_WIDTH = 120
+
+
+def _print(table: Table) -> None:
+    Console(highlight=False, width=max(shutil.get_terminal_size().columns, _TABLE_WIDTH)).print(table)
+
+
+def _warn(lines: list[str]) -> None:
+    for line in lines:
+        print(f"warning: {line}", file=sys.stderr)
+
+
+def _sweeps(paths: list[str]) -> list[ImpedanceSweep]:
+    """Every sweep of ``paths``, forces ascending; ConfigError when two files give the same force."""
+    sweeps = [sweep for path in paths for sweep in read_impedance_sweeps(path)]
+    sweeps.sort(key=lambda sweep: sweep.force_n)
+    for before, after in zip(sweeps, sweeps[1:]):
+        if before.force_n == after.force_n:
+            raise ConfigError(f"{after.source}: a sweep at {after.force_n:g} N again ({before.source} has one): "
+                              "give each force once")
+    return sweeps
+
+
+def _fits(paths: list[str]) -> tuple[list[ImpedanceSweep], list[BvdFit]]:
+    sweeps = _sweeps(paths)
+    return sweeps, [fit_sweep(sweep) for sweep in sweeps]
+
+
+def _fit_warnings(sweeps: list[ImpedanceSweep], fits: list[BvdFit]) -> list[str]:
+    return [f"{sweep.label}: {line}" for sweep, fit in zip(sweeps, fits) for line in fit.warnings]
+
+
+def concise(value: float, relative: float) -> str:
+    """``value`` with its standard uncertainty ``relative`` (a fraction) in concise notation: the uncertainty's
+    two leading digits in parentheses, in units of the value's last digit (``1.0395(26)`` is 1.0395 +- 0.0026)."""
+    sigma = abs(value) * relative
+    if not math.isfinite(sigma) or sigma <= 0.0:
+        return f"{value:.6g}"
+    decimals = max(0, 1 - math.floor(math.log10(sigma)))
+    return f"{value:.{decimals}f}({round(sigma * 10**decimals):d})"
+
+
+def _impedance_table(fits: list[BvdFit]) -> Table:
+    title = "Butterworth-Van Dyke fit (the last digits' standard uncertainty in parentheses)"
+    table = Table(box=box.SIMPLE_HEAD, title=title)
+    for heading in ("force (N)", "C0 (nF)", "L (H)", "C (pF)", "R (ohm)", "f_s (Hz)", "Q", "points", "residual"):
+        table.add_column(heading, justify="right", no_wrap=True)
+    for fit in fits:
+        values, spread = fit.values(), fit.uncertainty
+        cells = [concise(values[key], spread[key]) for key in QUANTITIES]
+        force = f"{fit.force_n:g}" if fit.force_given else "0 (none given)"
+        table.add_row(force, *cells, f"{fit.points} ({fit.band_points})", f"{100 * fit.rms_residual:.2g} %")
+    table.caption = "points: in the sweep (inside the half-power band); residual: RMS of (Z fit - Z) / |Z|"
+    return table
+
+
+def run_impedance(args: argparse.Namespace) -> int:
+    """Fit every sweep; print the table or JSON; draw --plot. ConfigError for a bad file or a sweep the
+    model does not fit."""
+    out = None if args.plot is None else figure_target("--plot", args.plot)
+    sweeps, fits = _fits(args.sweeps)
+    if args.json:
+        print(json.dumps([fit.as_json() for fit in fits], indent=2))
+    else:
+        _print(_impedance_table(fits))
+    if out is not None:
+        from tpad_rt.calibrate.plots import impedance_figure
+
+        save(impedance_figure(sweeps, fits), out)
+        print(f"wrote {printable(str(out))}", file=sys.stderr if args.json else sys.stdout)
+    _warn(_fit_warnings(sweeps, fits))
+    return 0
+
+
+def _circuit(args: argparse.Namespace) -> tuple[Circuit, list[str]]:
+    """The circuit the amplitudes are read through, and the impedance fits' warnings."""
+    if args.impedance:
+        sweeps, fits = _fits(args.impedance)
+        return circuit_of(fits), _fit_warnings(sweeps, fits)
+    device = Device.from_file(args.device)
+    return Circuit(device.force_table_n, device.motional_l_h_table, device.motional_c_f_table,
+                   device.motional_r_ohm_table), []
+
+
+def _gamma_table(fit: GammaFit) -> Table:
+    title = f"one gamma: {fit.gamma_n_per_v:.5g} N/V +-{100 * fit.uncertainty:.2g} %"
+    table = Table(box=box.SIMPLE_HEAD, title=title)
+    for heading in ("force (N)", "rows", "own gamma (N/V)", "vs the one gamma", "linear in volts within"):
+        table.add_column(heading, justify="right", no_wrap=True)
+    for force in fit.forces:
+        linearity = "one voltage" if force.linearity is None else f"{100 * force.linearity:.2g} %"
+        table.add_row(f"{force.force_n:g}", f"{force.points}", f"{force.gamma_n_per_v:.5g}",
+                      f"{100 * force.deviation:+.1f} %", linearity)
+    return table
+
+
+def run_amplitude(args: argparse.Namespace) -> int:
+    """Fit gamma; print the table or JSON; draw --plot. ConfigError for a bad file."""
+    out = None if args.plot is None else figure_target("--plot", args.plot)
+    circuit, warnings = _circuit(args)
+    measurements = read_amplitudes(args.measurements)
+    fit = fit_gamma(measurements, circuit, args.freq_hz)
+    if args.json:
+        print(json.dumps(fit.as_json(), indent=2))
+    else:
+        _print(_gamma_table(fit))
+    if out is not None:
+        from tpad_rt.calibrate.plots import amplitude_figure
+
+        save(amplitude_figure(measurements, circuit, fit), out)
+        print(f"wrote {printable(str(out))}", file=sys.stderr if args.json else sys.stdout)
+    _warn(warnings + [f"{measurements.source}: {line}" for line in fit.warnings])
+    return 0
+
+
+def _summary(device: Device, out: Path) -> str:
+    return (f"wrote {printable(str(out))}: device {printable(device.label)}, carrier {device.carrier_hz:.2f} Hz, "
+            f"gamma {device.gamma_n_per_v:.4g} N/V, {len(device.force_table_n)} forces "
+            f"({device.force_table_n[0]:g}-{device.force_table_n[-1]:g} N), "
+            f"{device.amplitude_m_per_v(device.force_table_n[0]) * device.max_voltage_v * 1e6:.3g} um at "
+            f"{device.max_voltage_v:g} V without contact, power budget {device.power_budget_w:g} W")
+
+
+def run_build(args: argparse.Namespace) -> int:
+    """Fit, build and write the device file; print what it holds. ConfigError for a bad input or a device
+    that would not load."""
+    out = Path(args.out)
+    check_writable_target(out, "device files")
+    template = load_device(args.like)
+    full_scale_v = template.amplifier.volts_per_full_scale
+    if args.max_voltage_v is not None and args.max_voltage_v > full_scale_v:
+        raise ConfigError(f"--max-voltage-v: must be <= the volts_per_full_scale of --like {printable(args.like)} "
+                          f"({full_scale_v:g} V), got {args.max_voltage_v:g}")
+    sweeps, fits = _fits(args.impedance)
+    measurements = read_amplitudes(args.amplitude)
+    gamma = fit_gamma(measurements, circuit_of(fits), None)
+    options = BuildOptions(
+        label=args.label or out.stem, impedance_files=tuple(Path(path).name for path in args.impedance),
+        amplitude_file=Path(args.amplitude).name, template_name=str(args.like), carrier_hz=args.carrier_hz,
+        shunt_ohm=args.shunt_ohm, max_voltage_v=args.max_voltage_v, power_budget_w=args.power_budget_w,
+    )
+    document, notes = build_document(fits, gamma, template, options)
+    device = write_device(document, out, _HEADER.format(action="build"))
+    print(_summary(device, out))
+    _warn(_fit_warnings(sweeps, fits) + [f"{measurements.source}: {line}" for line in gamma.warnings] + notes)
+    return 0
+
+
+def run_convert(args: argparse.Namespace) -> int:
+    """Convert the format 1 file; say how far its amplitude table was from one gamma."""
+    out = Path(args.out)
+    check_writable_target(out, "device files")
+    document, spread = convert_document(args.old)
+    device = write_device(document, out, _HEADER.format(action="convert"))
+    print(_summary(device, out))
+    print(f"its amplitude table implied gammas {spread.ratio:.2f}x apart across force; the file now has one, their "
+          f"geometric mean {spread.gamma_n_per_v:.4g} N/V: amplitude per volt follows the circuit")
+    return 0

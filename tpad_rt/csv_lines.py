@@ -1,0 +1,75 @@
+"""Reading the CSV files tpad-rt takes (trajectories, calibration measurements) line by line, bounded.
+
+Lines are read from an already opened regular file (:func:`tpad_rt.files.open_regular`)
+at most ``MAX_LINE_BYTES`` at a time, decoded as UTF-8 (a byte-order mark on the first
+line is skipped), and split by the csv module. Blank lines and lines starting with ``#``
+are skipped. Every problem is a ConfigError ``path:line: problem``.
+
+API map
+-------
+data_lines(path, stream) -> iterator of (line number, fields)
+    the fields of every line that is neither blank nor a comment
+check_header(path, line, header, required, optional, form) -> list of column names
+    ConfigError for an unknown (with a did-you-mean), repeated or missing column
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Iterator, Sequence
+from typing import BinaryIO
+
+from tpad_rt.errors import ConfigError, printable
+from tpad_rt.urls import did_you_mean
+
+#: Longest line (bytes, with its newline): a row is a few short numbers; this bounds one line's fields.
+MAX_LINE_BYTES = 4096
+
+
+def data_lines(path: str, stream: BinaryIO) -> Iterator[tuple[int, list[str]]]:
+    """``(line number, fields)`` of every line that is neither blank nor a comment, as read.
+
+    ``path`` names the file in messages. Raises ConfigError for a line longer than
+    MAX_LINE_BYTES, not UTF-8, or that the csv module refuses, and for a read error.
+    """
+    try:
+        for number, raw in enumerate(iter(lambda: stream.readline(MAX_LINE_BYTES + 1), b""), start=1):
+            if len(raw) > MAX_LINE_BYTES:
+                raise ConfigError(f"{path}:{number}: line longer than {MAX_LINE_BYTES:,} bytes")
+            try:
+                line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
+            except UnicodeDecodeError:
+                raise ConfigError(f"{path}:{number}: not UTF-8 text") from None
+            stripped = line.strip()
+            if stripped and not stripped.startswith("#"):
+                yield number, _fields(path, number, line.rstrip("\r\n"))
+    except OSError as error:
+        raise ConfigError(f"{path}: cannot read: {error.strerror}") from None
+
+
+def _fields(path: str, number: int, line: str) -> list[str]:
+    """The comma-separated fields of ``line``, stripped; ConfigError for a line the csv module refuses
+    (a carriage return inside it: a file whose lines end in CR alone reads as one line)."""
+    try:
+        return [field.strip() for field in next(csv.reader([line]), [])]
+    except csv.Error as error:
+        hint = "; lines must end in LF or CR LF" if "\r" in line else ""
+        raise ConfigError(f"{path}:{number}: not a CSV line ({error}){hint}") from None
+
+
+def check_header(
+    path: str, line: int, header: list[str], required: Sequence[str], optional: Sequence[str], form: str
+) -> list[str]:
+    """``header`` once every name in it is one of ``required`` or ``optional``, none twice, none of
+    ``required`` missing; ConfigError ``path:line: header: problem; expected FORM`` otherwise."""
+    known = list(required) + list(optional)
+    for name in header:
+        if name not in known:
+            hint = did_you_mean(name, known) or f" (columns: {', '.join(known)})"
+            raise ConfigError(f"{path}:{line}: header: unknown column '{printable(name)}'{hint}; expected {form}")
+        if header.count(name) > 1:
+            raise ConfigError(f"{path}:{line}: header: column '{name}' appears twice; expected {form}")
+    missing = [name for name in required if name not in header]
+    if missing:
+        raise ConfigError(f"{path}:{line}: header: missing column {', '.join(missing)}; expected {form}")
+    return header
