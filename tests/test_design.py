@@ -132,3 +132,17 @@ def test_every_accepted_plate_gives_finite_figures(capsys, plate, length, mode):
     assert main(["design", "--plate", plate, "--length-mm", length, "--mode", mode, "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
     assert all(math.isfinite(value) for row in rows for value in row.values() if isinstance(value, float))
+
+
+def test_the_papers_measured_power_order_is_shown_beside_eq21_and_where_they_part(capsys) -> None:
+    from tpad_rt.cli.design import design_rows, order_rows
+    from tpad_rt.physics.plate import TABLE1_GLASSES
+
+    orders = {row["pair"]: row for row in order_rows(design_rows(list(TABLE1_GLASSES), 0.130, 20, "SLG_0.56"))}
+    assert len(orders) == 8
+    assert [pair for pair, row in orders.items() if not row["agrees"]] == ["SLG_0.7 < BoroFloat_0.7"]
+    assert orders["SLG_0.7 < BoroFloat_0.7"]["eq21"] == "1.372 > 1.188"
+    assert main(["design"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "Power: the paper's measured order against Eq. 21" in out
+    assert "Where they part: SLG_0.7 < BoroFloat_0.7." in out

@@ -34,6 +34,22 @@ _PAPER_POWER_NOTES = {
     "Gorilla_0.8": "~ 1 W",
 }
 
+#: The paper's measured order of real power between plates (Section IV, "Results"), as ``(lower, higher,
+#: figure)``: Fig. 6 compares thicknesses of one glass, Fig. 7 glasses of one thickness.
+PAPER_ORDERS: tuple[tuple[str, str, str], ...] = (
+    ("SLG_0.4", "SLG_0.56", "6a"),
+    ("SLG_0.56", "SLG_0.7", "6a"),
+    ("D263_0.4", "D263_0.56", "6b"),
+    ("Gorilla_0.56", "Gorilla_0.8", "6c"),
+    ("SLG_0.4", "D263_0.4", "7a"),
+    ("SLG_0.56", "D263_0.56", "7b"),
+    ("SLG_0.7", "BoroFloat_0.7", "7c"),
+)
+#: Pairs the paper measured close, with the figure: Gorilla_0.56 'similar to' SLG_0.56.
+PAPER_CLOSE = (("SLG_0.56", "Gorilla_0.56", "7b"),)
+#: Eq. 21 calls two plates close when their powers differ by less than this fraction.
+CLOSE_FRACTION = 0.05
+
 _FOOTNOTE = (
     "Resonance: the m x 0 mode of the glass alone as an Euler-Bernoulli beam (Eq. 16, "
     "wavelength 2 l / m); actuator and glue are ignored. For the paper's 130 mm plates "
@@ -171,6 +187,35 @@ def _table(rows: list[dict[str, Any]], mode_m: int, reference: str) -> Table:
     return table
 
 
+def order_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The paper's measured power orders (PAPER_ORDERS, PAPER_CLOSE) beside what Eq. 21 predicts for them:
+    one row per pair present in ``rows``, with ``agrees``."""
+    ratio = {row["label"]: row["power_ratio"] for row in rows}
+    out = []
+    for lower, higher, figure in PAPER_ORDERS:
+        if lower in ratio and higher in ratio:
+            predicted = ratio[lower] < ratio[higher]
+            out.append({"pair": f"{lower} < {higher}", "figure": figure,
+                        "eq21": f"{ratio[lower]:.3f} {'<' if predicted else '>'} {ratio[higher]:.3f}",
+                        "agrees": predicted})
+    for first, second, figure in PAPER_CLOSE:
+        if first in ratio and second in ratio:
+            apart = abs(ratio[first] / ratio[second] - 1)
+            out.append({"pair": f"{first} ~ {second}", "figure": figure,
+                        "eq21": f"{100 * apart:.1f} % apart", "agrees": apart < CLOSE_FRACTION})
+    return out
+
+
+def _order_table(orders: list[dict[str, Any]]) -> Table:
+    table = Table(title="Power: the paper's measured order against Eq. 21", box=box.SIMPLE_HEAD, show_edge=False,
+                  pad_edge=False)
+    for header in ("measured (Section IV)", "Fig.", "Eq. 21: P / P_ref", ""):
+        table.add_column(header, no_wrap=True)
+    for row in orders:
+        table.add_row(row["pair"], row["figure"], row["eq21"], "agrees" if row["agrees"] else "PARTS")
+    return table
+
+
 def _positive_option(name: str, value: float) -> float:
     if not (math.isfinite(value) and value > 0):
         raise ConfigError(f"{name} must be > 0, got {value:g}")
@@ -189,4 +234,17 @@ def run(args: argparse.Namespace) -> int:
     console.print(_table(rows, mode_m, args.reference))
     console.print()
     console.print(_FOOTNOTE)
+    orders = order_rows(rows)
+    if orders:
+        console.print()
+        console.print(_order_table(orders))
+        parted = [row["pair"] for row in orders if not row["agrees"]]
+        console.print(_ORDER_NOTE.format(parted=", ".join(parted) if parted else "nowhere"))
     return 0
+
+
+_ORDER_NOTE = (
+    "Where they part: {parted}. There Eq. 21, as the paper prints it in its Discussion, predicts the reverse of "
+    "what its Results measured, and the paper does not reconcile the two. The shipped device files follow the "
+    "measured order (calibration/derive.py)."
+)
