@@ -157,7 +157,10 @@ class ImpedanceSweep:
 
     @property
     def label(self) -> str:
-        """``file, 0.5 N`` (``file, 0 N (no force_n column)`` when the file gives no force)."""
+        """``file, 0.5 N`` (``file, 0 N (no force_n column)`` when the file gives no force; the source alone when
+        the force is unknown, NaN: a sweep measured through an amplifier)."""
+        if math.isnan(self.force_n):
+            return self.source
         force = f"{self.force_n:g} N" if self.force_given else "0 N (no force_n column)"
         return f"{self.source}, {force}"
 

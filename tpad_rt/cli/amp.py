@@ -13,7 +13,7 @@ up to 256 samples, a 50 ms watchdog with a 10 ms ramp, STATUS every 5 ms; curren
 voltage and phase measured; an overcurrent trip at 1.5 x the current at the clamp at
 resonance), and enforces every amplifier rule A1-A8. Envelope samples play in real time
 at their due times on the monotonic clock; each drives the device's simulated plate
-(``--device``, default the shipped default device, at a contact force of 0.5 N), whose
+(``--device``, default the shipped default device, at a contact force of 0.5 N, or ``--force-n``), whose
 circuit gives the measured current and phase. The watchdog trips 38 ms after the last
 frame the emulator read (A4's 40 ms less 2 ms for its own reading latency), so the output
 is 0 within 50 ms of the frame's arrival. It asks for real-time scheduling (SCHED_FIFO),
@@ -59,7 +59,7 @@ from tpad_rt.amp.emulator import (
 from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
-from tpad_rt.limits import MAX_INPUT_S
+from tpad_rt.limits import MAX_FORCE_N, MAX_INPUT_S
 from tpad_rt.pipeline import RenderOptions
 
 #: Contact force (N) of the simulated plate: the runtime's default finger force.
@@ -153,6 +153,9 @@ def add_parser(subparsers: Subparsers) -> None:
                          help=f"end after S seconds, at most {MAX_INPUT_S:g} (default: run until SIGTERM or Ctrl-C)")
     emulate.add_argument("--fault", metavar="SPEC", action="append", default=[], type=fault_spec,
                          help="inject a fault (see below); repeatable")
+    emulate.add_argument("--force-n", metavar="N", type=number(0, True, MAX_FORCE_N, "N"), default=CONTACT_FORCE_N,
+                         help=f"contact force on the simulated plate (default {CONTACT_FORCE_N:g}): its circuit and "
+                         "plate at that force")
     emulate.add_argument("--seed", metavar="N", type=whole(2**32 - 1, "a 32-bit seed", low=0), default=0,
                          help="seed of the random faults (default 0)")
     emulate.set_defaults(func=run)
@@ -198,9 +201,9 @@ def run(args: argparse.Namespace) -> int:
     plan = fault_plan(args.fault, args.seed)
     if args.record is not None:
         check_record_path(args.record)
-    circuit = Circuit(device, CONTACT_FORCE_N)
+    circuit = Circuit(device, args.force_n)
     info = amplifier_info(device, circuit)
-    plate = Plate(device, CONTACT_FORCE_N, sim_rate_hz(info.carrier_max_mhz))
+    plate = Plate(device, args.force_n, sim_rate_hz(info.carrier_max_mhz))
     recorder = Recorder() if args.record is not None else None
     with _stop_signals() as stop:  # to the end: a second signal must not cut the recording short
         port = Port.open_pty() if args.port is None else Port.open_device(args.port)

@@ -9,7 +9,9 @@ Actions:
   how well one gamma explains every force;
 - ``build --impedance SWEEP.csv... --amplitude MEAS.csv --out DEVICE.yaml``: both fits,
   written as a device file that ``tpad-rt check`` accepts and ``play`` renders;
-- ``convert OLD.yaml --out NEW.yaml``: a format 1 device file as format 2.
+- ``convert OLD.yaml --out NEW.yaml``: a format 1 device file as format 2;
+- ``sweep serial://PORT [--device FILE]``: find the resonance through an amplifier that
+  measures current and phase (:mod:`tpad_rt.calibrate.sweep`).
 
 Tables go to stdout; warnings (a poorly determined parameter, a force one gamma does not
 explain) to stderr as ``warning: ...`` once the action succeeded. Every mistake (a bad
@@ -20,16 +22,20 @@ one line on stderr and exit status 1, with nothing written.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import shutil
 import sys
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from rich import box
 from rich.console import Console
 from rich.table import Table
 
+from tpad_rt.calibrate import sweep
 from tpad_rt.calibrate.amplitude import Circuit, GammaFit, fit_gamma
 from tpad_rt.calibrate.device_file import BuildOptions, build_document, circuit_of, convert_document, write_device
 from tpad_rt.calibrate.impedance import QUANTITIES, BvdFit, fit_sweep
@@ -104,6 +110,29 @@ def add_parser(subparsers: Subparsers) -> None:
     convert.add_argument("old", metavar="OLD.yaml", help="format 1 device file")
     convert.add_argument("--out", metavar="NEW.yaml", required=True, help="format 2 device file to write")
     convert.set_defaults(func=run_convert)
+
+    sweeper = actions.add_parser(
+        "sweep", help="find the resonance through a serial amplifier that measures current and phase",
+        description="Sweep the carrier of a serial amplifier (docs/amp-protocol.md) holding a small drive, read "
+        "the current and phase it measures, and fit the circuit around the resonance.")
+    sweeper.add_argument("url", metavar="serial://PORT", help="the amplifier (as play's --output takes it)")
+    sweeper.add_argument("--device", metavar="FILE", help="device file or shipped name: its carrier centres the "
+                         "search, its shunt is taken off the measured impedance (default: default)")
+    sweeper.add_argument("--from-hz", type=number(MIN_CARRIER_HZ, True, MAX_CARRIER_HZ, "Hz"),
+                         help=f"lowest carrier of the coarse sweep (default: the device's carrier less "
+                         f"{100 * sweep.COARSE_SPAN:g} %%)")
+    sweeper.add_argument("--to-hz", type=number(MIN_CARRIER_HZ, True, MAX_CARRIER_HZ, "Hz"),
+                         help=f"highest carrier of the coarse sweep (default: the device's carrier plus "
+                         f"{100 * sweep.COARSE_SPAN:g} %%)")
+    sweeper.add_argument("--drive-v", type=number(0, False, MAX_VOLTS, "V"),
+                         help=f"drive held while sweeping, V peak (default: {sweep.DEFAULT_DRIVE_V:g} V, or 1/8 of "
+                         "the device's max volts if less)")
+    sweeper.add_argument("--dwell-ms", type=number(1, True, 10_000, "ms"), default=sweep.DEFAULT_DWELL_S * 1e3,
+                         help=f"time each carrier is held before it is read (default {sweep.DEFAULT_DWELL_S * 1e3:g})")
+    sweeper.add_argument("--out", metavar="SWEEP.csv", help="write the fine sweep (freq_hz, z_real_ohm, z_imag_ohm)")
+    sweeper.add_argument("--json", action="store_true", help="print a JSON object")
+    sweeper.add_argument("--plot", metavar="FILE.png", help="draw the fine sweep with its fit")
+    sweeper.set_defaults(func=run_sweep)
 
 
 #: Columns the fit tables need: wider than a default 80-column terminal, so they are printed at least this wide.
@@ -253,6 +282,90 @@ def run_build(args: argparse.Namespace) -> int:
     print(_summary(device, out))
     _warn(_fit_warnings(sweeps, fits) + [f"{measurements.source}: {line}" for line in gamma.warnings] + notes)
     return 0
+
+
+def _write_sweep(out: Path, found: sweep.SweepResult) -> None:
+    """The fine sweep as an impedance CSV (docs/calibration.md "CSV formats")."""
+    fine = found.fine
+    lines = [f"# tpad-rt calibrate sweep: {fine.source}, the device's shunt taken off", "freq_hz,z_real_ohm,z_imag_ohm"]
+    lines += [f"{freq!r},{z.real!r},{z.imag!r}" for freq, z in zip(fine.freq_hz.tolist(), fine.impedance_ohm.tolist())]
+    try:
+        out.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    except OSError as error:
+        raise ConfigError(f"{printable(str(out))}: cannot write: {error.strerror or error}") from None
+
+
+def run_sweep(args: argparse.Namespace) -> int:
+    """Find the resonance through the amplifier; print it. ConfigError for a bad option or a sweep the model does
+    not fit, BackendError for the amplifier."""
+    from tpad_rt.outputs.serial_amp import AmpLink, parse_serial_url
+
+    plot = None if args.plot is None else figure_target("--plot", args.plot)
+    out = None if args.out is None else Path(args.out)
+    if out is not None:
+        check_writable_target(out, "impedance sweeps")
+    device = Device.default() if args.device is None else Device.from_file(args.device)
+    drive_v = args.drive_v if args.drive_v is not None else min(sweep.DEFAULT_DRIVE_V, device.max_voltage_v / 8)
+    if drive_v > device.max_voltage_v:
+        raise ConfigError(f"--drive-v: must be <= the device's max_voltage_v ({device.max_voltage_v:g} V), "
+                          f"got {drive_v:g}")
+    low = args.from_hz if args.from_hz is not None else device.carrier_hz * (1 - sweep.COARSE_SPAN)
+    high = args.to_hz if args.to_hz is not None else device.carrier_hz * (1 + sweep.COARSE_SPAN)
+    if not low < high:
+        raise ConfigError(f"--from-hz ({low:g}) must be below --to-hz ({high:g})")
+    target = parse_serial_url(args.url)
+    link = AmpLink.open(target, carrier_hz=low)
+    started = time.monotonic()
+    try:
+        assert link.info is not None
+        if drive_v > link.info.max_v:
+            raise ConfigError(f"--drive-v: must be <= the amplifier's clamp ({link.info.max_v:g} V), got {drive_v:g}")
+        with _progress("sweeping the carrier") as advance:
+            found = sweep.find_resonance(link, device, drive_v, args.dwell_ms * 1e-3, low, high, advance)
+    finally:
+        link.stop(ramp_ms=5.0)
+    seconds = time.monotonic() - started
+    if out is not None:
+        _write_sweep(out, found)
+    if args.json:
+        print(json.dumps(found.as_json(), indent=2))
+    else:
+        fit = found.fit
+        zero = "none within 5 degrees (the piezo stays capacitive)" if found.zero_phase_hz is None \
+            else f"{found.zero_phase_hz:.2f} Hz"
+        print(f"resonance: {found.loaded_resonance_hz:.2f} Hz loaded by the shunt (the carrier to drive at); "
+              f"series {fit.resonance_hz:.2f} Hz")
+        print(f"circuit: C0 {fit.c0_f * 1e9:.4g} nF, L {fit.l_h:.5g} H, C {fit.c_f * 1e12:.5g} pF, "
+              f"R {fit.r_ohm:.5g} ohm, Q {fit.q:.4g}; zero phase: {zero}")
+        print(f"measured {len(found.coarse.freq_hz) + len(found.fine.freq_hz)} carriers at {drive_v:g} V in "
+              f"{seconds:.1f} s")
+    if plot is not None:
+        from tpad_rt.calibrate.plots import impedance_figure
+
+        save(impedance_figure([found.fine], [found.fit]), plot)
+        print(f"wrote {printable(str(plot))}", file=sys.stderr if args.json else sys.stdout)
+    if out is not None:
+        print(f"wrote {printable(str(out))}", file=sys.stderr if args.json else sys.stdout)
+    _warn([f"{found.fine.label}: {line}" for line in found.fit.warnings])
+    return 0
+
+
+@contextlib.contextmanager
+def _progress(what: str) -> Iterator[Callable[[int, int], None]]:
+    """A progress bar on stderr while the block runs (none when stderr is not a terminal); yields advance(done,
+    total)."""
+    if not sys.stderr.isatty():
+        yield lambda done, total: None
+        return
+    from rich.progress import Progress
+
+    with Progress(console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(what, total=None)
+
+        def advance(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield advance
 
 
 def run_convert(args: argparse.Namespace) -> int:

@@ -13,6 +13,9 @@ AmpLink.open(target, *, carrier_hz, timeout_s=HELLO_TIMEOUT_S) -> AmpLink
 AmpLink.start(table) / .failure() / .stop(ramp_ms) / .stats() / .info / .carrier_hz
     stream with the GIL-free streamer (:mod:`tpad_rt.kernel.amp_stream`) in a thread;
     the error that ended the stream (a BackendError), or None; end with STOP (H8), close
+AmpLink.set_carrier(carrier_hz) / .tone(envelope_v, seconds) -> AmpStatus
+    measuring instead of rendering (``tpad-rt calibrate sweep``): move the carrier, hold a
+    constant envelope from Python and read the amplifier's measured voltage, current, phase
 warm_up(table)
     compile the streamer before a port opens
 
@@ -142,6 +145,22 @@ def _read_info(body: np.ndarray) -> AmpInfo:
     return info
 
 
+@dataclass(frozen=True)
+class AmpStatus:
+    """What one STATUS measured (docs/amp-protocol.md 3.2), in SI units: the applied envelope (V peak, signed),
+    rms voltage (V) and current (A), the phase of current against voltage (degrees), the carrier (Hz)."""
+
+    envelope_v: float
+    voltage_v_rms: float
+    current_a_rms: float
+    phase_deg: float
+    carrier_hz: float
+
+
+#: Envelope the amplifier holds buffered while :meth:`AmpLink.tone` plays (s): a Python loop keeps it filled.
+TONE_BUFFER_S = 0.03
+
+
 class AmpLink:
     """An open session with a serial amplifier (create it with :meth:`open`)."""
 
@@ -166,6 +185,7 @@ class AmpLink:
         self.frame_samples = 0
         self.target_fill = 0
         self.realtime = False  # whether the streamer thread got real-time scheduling
+        self._tone_index = -1  # the next envelope index tone() writes; -1 before its START
 
     # --- opening ----------------------------------------------------------------------
 
@@ -307,6 +327,87 @@ class AmpLink:
             most_ms = (info.buffer_samples - self.frame_samples) / target.envelope_hz * 1e3
             raise ConfigError(f"serial: buffer_ms={target.buffer_ms:g} is more than the amplifier's buffer holds "
                               f"at {target.envelope_hz} Hz (at most {most_ms:g} ms)")
+
+    # --- measuring (calibrate sweep) ---------------------------------------------------
+
+    def set_carrier(self, carrier_hz: float) -> float:
+        """SET_CARRIER (also while a tone plays: the amplifier keeps the phase continuous); the achieved carrier
+        (Hz). BackendError outside the amplifier's range or for a refusal."""
+        self._set_carrier(carrier_hz)
+        return self.carrier_hz
+
+    def tone(self, envelope_v: float, seconds: float) -> AmpStatus:
+        """Hold a constant envelope of ``envelope_v`` (V peak, at most the amplifier's clamp) for ``seconds``;
+        the last STATUS read, once the amplifier applied the envelope on the present carrier.
+
+        The first call STARTs a stream; this loop (Python, not the streamer) keeps TONE_BUFFER_S of envelope
+        buffered from the play index each STATUS reports. :meth:`stop` ends it as it ends a stream.
+        BackendError for a fault, a lost port, an amplifier that stops reporting, or one that refuses START.
+        """
+        info = self.info
+        assert info is not None and self._thread is None
+        value = round(max(-1.0, min(1.0, envelope_v / info.full_scale_v)) * 32767)
+        rate = self.target.envelope_hz
+        fill = min(info.buffer_samples - self.frame_samples, max(self.target_fill, round(TONE_BUFFER_S * rate)))
+        if self._tone_index < 0:
+            payload = rate.to_bytes(4, "little") + (0).to_bytes(4, "little") + min(fill, info.buffer_samples).to_bytes(
+                2, "little")
+            self._start_sent = True
+            self._command(payload, codec.MSG_START, f"START at {rate} Hz")
+            self._tone_index = 0
+            self._write_tone(value, 0, fill)
+        deadline = time.monotonic() + seconds
+        silent_s = (4 * info.status_period_ms + 100) * 1e-3
+        last: AmpStatus | None = None
+        while True:
+            body = self._receive(codec.MSG_STATUS, time.monotonic() + silent_s)
+            if body is None:
+                raise BackendError(f"serial: the amplifier on {self.target.port} stopped reporting (no STATUS for "
+                                   f"{silent_s * 1e3:.0f} ms)")
+            status = self._status(body)
+            self._write_tone(value, int(codec.get_u32(body, codec.PAYLOAD + codec.STATUS_PLAY_INDEX)), fill)
+            if status is not None and abs(status.carrier_hz - self.carrier_hz) < 1e-3 and \
+                    abs(status.envelope_v * 32767 / info.full_scale_v - value) <= 1.0:
+                last = status
+            if time.monotonic() >= deadline and last is not None:
+                return last
+
+    def _status(self, body: np.ndarray) -> AmpStatus | None:
+        """The STATUS ``body`` measured, or None while it plays nothing; BackendError for a fault."""
+        info = self.info
+        assert info is not None
+        at = codec.PAYLOAD
+        faults = int(body[at + codec.STATUS_FAULTS])
+        if faults:
+            names = [name for bit, name in codec.FAULT_BITS if faults & bit] or [f"bits {faults:#x}"]
+            raise BackendError(f"serial: the amplifier on {self.target.port} reported a fault: {', '.join(names)}; "
+                               "its output is off")
+        if int(body[at + codec.STATUS_STATE]) != codec.STATE_RUNNING:
+            return None
+        envelope_mv = int(np.frombuffer(body[at + codec.STATUS_ENVELOPE_MV:at + codec.STATUS_ENVELOPE_MV + 4].tobytes(),
+                                        dtype="<i4")[0])
+        phase_cdeg = int(np.frombuffer(body[at + codec.STATUS_PHASE_CDEG:at + codec.STATUS_PHASE_CDEG + 2].tobytes(),
+                                       dtype="<i2")[0])
+        return AmpStatus(
+            envelope_v=envelope_mv / 1e3,
+            voltage_v_rms=codec.get_u32(body, at + codec.STATUS_VOLTAGE_MV_RMS) / 1e3,
+            current_a_rms=codec.get_u32(body, at + codec.STATUS_CURRENT_UA_RMS) / 1e6,
+            phase_deg=phase_cdeg / 100,
+            carrier_hz=codec.get_u32(body, at + codec.STATUS_CARRIER_MHZ) / 1e3,
+        )
+
+    def _write_tone(self, value: int, play_index: int, fill: int) -> None:
+        """ENVELOPE frames of ``value`` from the next unwritten index until ``fill`` samples past ``play_index``
+        (skipping indices already played: the amplifier counts those as underruns)."""
+        info = self.info
+        assert info is not None
+        lag = (play_index - self._tone_index) & 0xFFFFFFFF
+        if lag < 0x80000000:  # the amplifier played past what was written
+            self._tone_index = play_index
+        samples = np.full(self.frame_samples, value, dtype="<i2").tobytes()
+        while ((self._tone_index - play_index) & 0xFFFFFFFF) + self.frame_samples <= fill:
+            self._send((self._tone_index & 0xFFFFFFFF).to_bytes(4, "little") + samples, codec.MSG_ENVELOPE)
+            self._tone_index = (self._tone_index + self.frame_samples) & 0xFFFFFFFF
 
     # --- streaming --------------------------------------------------------------------
 

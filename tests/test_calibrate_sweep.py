@@ -1,0 +1,89 @@
+"""``tpad-rt calibrate sweep``: the resonance found through the amplifier emulator (a real process on a real pty),
+which simulates its device file's circuit at its contact force."""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from amp_emulator import Emulator
+from cli_run import tpad_rt
+
+from tpad_rt.calibrate.measurements import read_impedance_sweeps
+from tpad_rt.device import Device
+from tpad_rt.physics import electromech
+from tpad_rt.shipped import DEVICES_DIR
+
+
+@pytest.mark.parametrize(("label", "force_n"), [("default", 0.5), ("SLG_0.4", 2.0)])
+def test_the_sweep_finds_the_emulated_devices_resonance_within_0_05_percent(tmp_path: Path, label: str,
+                                                                            force_n: float) -> None:
+    device = Device.from_file(DEVICES_DIR / f"{label}.yaml")
+    out = tmp_path / "fine.csv"
+    with Emulator(tmp_path, "--device", label, "--force-n", str(force_n)) as amp:
+        run = tpad_rt("calibrate", "sweep", f"serial://{amp.port}", "--device", label, "--json", "--out", str(out))
+        amp.finish()
+    assert run.returncode == 0, run.stderr
+    found = json.loads(run.stdout)
+    l_h, c_f, r_ohm = (float(value) for value in device.motional(force_n))
+    series_hz = float(electromech.resonance_hz(l_h, c_f))
+    assert found["resonance_hz"] == pytest.approx(series_hz, rel=5e-4)
+    assert found["loaded_resonance_hz"] == pytest.approx(float(device.motional_resonance_hz(force_n)), rel=5e-4)
+    # At 2 N the plate sits 0.125 % above the carrier it was tuned to: the sweep sees the detuned plate
+    assert abs(found["resonance_hz"] / device.carrier_hz - 1) > (1e-3 if force_n == 2.0 else 0.0)
+    assert found["motional_r_ohm"] == pytest.approx(r_ohm, rel=0.01)
+    assert found["c0_nf"] == pytest.approx(device.c0_f * 1e9, rel=0.01)
+    assert found["zero_phase_hz"] is None  # C0's current dominates: a TPaD's piezo stays capacitive
+    [fine] = read_impedance_sweeps(out)  # what calibrate impedance and build take
+    assert len(fine.freq_hz) == 101 and fine.freq_hz[0] < series_hz < fine.freq_hz[-1]
+
+
+def test_a_vanished_amplifier_ends_the_sweep_in_one_line(tmp_path: Path) -> None:
+    with Emulator(tmp_path, "--fault", "disconnect:1.5") as amp:
+        run = tpad_rt("calibrate", "sweep", f"serial://{amp.port}")
+        amp.finish(sig=None)
+    run.assert_one_line_error("tpad-rt calibrate sweep: serial:")
+
+
+@pytest.mark.parametrize(("args", "expected"), [
+    (("--drive-v", "41"), "--drive-v: must be <= the device's max_voltage_v (40 V), got 41"),
+    (("--from-hz", "40000", "--to-hz", "30000"), "--from-hz (40000) must be below --to-hz (30000)"),
+    (("--dwell-ms", "0"), "argument --dwell-ms: must be a number in [1, 10000] (ms), got '0'"),
+    (("--plot", "x.gif"), "--plot: must end in .png, .pdf, .svg"),
+])
+def test_bad_options_end_in_one_line_before_the_port_opens(args: tuple[str, ...], expected: str) -> None:
+    tpad_rt("calibrate", "sweep", "serial:///dev/nonexistent-port", *args).assert_one_line_error(expected)
+
+
+def test_a_missing_port_is_one_line() -> None:
+    tpad_rt("calibrate", "sweep", "serial:///dev/nonexistent-port").assert_one_line_error(
+        "serial: cannot open /dev/nonexistent-port")
+
+
+def _has_open(pid: int, path: str) -> bool:
+    """Whether process ``pid`` holds ``path`` open (its /proc fd links)."""
+    folder = Path(f"/proc/{pid}/fd")
+    try:
+        return any(os.readlink(folder / name) == path for name in os.listdir(folder))
+    except OSError:
+        return False
+
+
+def test_a_signal_during_the_sweep_ramps_down_and_exits_130(tmp_path: Path) -> None:
+    with Emulator(tmp_path) as amp:
+        process = subprocess.Popen([sys.executable, "-m", "tpad_rt", "calibrate", "sweep", f"serial://{amp.port}"],
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        while process.poll() is None and not _has_open(process.pid, amp.port):
+            select.select([], [], [], 0.01)  # poll /proc for the port, opened once the imports are done
+        process.send_signal(signal.SIGINT)
+        _, err = process.communicate(timeout=60)
+        recording = amp.finish()
+    assert process.returncode == 130, err
+    assert err.strip() == "tpad-rt calibrate sweep: interrupted"
+    assert len(recording["envelope_v"]) == 0 or recording["envelope_v"][-1] == 0.0
