@@ -6,7 +6,7 @@ load_texture(path) -> TextureFile
     one of Grating, Bitmap, Gradient, Bumps, Edges, Temporal, Layers
 load_device(path) -> DeviceFile
 load_any(path) -> TextureFile | DeviceFile
-    a device file has ``resonance_hz``, a texture file has ``kind``
+    a device file has ``format_version`` (format 1: ``resonance_hz``), a texture file has ``kind``
 check_file(path) -> list[str]
     every breadcrumb error of a file (empty if it is fine)
 schema_json("texture" | "device") -> dict
