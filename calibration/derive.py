@@ -92,7 +92,8 @@ SOURCE = {
     "label": "measured: paper Table 1",
     "plate": "measured: paper Table 1 (thickness, density, Young's modulus), Section II (130 x 60 mm, 20 x 0 mode)",
     "actuator": "measured: paper Section VI (SMPL60W5T03R112: 0.3 mm, 7.9 g/cm3, 84 GPa)",
-    "carrier_hz": "derived: glass-only Euler-Bernoulli beam (Eq. 16) scaled by one factor so SLG_0.4 = 22.4 kHz, "
+    "carrier_hz": "derived: glass-only free-free Euler-Bernoulli beam (Eq. 16, 20 nodal lines) scaled by one factor so "
+    "SLG_0.4 = 22.4 kHz, "
     "the lowest the paper reports (Section II); rounded to 10 Hz; the motional branch's loaded resonance at 0 N",
     "amplifier.max_voltage_v": "illustrative: the paper's test drive, its +/-40 V source (Section II), not a measured limit "
     "of the plate",

@@ -51,10 +51,10 @@ PAPER_CLOSE = (("SLG_0.56", "Gorilla_0.56", "7b"),)
 CLOSE_FRACTION = 0.05
 
 _FOOTNOTE = (
-    "Resonance: the m x 0 mode of the glass alone as an Euler-Bernoulli beam (Eq. 16, "
-    "wavelength 2 l / m); actuator and glue are ignored. For the paper's 130 mm plates "
-    "in the 20x0 mode it predicts 22.96-46.67 kHz where the paper measured 22.4-44.6 kHz: "
-    "2.5 % high at the low end, 4.6 % at the top.\n"
+    "Resonance: the m x 0 mode of the glass alone as a free-free Euler-Bernoulli beam (Eq. 16, "
+    "m nodal lines: wavelength 2 l / (m - 1/2)); actuator and glue are ignored. For the paper's 130 mm plates "
+    "in the 20x0 mode it predicts 21.82-44.37 kHz where the paper measured 22.4-44.6 kHz: "
+    "2.6 % low at the low end, 0.5 % at the top.\n"
     f"n: amplification number, Eqs. 19-20, actuator {ACTUATOR.thickness_mm} mm, "
     f"{ACTUATOR.density_g_cm3} g/cm3, {ACTUATOR.youngs_modulus_gpa:g} GPa (Section VI).\n"
     "Power: Eq. 21, P / P_ref = n_ref^2 / n^2 at equal drive voltage, assuming the "
