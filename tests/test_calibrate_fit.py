@@ -286,3 +286,10 @@ def test_a_fifo_is_refused_before_it_is_read(tmp_path):
     os.mkfifo(fifo)
     with pytest.raises(ConfigError, match="not a regular file \\(a FIFO\\); tpad-rt reads impedance sweeps from"):
         read_impedance_sweeps(fifo)
+
+
+def test_a_file_of_too_many_forces_is_refused(tmp_path, monkeypatch):
+    monkeypatch.setattr(measurements, "MAX_SWEEPS", 2)
+    rows = "".join(f"{30000 + k},1,-500,{force}\n" for force in (0, 1, 2) for k in range(20))
+    with pytest.raises(ConfigError, match="m.csv: 3 forces; a file may hold at most 2 sweeps"):
+        read_impedance_sweeps(_write(tmp_path, "freq_hz,z_real_ohm,z_imag_ohm,force_n\n" + rows))

@@ -23,6 +23,7 @@ from __future__ import annotations
 import datetime
 import math
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -249,7 +250,9 @@ def write_device(document: dict[str, Any], out: str | Path, header: str = "") ->
         try:
             device = Device.from_file(temporary)
         except ConfigError as error:
-            raise ConfigError([line.replace(str(temporary), shown) for line in error.errors]) from None
+            # The lines name the temporary file and its line numbers: the user sees neither.
+            raise ConfigError([re.sub(r" \(line \d+\)$", "", line.replace(str(temporary), f"{shown} (not written)"))
+                               for line in error.errors]) from None
         os.replace(temporary, target)
     except OSError as error:
         raise ConfigError(f"{shown}: cannot write: {error.strerror or error}") from None

@@ -19,8 +19,8 @@ API map
 -------
 read_impedance_sweeps(path) -> list[ImpedanceSweep]     one per force, frequencies ascending
 read_amplitudes(path) -> AmplitudeMeasurements
-MIN_SWEEP_POINTS
-    fewest points a sweep may have
+MIN_SWEEP_POINTS, MAX_SWEEPS
+    fewest points a sweep may have, most sweeps a file may hold
 """
 
 from __future__ import annotations
@@ -40,6 +40,8 @@ from tpad_rt.limits import MAX_FORCE_N, MAX_MEASUREMENT_BYTES, MAX_MEASUREMENT_R
 
 #: Fewest points an impedance sweep may have (four parameters are fitted to it).
 MIN_SWEEP_POINTS = 20
+#: Most sweeps (distinct forces) one file may hold: a device's force table is a few to tens of forces.
+MAX_SWEEPS = 256
 
 _Array = npt.NDArray[np.float64]
 
@@ -186,8 +188,11 @@ def read_impedance_sweeps(path: str | Path) -> list[ImpedanceSweep]:
         raise ConfigError(f"{table.name}:{table.lines[short[0]]}: |Z| is below {MIN_IMPEDANCE_OHM:g} ohm: a short "
                           "circuit, not a sweep")
     forces = columns.get("force_n", np.zeros(len(impedance)))
+    distinct = np.unique(forces)
+    if len(distinct) > MAX_SWEEPS:
+        raise ConfigError(f"{table.name}: {len(distinct):,} forces; a file may hold at most {MAX_SWEEPS} sweeps")
     sweeps = []
-    for force in np.unique(forces):
+    for force in distinct:
         rows = np.flatnonzero(forces == force)
         rows = rows[np.argsort(columns["freq_hz"][rows], kind="stable")]
         freq = columns["freq_hz"][rows]
