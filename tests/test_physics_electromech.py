@@ -188,3 +188,70 @@ def test_vectorised_functions_equal_a_scalar_reference_point_by_point():
     assert em.resonance_hz(L_H, C_F) == pytest.approx(1 / (2 * math.pi * math.sqrt(L_H * C_F)), rel=1e-12)
     assert isinstance(em.quality_factor(L_H, C_F, R_OHM), np.float64)  # a NumPy scalar for scalar inputs
 
+
+
+# --- the device model's quantities: naive references from complex circuit algebra ---------------------------
+
+def _naive_branch_current(u_peak, freq_hz, c0_f, l_h, c_f, r_ohm, r0_ohm):
+    """Source -> R0 -> (C0 parallel to the branch): the branch current from the actuator voltage."""
+    omega = 2 * math.pi * freq_hz
+    z_branch = r_ohm + 1j * omega * l_h + 1 / (1j * omega * c_f)
+    z_actuator = 1 / (1j * omega * c0_f + 1 / z_branch)
+    v_actuator = u_peak * z_actuator / (r0_ohm + z_actuator)
+    return v_actuator / z_branch
+
+
+def _naive_thevenin(freq_hz, c0_f, r0_ohm):
+    """The source seen from the branch: R0 then C0 to ground, as a voltage ratio and an impedance."""
+    z_c0 = 1 / (1j * 2 * math.pi * freq_hz * c0_f)
+    return z_c0 / (r0_ohm + z_c0), r0_ohm * z_c0 / (r0_ohm + z_c0)
+
+
+branches = st.tuples(st.floats(5e3, 100e3), st.floats(1e-9, 1e-7), st.floats(20.0, 3000.0), st.floats(10.0, 1e5),
+                     st.floats(0.0, 1e3))
+
+
+@NO_DEADLINE
+@given(branches, st.floats(-0.01, 0.01), st.floats(0.1, 100.0))
+def test_motional_current_and_amplitude_are_the_circuits(branch, detuning, u_peak):
+    f0_hz, c0_f, q, r_ohm, r0_ohm = branch
+    l_h = q * r_ohm / (2 * math.pi * f0_hz)
+    c_f = 1 / ((2 * math.pi * f0_hz) ** 2 * l_h)
+    freq = f0_hz * (1 + detuning)
+    naive = _naive_branch_current(u_peak, freq, c0_f, l_h, c_f, r_ohm, r0_ohm)
+    assert em.motional_current(u_peak, freq, c0_f, l_h, c_f, r_ohm, r0_ohm) == pytest.approx(naive, rel=1e-9)
+    gamma = 0.05
+    assert em.plate_amplitude_m(u_peak, freq, c0_f, l_h, c_f, r_ohm, r0_ohm, gamma) == pytest.approx(
+        abs(naive) / (gamma * 2 * math.pi * freq), rel=1e-9)
+    # |I|^2 R / 2 at peak volts is the exact circuit's power at RMS volts
+    assert abs(naive) ** 2 * r_ohm / 2 == pytest.approx(
+        em.real_power_exact(u_peak / math.sqrt(2), freq, c0_f, l_h, c_f, r_ohm, r0_ohm), rel=1e-9)
+
+
+@NO_DEADLINE
+@given(branches)
+def test_the_loaded_resonance_zeroes_the_loops_reactance(branch):
+    f0_hz, c0_f, q, r_ohm, r0_ohm = branch
+    l_h = q * r_ohm / (2 * math.pi * f0_hz)
+    c_f = 1 / ((2 * math.pi * f0_hz) ** 2 * l_h)
+    resonance = float(em.loaded_resonance_hz(c0_f, l_h, c_f, r0_ohm))
+    omega = 2 * math.pi * resonance
+    _, z_th = _naive_thevenin(resonance, c0_f, r0_ohm)
+    loop_x = omega * l_h - 1 / (omega * c_f) + z_th.imag
+    assert abs(loop_x) <= 1e-9 * omega * l_h
+    assert resonance >= f0_hz * (1 - 1e-12)  # the shunt through C0 is capacitive: it raises the resonance
+
+
+@NO_DEADLINE
+@given(branches, st.floats(-0.01, 0.01))
+def test_time_constant_and_detuning_factor_are_the_loaded_loops(branch, detuning):
+    f0_hz, c0_f, q, r_ohm, r0_ohm = branch
+    l_h = q * r_ohm / (2 * math.pi * f0_hz)
+    c_f = 1 / ((2 * math.pi * f0_hz) ** 2 * l_h)
+    freq = f0_hz * (1 + detuning)
+    ratio, z_th = _naive_thevenin(freq, c0_f, r0_ohm)
+    r_loop = r_ohm + z_th.real
+    assert em.loaded_time_constant_s(freq, c0_f, l_h, r_ohm, r0_ohm) == pytest.approx(2 * l_h / r_loop, rel=1e-9)
+    steady = abs(_naive_branch_current(1.0, freq, c0_f, l_h, c_f, r_ohm, r0_ohm)) ** 2
+    worst = abs(ratio / r_loop) ** 2  # the L1 bound of the envelope's impulse response: |V_th| / R_loop
+    assert em.detuning_factor(freq, c0_f, l_h, c_f, r_ohm, r0_ohm) == pytest.approx(worst / steady, rel=1e-9)
