@@ -185,10 +185,9 @@ class Device:
         ``|I_g| / (gamma omega)`` at ``freq_hz`` (default: the carrier), the exact circuit,
         detuning included.
         """
+        l_h, c_f, r_ohm = self.motional(force_n)
         freq = self.carrier_hz if freq_hz is None else freq_hz
-        amplitude: FloatOrArray = (np.abs(self.motional_current_a_per_v(force_n, freq))
-                                   / (self.gamma_n_per_v * 2.0 * math.pi * freq))
-        return amplitude
+        return electromech.plate_amplitude_m(1.0, freq, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm, self.gamma_n_per_v)
 
     def steady_power_w_per_v2(self, force_n: npt.ArrayLike, freq_hz: float | None = None) -> FloatOrArray:
         """Steady real power (W) into the motional branch per squared peak drive volt, ``|I_g|^2 R / 2``.

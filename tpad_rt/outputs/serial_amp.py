@@ -159,6 +159,8 @@ class AmpStatus:
 
 #: Envelope the amplifier holds buffered while :meth:`AmpLink.tone` plays (s): a Python loop keeps it filled.
 TONE_BUFFER_S = 0.03
+#: How long past its dwell :meth:`AmpLink.tone` waits for a STATUS showing the tone applied on the carrier (s).
+TONE_APPLY_LIMIT_S = 1.0
 
 
 class AmpLink:
@@ -338,7 +340,8 @@ class AmpLink:
 
     def tone(self, envelope_v: float, seconds: float) -> AmpStatus:
         """Hold a constant envelope of ``envelope_v`` (V peak, at most the amplifier's clamp) for ``seconds``;
-        the last STATUS read, once the amplifier applied the envelope on the present carrier.
+        the last STATUS read, once the amplifier applied the envelope on the present carrier (BackendError if it
+        has not TONE_APPLY_LIMIT_S after the dwell).
 
         The first call STARTs a stream; this loop (Python, not the streamer) keeps TONE_BUFFER_S of envelope
         buffered from the play index each STATUS reports. :meth:`stop` ends it as it ends a stream.
@@ -357,9 +360,14 @@ class AmpLink:
             self._tone_index = 0
             self._write_tone(value, 0, fill)
         deadline = time.monotonic() + seconds
+        give_up = deadline + TONE_APPLY_LIMIT_S
         silent_s = (4 * info.status_period_ms + 100) * 1e-3
         last: AmpStatus | None = None
         while True:
+            if time.monotonic() > give_up:
+                raise BackendError(f"serial: the amplifier on {self.target.port} did not apply a {envelope_v:g} V tone "
+                                   f"at {self.carrier_hz:g} Hz within {seconds + TONE_APPLY_LIMIT_S:g} s (its STATUS "
+                                   "never showed it RUNNING with that envelope and carrier)")
             body = self._receive(codec.MSG_STATUS, time.monotonic() + silent_s)
             if body is None:
                 raise BackendError(f"serial: the amplifier on {self.target.port} stopped reporting (no STATUS for "
