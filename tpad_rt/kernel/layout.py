@@ -7,7 +7,7 @@ flags are the contract with the Python side that fills and reads the arrays.
 
 # --- cfg: float64[CFG_SIZE], written by Python -------------------------------
 CFG_FS_HZ = 0                 # output sample rate
-CFG_CARRIER_HZ = 1            # device resonance (drive frequency)
+CFG_CARRIER_HZ = 1            # the carrier (drive frequency), the device's carrier_hz
 CFG_VOLTS_PER_FS = 2          # drive volts at DAC sample 1.0
 CFG_MAX_VOLTAGE_V = 3         # peak drive never exceeded
 CFG_POWER_CAP_W = 4           # instantaneous power cap
@@ -36,8 +36,8 @@ CFG_SIZE = 26
 
 # --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
 DEV_AMP_M_PER_V = 0           # plate amplitude (m) per peak drive volt
-DEV_POWER_W_PER_V2 = 1        # exact-circuit real power (W) at 1 V peak, at the carrier
-DEV_TAU_S = 2                 # plate envelope time constant Q / (pi f0)
+DEV_POWER_W_PER_V2 = 1        # the most real power (W) a 1 V peak drive at the carrier draws (detuning bound)
+DEV_TAU_S = 2                 # plate envelope time constant, the loaded branch's 2 L / (R + Re Z_th)
 DEV_ROWS = 3
 
 # --- finger: float64[R, FINGER_COLS], one writer at a time (Python, under a lock) ---
