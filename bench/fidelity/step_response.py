@@ -86,7 +86,9 @@ def measure(k: float, folder: Path) -> dict[str, Any]:
     device = Device.default()
     volts = k * device.max_voltage_v
     amplitude_m = volts * float(device.amplitude_m_per_v(FORCE_N))
-    low_mu = float(relative_friction(amplitude_m, device.carrier_hz, SPEED_MM_S * 1e-3, device.mu0,
+    # Revisions before device format 2 (one circuit, one gamma) called the carrier resonance_hz.
+    carrier_hz = getattr(device, "carrier_hz", None) or getattr(device, "resonance_hz")
+    low_mu = float(relative_friction(amplitude_m, carrier_hz, SPEED_MM_S * 1e-3, device.mu0,
                                      device.poisson, device.psi_star))
     texture_file = folder / f"steps_{k}.yaml"
     texture_file.write_text(
