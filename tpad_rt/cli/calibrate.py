@@ -150,8 +150,8 @@ def _warn(lines: list[str]) -> None:
 
 def _sweeps(paths: list[str]) -> list[ImpedanceSweep]:
     """Every sweep of ``paths``, forces ascending; ConfigError when two files give the same force."""
-    sweeps = [sweep for path in paths for sweep in read_impedance_sweeps(path)]
-    sweeps.sort(key=lambda sweep: sweep.force_n)
+    sweeps = [one for path in paths for one in read_impedance_sweeps(path)]
+    sweeps.sort(key=lambda one: one.force_n)
     for before, after in zip(sweeps, sweeps[1:]):
         if before.force_n == after.force_n:
             raise ConfigError(f"{after.source}: a sweep at {after.force_n:g} N again ({before.source} has one): "
@@ -165,7 +165,7 @@ def _fits(paths: list[str]) -> tuple[list[ImpedanceSweep], list[BvdFit]]:
 
 
 def _fit_warnings(sweeps: list[ImpedanceSweep], fits: list[BvdFit]) -> list[str]:
-    return [f"{sweep.label}: {line}" for sweep, fit in zip(sweeps, fits) for line in fit.warnings]
+    return [f"{one.label}: {line}" for one, fit in zip(sweeps, fits) for line in fit.warnings]
 
 
 def concise(value: float, relative: float) -> str:
