@@ -65,7 +65,7 @@ def test_options_that_would_allocate_without_bound_or_overflow_are_refused(optio
         RenderOptions(**{option: value})
 
 
-@pytest.mark.parametrize("name", [f.name for f in fields(RenderOptions) if f.name not in ("preemphasis", "braking")])
+@pytest.mark.parametrize("name", [f.name for f in fields(RenderOptions) if f.name not in ("preemphasis", "braking", "track")])
 def test_every_numeric_option_refuses_text(name: str) -> None:
     with pytest.raises(ConfigError, match=f"RenderOptions.{name}: must be a (finite|whole) number"):
         RenderOptions(**{name: "1"})  # type: ignore[arg-type]

@@ -27,9 +27,9 @@ from tpad_rt.config.texture_schema import MAX_FREQUENCY_HZ, MAX_GAIN, MAX_HEIGHT
 from tpad_rt.device import Device
 from tpad_rt.physics import electromech
 from tpad_rt.kernel import layout
-from tpad_rt.limits import MAX_FORCE_N
+from tpad_rt.limits import MAX_FORCE_N, MAX_RATE_HZ
 from tpad_rt.outputs.sim import SimOutput
-from tpad_rt.pipeline import MAX_CARRIER_FRACTION, Pipeline
+from tpad_rt.pipeline import MAX_CARRIER_FRACTION, Pipeline, RenderOptions, device_tables
 from tpad_rt.texture import load_compiled
 
 BLOCKS = 20
@@ -237,8 +237,11 @@ def test_every_valid_file_renders_finite_in_limit_output(tmp_path_factory: pytes
     texture = load_compiled(_written(folder, "texture.yaml",
                                      {"description": "random", **data.draw(_texture(folder), "texture")}))
     device = Device.from_file(_written(folder, "device.yaml", data.draw(_device(), "device")))
-    fs_hz = max(192_000, math.ceil(device.carrier_hz / MAX_CARRIER_FRACTION))
-    pipeline = Pipeline(device, texture, fs_hz)
+    track = data.draw(st.booleans(), "track")
+    highest_hz = float(device_tables(device, track)[0][layout.DEV_CARRIER_HZ].max())
+    fs_hz = max(192_000, math.ceil(highest_hz / MAX_CARRIER_FRACTION))
+    assume(fs_hz <= MAX_RATE_HZ)
+    pipeline = Pipeline(device, texture, fs_hz, options=RenderOptions(track=track))
     sim = SimOutput(device, fs_hz)
     length_mm, width_mm = device.plate.length_m * 1e3, device.plate.width_m * 1e3
     y_mm = data.draw(st.floats(0.0, width_mm), "y_mm")

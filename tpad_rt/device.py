@@ -173,13 +173,14 @@ class Device:
             for table in (self.motional_l_h_table, self.motional_c_f_table, self.motional_r_ohm_table)
         )
 
-    def motional_current_a_per_v(self, force_n: npt.ArrayLike, freq_hz: float | None = None) -> ComplexOrArray:
-        """Steady complex motional current (A peak) per peak drive volt at ``freq_hz`` (default: the carrier)."""
+    def motional_current_a_per_v(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> ComplexOrArray:
+        """Steady complex motional current (A peak) per peak drive volt at ``freq_hz`` (Hz, default: the carrier;
+        an array broadcasts against ``force_n``)."""
         l_h, c_f, r_ohm = self.motional(force_n)
         freq = self.carrier_hz if freq_hz is None else freq_hz
         return electromech.motional_current(1.0, freq, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
 
-    def amplitude_m_per_v(self, force_n: npt.ArrayLike, freq_hz: float | None = None) -> FloatOrArray:
+    def amplitude_m_per_v(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
         """Steady plate vibration amplitude (m) per peak drive volt at contact force ``force_n`` (N, >= 0).
 
         ``|I_g| / (gamma omega)`` at ``freq_hz`` (default: the carrier), the exact circuit,
@@ -189,7 +190,7 @@ class Device:
         freq = self.carrier_hz if freq_hz is None else freq_hz
         return electromech.plate_amplitude_m(1.0, freq, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm, self.gamma_n_per_v)
 
-    def steady_power_w_per_v2(self, force_n: npt.ArrayLike, freq_hz: float | None = None) -> FloatOrArray:
+    def steady_power_w_per_v2(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
         """Steady real power (W) into the motional branch per squared peak drive volt, ``|I_g|^2 R / 2``.
 
         At ``freq_hz`` (default: the carrier), through the shunt and C0 (paper Eqs. 2-6,
@@ -199,35 +200,40 @@ class Device:
         power: FloatOrArray = np.abs(self.motional_current_a_per_v(force_n, freq_hz)) ** 2 * r_ohm / 2.0
         return power
 
-    def detuning_factor(self, force_n: npt.ArrayLike) -> FloatOrArray:
-        """How far a transient's motional power can exceed the steady power at the carrier (>= 1).
+    def detuning_factor(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
+        """How far a transient's motional power can exceed the steady power at ``freq_hz`` (default: the carrier;
+        >= 1).
 
-        :func:`tpad_rt.physics.electromech.detuning_factor`: 1 where the carrier sits on the
+        :func:`tpad_rt.physics.electromech.detuning_factor`: 1 where the drive sits on the
         loaded resonance, ``1 + (detuning x tau)^2`` off it.
         """
         l_h, c_f, r_ohm = self.motional(force_n)
-        return electromech.detuning_factor(self.carrier_hz, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
+        freq = self.carrier_hz if freq_hz is None else freq_hz
+        return electromech.detuning_factor(freq, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
 
-    def power_w_per_v2(self, force_n: npt.ArrayLike) -> FloatOrArray:
-        """The most real power (W) per squared peak drive volt that a drive at the carrier can draw.
+    def power_w_per_v2(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
+        """The most real power (W) per squared peak drive volt that a drive at ``freq_hz`` (default: the carrier)
+        can draw.
 
         :meth:`steady_power_w_per_v2` times :meth:`detuning_factor`: a drive whose envelope
         stays within ``V`` volts never draws more than ``V**2`` times this, through any
         transient. It is what the kernel's power caps and its power telemetry use (equal to
         the steady power where the carrier is on the motional resonance).
         """
-        bound: FloatOrArray = self.steady_power_w_per_v2(force_n) * self.detuning_factor(force_n)
+        bound: FloatOrArray = self.steady_power_w_per_v2(force_n, freq_hz) * self.detuning_factor(force_n, freq_hz)
         return bound
 
     def quality_factor(self, force_n: npt.ArrayLike) -> FloatOrArray:
         """Unloaded quality factor ``sqrt(L / C) / R`` of the motional branch at contact force ``force_n``."""
         return electromech.quality_factor(*self.motional(force_n))
 
-    def envelope_time_constant_s(self, force_n: npt.ArrayLike) -> FloatOrArray:
+    def envelope_time_constant_s(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
         """Time constant (s) of the vibration envelope: ``2 L / (R + Re Z_th)``, the branch loaded by the
-        shunt and C0 at the carrier (:func:`tpad_rt.physics.electromech.loaded_time_constant_s`)."""
+        shunt and C0 at ``freq_hz`` (default: the carrier;
+        :func:`tpad_rt.physics.electromech.loaded_time_constant_s`)."""
         l_h, _, r_ohm = self.motional(force_n)
-        return electromech.loaded_time_constant_s(self.carrier_hz, self.c0_f, l_h, r_ohm, self.shunt_ohm)
+        freq = self.carrier_hz if freq_hz is None else freq_hz
+        return electromech.loaded_time_constant_s(freq, self.c0_f, l_h, r_ohm, self.shunt_ohm)
 
     def motional_resonance_hz(self, force_n: npt.ArrayLike) -> FloatOrArray:
         """Resonance (Hz) of the motional branch loaded by the shunt and C0 at contact force ``force_n``: the

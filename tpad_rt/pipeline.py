@@ -3,8 +3,8 @@
 API map
 -------
 RenderOptions(power_budget_w=None, power_avg_w=None, power_window_s=1.0, control_interval=32,
-              smoothing_ms=1.0, preemphasis=None, horizon_ms=1.0, velocity_window_ms=10.0,
-              watchdog_ms=50.0, ramp_ms=5.0, default_force_n=0.5, mu_floor=0.01,
+              smoothing_ms=0.25, preemphasis=None, braking=True, track=False, horizon_ms=0.25,
+              velocity_window_ms=10.0, watchdog_ms=50.0, ramp_ms=5.0, default_force_n=0.5, mu_floor=0.01,
               finger_ring=1024, telemetry_ring=8192)
     the renderer's settings (frozen; ConfigError naming each bad field)
 Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
@@ -46,8 +46,8 @@ from tpad_rt.kernel.render import render_block
 from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, position_range_mm
 from tpad_rt.texture import CompiledTexture
 
-#: Highest carrier frequency, as a fraction of the sample rate, the pipeline renders.
-MAX_CARRIER_FRACTION = 0.45
+#: Highest carrier frequency, as a fraction of the sample rate, the pipeline renders (the kernel's own bound).
+MAX_CARRIER_FRACTION = layout.MAX_CARRIER_FRACTION
 #: Force-grid intervals: at most this many (a grid holding every table knot is sought up
 #: to it) and at least this many (amplitude, power and tau are smooth between knots: on
 #: 4096 intervals over the shipped 0-2 N, linear interpolation is within 2e-8 of them).
@@ -100,6 +100,11 @@ class RenderOptions:
     - ``braking``: let the shaper drive in anti-phase (a negative envelope, within the
       same volt and power limits) to take energy out of the plate faster than it rings
       down, when the command falls.
+    - ``track``: follow the plate's resonance as the contact force moves it: each control
+      step drives at the device circuit's loaded resonance at the step's force
+      (:meth:`Device.motional_resonance_hz`), the carrier's phase continuous, with the
+      amplitude, power and time constant there. Only for carrier samples (a DAC): an
+      amplifier that makes the carrier itself is not tracked yet (ConfigError).
     - ``horizon_ms``: extra extrapolation lead of the finger position (ms; latency
       compensation). The default equals the default ``smoothing_ms``: a one-pole filter
       delays a slowly varying envelope by its time constant, so looking that far ahead
@@ -125,6 +130,7 @@ class RenderOptions:
     smoothing_ms: float = 0.25
     preemphasis: bool | None = None
     braking: bool = True
+    track: bool = False
     horizon_ms: float = 0.25
     velocity_window_ms: float = 10.0
     watchdog_ms: float = 50.0
@@ -155,6 +161,8 @@ class RenderOptions:
             found.append(("preemphasis", f"must be true, false or None, got {self.preemphasis!r}"))
         if not isinstance(self.braking, bool):
             found.append(("braking", f"must be true or false, got {self.braking!r}"))
+        if not isinstance(self.track, bool):
+            found.append(("track", f"must be true or false, got {self.track!r}"))
         return [(name, problem) for name, problem in found if problem]
 
 
@@ -246,30 +254,35 @@ def force_grid(device: Device) -> tuple[float, float, int]:
     return start_n, span_n / intervals, intervals
 
 
-def device_tables(device: Device) -> tuple[np.ndarray, float, float]:
+def device_tables(device: Device, track: bool = False) -> tuple[np.ndarray, float, float]:
     """``(dev, start_n, step_n)``: the kernel's device tables on :func:`force_grid`'s grid.
 
-    ``dev[DEV_AMP_M_PER_V]`` plate amplitude per peak volt at the carrier (m/V),
-    ``dev[DEV_POWER_W_PER_V2]`` the most power a drive of 1 V peak at the carrier can draw
-    (W, :meth:`Device.power_w_per_v2`: the exact circuit, detuning included),
+    ``dev[DEV_CARRIER_HZ]`` the carrier driven at each force: the device's ``carrier_hz``, or
+    with ``track`` the motional branch's loaded resonance there
+    (:meth:`Device.motional_resonance_hz`). At that carrier: ``dev[DEV_AMP_M_PER_V]`` plate
+    amplitude per peak volt (m/V), ``dev[DEV_POWER_W_PER_V2]`` the most power a drive of 1 V
+    peak can draw (W, :meth:`Device.power_w_per_v2`: the exact circuit, detuning included),
     ``dev[DEV_TAU_S]`` the loaded envelope time constant (s); forces ``start_n + k * step_n``.
     """
     start_n, step_n, intervals = force_grid(device)
     forces_n = start_n + step_n * np.arange(intervals + 1)
+    carrier_hz = (np.asarray(device.motional_resonance_hz(forces_n), dtype=np.float64) if track
+                  else np.full(len(forces_n), device.carrier_hz))
     dev = np.empty((layout.DEV_ROWS, intervals + 1))
-    dev[layout.DEV_AMP_M_PER_V] = device.amplitude_m_per_v(forces_n)
-    dev[layout.DEV_POWER_W_PER_V2] = device.power_w_per_v2(forces_n)
-    dev[layout.DEV_TAU_S] = device.envelope_time_constant_s(forces_n)
+    dev[layout.DEV_AMP_M_PER_V] = device.amplitude_m_per_v(forces_n, carrier_hz)
+    dev[layout.DEV_POWER_W_PER_V2] = device.power_w_per_v2(forces_n, carrier_hz)
+    dev[layout.DEV_TAU_S] = device.envelope_time_constant_s(forces_n, carrier_hz)
+    dev[layout.DEV_CARRIER_HZ] = carrier_hz
     return dev, start_n, step_n
 
 
-def _check_rate(device: Device, fs_hz: float, envelope_output: bool) -> None:
+def _check_rate(device: Device, fs_hz: float, envelope_output: bool, highest_carrier_hz: float) -> None:
     """ConfigError unless ``fs_hz`` is a finite rate (Hz) in (0, MAX_RATE_HZ], and (for carrier samples,
-    not ``envelope_output``) at least ``resonance_hz / 0.45``."""
+    not ``envelope_output``) at least ``highest_carrier_hz / 0.45``."""
     problem = _number_problem(fs_hz, f"in (0, {MAX_RATE_HZ}]", lambda v: 0 < v <= MAX_RATE_HZ)
     if problem:
         raise ConfigError(f"fs_hz: {problem}")
-    needed_hz = device.carrier_hz / MAX_CARRIER_FRACTION
+    needed_hz = highest_carrier_hz / MAX_CARRIER_FRACTION
     if fs_hz < needed_hz and not envelope_output:
         raise ConfigError(
             f"fs_hz: device {device.label}'s carrier ({device.carrier_hz:g} Hz) needs a sample rate of at "
@@ -301,7 +314,11 @@ class Pipeline:
         *,
         envelope_output: bool = False,
     ):
-        _check_rate(device, fs_hz, envelope_output)
+        if options.track and envelope_output:
+            raise ConfigError("track: an amplifier that makes the carrier itself (serial://) is not tracked yet: "
+                              "render to a DAC output (audio://, sim://, wav://), or leave track off")
+        dev, start_n, step_n = device_tables(device, options.track)
+        _check_rate(device, fs_hz, envelope_output, float(dev[layout.DEV_CARRIER_HZ].max()))
         self.envelope_output = envelope_output
         self.device = device
         self.options = options
@@ -311,7 +328,6 @@ class Pipeline:
         self._producer = threading.Lock()  # push_finger may be called from several threads
         self._last_t_s = -math.inf  # the newest sample's time (s): finger times never decrease
         self.position_range_mm = position_range_mm(device.plate.length_m * 1e3, device.plate.width_m * 1e3)
-        dev, start_n, step_n = device_tables(device)
         window_steps = max(1, round(options.power_window_s * fs_hz / options.control_interval))
         self._arrays = KernelArrays(
             cfg=self._config(start_n, step_n, window_steps),
@@ -360,6 +376,7 @@ class Pipeline:
             layout.CFG_FORCE_GRID_STEP_N: grid_step_n,
             layout.CFG_OUTPUT_ENVELOPE: 1.0 if self.envelope_output else 0.0,
             layout.CFG_BRAKING: 1.0 if options.braking else 0.0,
+            layout.CFG_TRACK: 1.0 if options.track else 0.0,
         }.items():
             cfg[index] = value
         return cfg

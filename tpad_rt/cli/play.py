@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable_target(args.record, "recordings")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
     output, finger = choose_output(args.output, args.rate), choose_input(args.input)
-    options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
+    options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg, track=args.track,
                             **({} if args.force is None else {"default_force_n": args.force}))
     with contextlib.ExitStack() as compiling:
         # A first run compiles the kernels (about 10 s): say so at once, and compile everything

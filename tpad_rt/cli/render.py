@@ -87,6 +87,9 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
     parser.add_argument("--force", metavar="N", type=number(0, True, MAX_FORCE_N, "N"),
                         help=f"contact force (N, at most {MAX_FORCE_N:g}) for every finger sample, overriding the "
                         "input's")
+    parser.add_argument("--track", action="store_true",
+                        help="follow the plate's resonance as the contact force moves it (the device circuit's loaded "
+                        "resonance at each force; DAC outputs only)")
 
 
 def add_parser(subparsers: Subparsers) -> None:
@@ -127,7 +130,7 @@ def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_
         raise ConfigError(f"input {args.input}: follows a live finger, which cannot be rendered offline; "
                           "use tpad-rt play, or a scripted:// or file:// input")
     input_s = input_span_s(source, args.duration)
-    options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg,
+    options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg, track=args.track,
                             **({} if args.force is None else {"default_force_n": args.force}))
     # The ramp down starts at the first control step after the stop and lasts ramp_ms:
     # one control interval plus the ramp, and a whole block more, end in silence.

@@ -32,13 +32,15 @@ CFG_RUN = 22                  # 1.0 while running, 0.0 to ramp down and stay sil
 CFG_TEXTURE_T0_S = 23         # stream time the current texture was set (temporal kinds)
 CFG_OUTPUT_ENVELOPE = 24      # 1.0: samples are the envelope (for an amplifier that makes the carrier); 0.0: carrier
 CFG_BRAKING = 25              # 1.0: the shaper may drive in anti-phase (negative envelope) to brake the plate
-CFG_SIZE = 26
+CFG_TRACK = 26                # 1.0: each control step drives at dev[DEV_CARRIER_HZ] at its force, phase continuous
+CFG_SIZE = 27
 
 # --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
 DEV_AMP_M_PER_V = 0           # plate amplitude (m) per peak drive volt
 DEV_POWER_W_PER_V2 = 1        # the most real power (W) a 1 V peak drive at the carrier draws (detuning bound)
 DEV_TAU_S = 2                 # plate envelope time constant, the loaded branch's 2 L / (R + Re Z_th)
-DEV_ROWS = 3
+DEV_CARRIER_HZ = 3            # the carrier to drive at (the loaded resonance when tracking, else carrier_hz)
+DEV_ROWS = 4
 
 # --- finger: float64[R, FINGER_COLS], one writer at a time (Python, under a lock) ---
 FINGER_T_S = 0
@@ -123,6 +125,7 @@ PROFILE_DISK = 2
 PROFILE_STEP = 3
 GAUSSIAN_REACH_SIGMAS = 3.0   # gaussian bumps end at 3 sigma (sigma = radius / 2)
 LAYER_FLOOR = 0.01            # every COMBINE result is clamped to [LAYER_FLOOR, 1]
+MAX_CARRIER_FRACTION = 0.45   # the carrier stays at or below this fraction of the sample rate (a tracked one too)
 
 # --- state: float64[STATE_SIZE], written by the render kernel only ------------
 # All zeros is a fresh stream (tpad_rt/kernel/render.py says how the values are used).
@@ -173,9 +176,15 @@ STATE_MODEL_V = 37            # model envelope (drive volts it is worth) after t
 STATE_MODEL_STEP = 38         # 1 - exp(-1 / (tau(force) fs)): the model's per-sample step towards the drive
 STATE_DRIVE_LOW_V = 39        # the open step's lowest drive: -cap with braking, else 0
 STATE_MODEL_ON_REF = 40       # 1.0: the model is on the smoothed command (STATE_MODEL_V is then 0, unused), 0.0: off
+# The carrier's phase at the open step's first sample (2**-60 cycles, as two 30-bit halves, each exact in a
+# float64), that sample's index, and the open step's carrier (Hz): a tracked carrier's phase runs on from them.
+STATE_PHASE_HI = 41
+STATE_PHASE_LO = 42
+STATE_PHASE_INDEX = 43
+STATE_STEP_CARRIER_HZ = 44
 # Per-sample tables, indexed by j, the sample's offset in its control step:
 MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
-STATE_COS_TABLE = 44          # cos(j w), w the carrier's phase step (rad)
+STATE_COS_TABLE = 48          # cos(j w), w the carrier's phase step (rad)
 STATE_SIN_TABLE = STATE_COS_TABLE + MAX_CONTROL_INTERVAL       # sin(j w)
 STATE_DECAY_TABLE = STATE_SIN_TABLE + MAX_CONTROL_INTERVAL     # d^j (0 <= j <= MAX_CONTROL_INTERVAL), d the smoothing decay
 STATE_ENVELOPE = STATE_DECAY_TABLE + MAX_CONTROL_INTERVAL + 1  # the open step's envelope e_j (V)

@@ -68,10 +68,12 @@ from tpad_rt.kernel.layout import (
     CFG_SMOOTHING_S,
     CFG_SPEED_FLOOR_M_S,
     CFG_TEXTURE_T0_S,
+    CFG_TRACK,
     CFG_VELOCITY_WINDOW_S,
     CFG_VOLTS_PER_FS,
     CFG_WATCHDOG_S,
     DEV_AMP_M_PER_V,
+    DEV_CARRIER_HZ,
     DEV_POWER_W_PER_V2,
     DEV_TAU_S,
     FINGER_DOWN,
@@ -91,6 +93,7 @@ from tpad_rt.kernel.layout import (
     FLAG_SPEED_FLOOR,
     FLAG_VOLTAGE,
     FLAG_WATCHDOG,
+    MAX_CARRIER_FRACTION,
     MAX_CONTROL_INTERVAL,
     MAX_SPEED_MM_S,
     STATE_AMPLITUDE_M,
@@ -117,6 +120,9 @@ from tpad_rt.kernel.layout import (
     STATE_MODEL_V,
     STATE_NEXT_INDEX,
     STATE_NEXT_PHASE,
+    STATE_PHASE_HI,
+    STATE_PHASE_INDEX,
+    STATE_PHASE_LO,
     STATE_POWER_PER_V2,
     STATE_FOLLOW_GAIN,
     STATE_RING_SLOT,
@@ -125,6 +131,7 @@ from tpad_rt.kernel.layout import (
     STATE_SIN_TABLE,
     STATE_SMOOTH_START_V,
     STATE_SPEED_MM_S,
+    STATE_STEP_CARRIER_HZ,
     STATE_STEP_FLAGS,
     STATE_STEP_OPEN,
     STATE_STEP_SAMPLES,
@@ -161,6 +168,7 @@ SAFETY_MARGIN = 1e-6
 PHASE_BITS = 60
 _HALF_BITS = PHASE_BITS // 2
 _HALF_MASK = (1 << _HALF_BITS) - 1
+_HALF_SPAN = float(1 << _HALF_BITS)
 _PHASE_MASK = (1 << PHASE_BITS) - 1
 _TWO_PI = 2.0 * math.pi
 # The carrier phasor of a phase: a table at the top 8 bits, a polynomial for the rest.
@@ -258,15 +266,15 @@ def _device_value(dev: np.ndarray, row: int, cell: tuple[int, int, float]) -> fl
 
 
 @_kernel
-def _refresh_tables(cfg: np.ndarray, state: np.ndarray) -> None:
-    """Rebuild the per-sample tables (carrier rotation, smoothing decay) if their cfg values changed.
+def _refresh_tables(cfg: np.ndarray, state: np.ndarray, carrier_hz: float) -> None:
+    """Rebuild the per-sample tables (carrier rotation, smoothing decay) if the rate, the step's carrier
+    ``carrier_hz`` (Hz) or the smoothing changed.
 
     ``cos(j w)``, ``sin(j w)`` of the exact integer phase of sample ``j``, for every
     ``j < MAX_CONTROL_INTERVAL``, and ``d^j = exp(-j / (smoothing_s fs))`` for every ``j <=
     MAX_CONTROL_INTERVAL``.
     """
     fs_hz = cfg[CFG_FS_HZ]
-    carrier_hz = cfg[CFG_CARRIER_HZ]
     smoothing_s = cfg[CFG_SMOOTHING_S]
     if (
         state[STATE_TABLE_FS_HZ] == fs_hz
@@ -506,10 +514,11 @@ def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndar
 
 @_kernel
 def _command_volts(
-    t_s: float, cfg: np.ndarray, state: np.ndarray, amplitude_m_per_v: float,
+    t_s: float, cfg: np.ndarray, state: np.ndarray, amplitude_m_per_v: float, carrier_hz: float,
     prog: np.ndarray, params: np.ndarray, img: np.ndarray, stack: np.ndarray,
 ) -> tuple[float, int, int]:
-    """Envelope volts (peak) the texture asks for at the step's finger, and FLAG_SPEED_FLOOR if floored.
+    """Envelope volts (peak) the texture asks for at the step's finger, and FLAG_SPEED_FLOOR if floored; the
+    friction model's vibration frequency is the step's carrier ``carrier_hz`` (Hz).
 
     Returns ``(volts, FLAG_* bits, FAULT_* bits)``; writes the clamped target friction to
     ``state``. A texture value that is not finite is a FAULT_TEXTURE, a command that is
@@ -532,7 +541,7 @@ def _command_volts(
         speed_m_s = cfg[CFG_SPEED_FLOOR_M_S]
         flags = FLAG_SPEED_FLOOR
     amplitude_m = amplitude_for_core(
-        mu, cfg[CFG_CARRIER_HZ], speed_m_s, cfg[CFG_MU0], cfg[CFG_POISSON], cfg[CFG_PSI_STAR]
+        mu, carrier_hz, speed_m_s, cfg[CFG_MU0], cfg[CFG_POISSON], cfg[CFG_PSI_STAR]
     )
     command_v = amplitude_m / amplitude_m_per_v
     if not 0.0 <= command_v < math.inf:
@@ -613,6 +622,40 @@ def _note_fault(state: np.ndarray, causes: int, new_step: bool) -> None:
 
 
 @_kernel
+def _step_phase(n: int, cfg: np.ndarray, state: np.ndarray, carrier_hz: float) -> tuple[int, int]:
+    """``(phase, FAULT_* bits)``: the carrier's phase at sample ``n`` (2**-60 cycles), the first of a step at
+    ``carrier_hz`` (Hz), recorded in ``state`` for the next step.
+
+    A fixed carrier's phase is ``n * S mod 2**60`` (exact, from the index alone). A tracked one
+    (CFG_TRACK) runs on from the last step's phase, at the last step's carrier, over the samples
+    between: the phase never jumps when the carrier moves. Recorded phase halves that are not
+    whole numbers in ``[0, 2**30)``, or an index that is not a whole number in ``[0, n]``, are
+    corrupt: the phase restarts from ``n * S`` (FAULT_STATE).
+    """
+    fs_hz = cfg[CFG_FS_HZ]
+    step_units = carrier_step_units(carrier_hz, fs_hz)
+    fault = 0
+    if cfg[CFG_TRACK] == 0.0 or state[STATE_STEP_OPEN] == 0.0:
+        phase_units = carrier_phase_units(n, step_units)
+    else:
+        hi, lo, index, last_hz = (state[STATE_PHASE_HI], state[STATE_PHASE_LO], state[STATE_PHASE_INDEX],
+                                  state[STATE_STEP_CARRIER_HZ])
+        if (0.0 <= hi < _HALF_SPAN and hi == math.floor(hi) and 0.0 <= lo < _HALF_SPAN and lo == math.floor(lo)
+                and 0.0 <= index <= n and index == math.floor(index) and 0.0 < last_hz < fs_hz):
+            start = (int(hi) << _HALF_BITS) | int(lo)
+            phase_units = (start + carrier_phase_units(n - int(index), carrier_step_units(last_hz, fs_hz))) \
+                & _PHASE_MASK
+        else:
+            phase_units = carrier_phase_units(n, step_units)
+            fault = FAULT_STATE
+    state[STATE_PHASE_HI] = float(phase_units >> _HALF_BITS)
+    state[STATE_PHASE_LO] = float(phase_units & _HALF_MASK)
+    state[STATE_PHASE_INDEX] = float(n)
+    state[STATE_STEP_CARRIER_HZ] = carrier_hz
+    return phase_units, fault
+
+
+@_kernel
 def _control_step(
     n: int, cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, power_ring: np.ndarray,
     finger: np.ndarray, finger_count: np.ndarray,
@@ -634,13 +677,22 @@ def _control_step(
             fault = FAULT_STATE
     _close_step(cfg, state, power_ring)
     fault |= _repaired_state(cfg, state)
-    _refresh_tables(cfg, state)
     fs_hz = cfg[CFG_FS_HZ]
     t_s = n / fs_hz
     finger_status = _read_finger(t_s, cfg, state, finger, finger_count[0])
     if finger_status < 0:
         fault |= FAULT_FINGER
     cell = _force_cell(cfg, dev, state[STATE_FORCE_N])
+    carrier_hz = cfg[CFG_CARRIER_HZ]
+    if cfg[CFG_TRACK] != 0.0:
+        tracked_hz = _device_value(dev, DEV_CARRIER_HZ, cell)
+        if 0.0 < tracked_hz <= MAX_CARRIER_FRACTION * fs_hz:
+            carrier_hz = tracked_hz
+        else:
+            fault |= FAULT_DEVICE
+    _refresh_tables(cfg, state, carrier_hz)
+    phase_units, phase_fault = _step_phase(n, cfg, state, carrier_hz)
+    fault |= phase_fault
     amplitude_m_per_v = _device_value(dev, DEV_AMP_M_PER_V, cell)
     p1_w = _device_value(dev, DEV_POWER_W_PER_V2, cell)
     tau_s = _device_value(dev, DEV_TAU_S, cell)
@@ -653,7 +705,7 @@ def _control_step(
     flags = 0
     if finger_status > 0 and fault == 0:
         command_v, flags, command_fault = _command_volts(
-            t_s, cfg, state, amplitude_m_per_v, prog, params, img, stack)
+            t_s, cfg, state, amplitude_m_per_v, carrier_hz, prog, params, img, stack)
         fault |= command_fault
     elif finger_status == 0:
         command_v = state[STATE_COMMAND_V]
@@ -688,7 +740,6 @@ def _control_step(
     state[STATE_GATE] = 1.0 if finger_status > 0 and fault == 0 and cfg[CFG_RUN] != 0.0 else 0.0
     state[STATE_RAMP_SAMPLES] = max(1.0, float(round(cfg[CFG_RAMP_S] * fs_hz)))
     state[STATE_RAMP_START] = min(state[STATE_RAMP_START], state[STATE_RAMP_SAMPLES])
-    phase_units = carrier_phase_units(n, carrier_step_units(cfg[CFG_CARRIER_HZ], fs_hz))
     state[STATE_CARRIER_COS], state[STATE_CARRIER_SIN] = _unit_phasor(phase_units)
     state[STATE_RING_SLOT] = slot
     state[STATE_STEP_SAMPLES] = 0.0
