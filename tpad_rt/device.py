@@ -173,11 +173,15 @@ class Device:
             for table in (self.motional_l_h_table, self.motional_c_f_table, self.motional_r_ohm_table)
         )
 
+    def _driven(self, freq_hz: npt.ArrayLike | None) -> npt.ArrayLike:
+        """``freq_hz``, or the carrier when None: the frequency a method evaluates the circuit at."""
+        return self.carrier_hz if freq_hz is None else freq_hz
+
     def motional_current_a_per_v(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> ComplexOrArray:
         """Steady complex motional current (A peak) per peak drive volt at ``freq_hz`` (Hz, default: the carrier;
         an array broadcasts against ``force_n``)."""
         l_h, c_f, r_ohm = self.motional(force_n)
-        freq = self.carrier_hz if freq_hz is None else freq_hz
+        freq = self._driven(freq_hz)
         return electromech.motional_current(1.0, freq, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
 
     def amplitude_m_per_v(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
@@ -187,7 +191,7 @@ class Device:
         detuning included.
         """
         l_h, c_f, r_ohm = self.motional(force_n)
-        freq = self.carrier_hz if freq_hz is None else freq_hz
+        freq = self._driven(freq_hz)
         return electromech.plate_amplitude_m(1.0, freq, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm, self.gamma_n_per_v)
 
     def steady_power_w_per_v2(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
@@ -208,7 +212,7 @@ class Device:
         loaded resonance, ``1 + (detuning x tau)^2`` off it.
         """
         l_h, c_f, r_ohm = self.motional(force_n)
-        freq = self.carrier_hz if freq_hz is None else freq_hz
+        freq = self._driven(freq_hz)
         return electromech.detuning_factor(freq, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
 
     def power_w_per_v2(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
@@ -232,7 +236,7 @@ class Device:
         shunt and C0 at ``freq_hz`` (default: the carrier;
         :func:`tpad_rt.physics.electromech.loaded_time_constant_s`)."""
         l_h, _, r_ohm = self.motional(force_n)
-        freq = self.carrier_hz if freq_hz is None else freq_hz
+        freq = self._driven(freq_hz)
         return electromech.loaded_time_constant_s(freq, self.c0_f, l_h, r_ohm, self.shunt_ohm)
 
     def motional_resonance_hz(self, force_n: npt.ArrayLike) -> FloatOrArray:

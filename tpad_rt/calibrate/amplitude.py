@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.calibrate.measurements import AmplitudeMeasurements
+from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 
 #: A force whose amplitude departs from proportional to volts by more than this fraction is flagged.
@@ -48,6 +49,12 @@ class Circuit:
     l_h: _Array
     c_f: _Array
     r_ohm: _Array
+
+    @classmethod
+    def of_device(cls, device: Device) -> Circuit:
+        """The motional branch of ``device``'s circuit."""
+        return cls(device.force_table_n, device.motional_l_h_table, device.motional_c_f_table,
+                   device.motional_r_ohm_table)
 
     @property
     def resonance_hz(self) -> float:

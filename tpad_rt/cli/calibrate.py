@@ -215,9 +215,7 @@ def _circuit(args: argparse.Namespace) -> tuple[Circuit, list[str]]:
     if args.impedance:
         sweeps, fits = _fits(args.impedance)
         return circuit_of(fits), _fit_warnings(sweeps, fits)
-    device = Device.from_file(args.device)
-    return Circuit(device.force_table_n, device.motional_l_h_table, device.motional_c_f_table,
-                   device.motional_r_ohm_table), []
+    return Circuit.of_device(Device.from_file(args.device)), []
 
 
 def _gamma_table(fit: GammaFit) -> Table:
