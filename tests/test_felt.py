@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from tpad_rt.engine import Renderer
-from tpad_rt.felt import texture_at_finger
+from tpad_rt.felt import start_ramps, texture_at_finger
 from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.texture import load_compiled
 
@@ -48,6 +48,34 @@ def test_a_temporal_texture_is_read_at_its_own_time() -> None:
     assert valid.all()
     assert mu.tolist() == [0.5, 1.0]
     assert texture_at_finger(fingers, texture, times)[0].tolist() == [1.0, 0.5]  # from t0 = 0: 300 cycles in
+
+
+def _naive_start_ramps(t_s: np.ndarray, touching: np.ndarray, window_s: float) -> np.ndarray:
+    ramping, start_s, before = np.zeros(len(t_s), dtype=bool), -np.inf, False
+    for k, (t, now) in enumerate(zip(t_s, touching)):
+        if now and not before:
+            start_s = t
+        ramping[k] = bool(now) and t - start_s < window_s
+        before = bool(now)
+    return ramping
+
+
+def test_start_ramps_match_a_loop_whole_and_in_chunks() -> None:
+    rng = np.random.default_rng(7)
+    t_s = np.arange(2000) / 3000.0
+    touching = np.repeat(rng.random(40) < 0.7, 50)  # touches of 50-block runs, some back to back
+    touching[:3] = True  # a run touching from the first block starts a touch there
+    window_s = 0.004
+    expected = _naive_start_ramps(t_s, touching, window_s)
+    whole, _ = start_ramps(t_s, touching, window_s)
+    np.testing.assert_array_equal(whole, expected)
+    assert 0 < expected.sum() < touching.sum()
+    chunks, start_s, before = [], -np.inf, False
+    for cut in np.array_split(np.arange(len(t_s)), 37):  # chunks that split touches and ramps
+        part, start_s = start_ramps(t_s[cut], touching[cut], window_s, start_s, before)
+        before = bool(touching[cut][-1])
+        chunks.append(part)
+    np.testing.assert_array_equal(np.concatenate(chunks), expected)
 
 
 def test_the_renderer_keeps_its_newest_finger_samples_in_order() -> None:

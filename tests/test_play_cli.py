@@ -49,7 +49,10 @@ def test_without_sound_card_or_display_it_plays_a_swipe_on_the_simulated_plate()
     judged = int(friction[0].split(" over ")[1].split(" touching")[0])
     callbacks = int(lines[1].split(": ")[1].split(" callbacks")[0])
     assert 0.9 * callbacks <= judged <= callbacks  # every block is judged (the finger touches throughout)
-    assert "departures: 0 blocks" in friction[0]
+    # The plate follows the texture but where a touch starts: the drive fades in over ramp_ms there (how many blocks
+    # that covers depends on where the texture is when the first sample lands, so on the host's timing).
+    departed = int(friction[0].split("departures: ")[1].split(" blocks")[0])
+    assert departed == 0 or f"; {departed} of them in a touch's start ramp" in friction[0], friction[0]
 
 
 def test_blocks_the_plate_cannot_follow_are_counted_as_departures() -> None:

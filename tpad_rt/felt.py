@@ -7,6 +7,8 @@ texture_at_finger(finger, texture, t_s, texture_t0_s=0.0) -> (mu, valid)
     position interpolated between its samples, and where that is known
 departures(felt_mu, achieved_mu, judged, tolerance_mu=DEPARTURE_TOLERANCE_MU) -> mask
     the blocks whose achieved friction is further than ``tolerance_mu`` from the felt one
+start_ramps(t_s, touching, window_s, touch_start_s=-inf, was_touching=False) -> (mask, touch_start_s)
+    the touching blocks within ``window_s`` of their touch's start, where the drive fades in
 
 Used to judge a rendering against its texture free of the kernel's own extrapolation
 (``horizon_ms``): ``tpad-rt render``'s summary and plots (through
@@ -14,6 +16,8 @@ Used to judge a rendering against its texture free of the kernel's own extrapola
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -28,6 +32,24 @@ def departures(felt_mu: np.ndarray, achieved_mu: np.ndarray, judged: np.ndarray,
                tolerance_mu: float = DEPARTURE_TOLERANCE_MU) -> np.ndarray:
     """True for the ``judged`` blocks where ``|felt_mu - achieved_mu| > tolerance_mu`` (NaN counts as departed)."""
     return judged & ~(np.abs(felt_mu - achieved_mu) <= tolerance_mu)
+
+
+def start_ramps(t_s: np.ndarray, touching: np.ndarray, window_s: float, touch_start_s: float = -math.inf,
+                was_touching: bool = False) -> tuple[np.ndarray, float]:
+    """True for the ``touching`` blocks (stream times ``t_s``, s, in order) less than ``window_s`` (s) after
+    the start of their touch, and the start (s) of the touch the last block belongs to.
+
+    A touch starts at a touching block after a block that was not touching (the watchdog
+    gate was closed: no finger, a lift, a stalled input); the renderer fades the drive in
+    there by design, over ``ramp_ms``. Blocks judged in chunks carry the state on:
+    ``touch_start_s`` and ``was_touching`` describe the blocks before ``t_s``.
+    """
+    touching = np.asarray(touching, dtype=bool)
+    t_s = np.asarray(t_s, dtype=np.float64)
+    previous = np.r_[was_touching, touching[:-1]]
+    starts_s = np.maximum.accumulate(np.where(touching & ~previous, t_s, touch_start_s))
+    last_start_s = float(starts_s[-1]) if len(starts_s) else touch_start_s
+    return touching & (t_s - starts_s < window_s), last_start_s
 
 
 def texture_at_finger(finger: np.ndarray, texture: CompiledTexture, t_s: np.ndarray,

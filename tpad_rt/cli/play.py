@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import signal
 import threading
 import time
@@ -49,7 +50,7 @@ from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
-from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures, texture_at_finger
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures, start_ramps, texture_at_finger
 from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import screen_size_px
@@ -233,6 +234,9 @@ class Session:
     plate_next: int = -1  # the sample it takes next
     judged_blocks: int = 0
     departed_blocks: int = 0
+    ramp_departed_blocks: int = 0  # of departed_blocks, those in a touch's start ramp (start_ramps)
+    touch_start_s: float = -math.inf  # the start of the touch the last judged block belongs to (s)
+    was_touching: bool = False  # whether the last judged block was touching
     error_sum: float = 0.0
     error_max: float = 0.0
 
@@ -279,15 +283,34 @@ class Session:
         middle_s = (starts + 0.5 * block) / rate_hz
         felt, known = texture_at_finger(renderer.recent_fingers(), renderer.texture, middle_s, renderer.texture_t0_s())
         felt = np.clip(felt, renderer.options.mu_floor, 1.0)
-        judged = known & ((rows["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0)
+        touching = (rows["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0
+        judged = known & touching
         errors = np.abs(felt - achieved)[judged]
+        departed = departures(felt, achieved, judged)
+        ramping, self.touch_start_s = start_ramps(rows["t"], touching, self.ramp_window_s(), self.touch_start_s,
+                                                  self.was_touching)
+        self.was_touching = bool(touching[-1])
         self.judged_blocks += len(errors)
-        self.departed_blocks += int(np.count_nonzero(departures(felt, achieved, judged)))
+        self.departed_blocks += int(np.count_nonzero(departed))
+        self.ramp_departed_blocks += int(np.count_nonzero(departed & ramping))
         if len(errors):
             self.error_sum += float(errors.sum())
             self.error_max = max(self.error_max, float(errors.max()))
         self.achieved = float(achieved[-1])
         self.felt = float(felt[-1]) if known[-1] else None
+
+    def ramp_window_s(self) -> float:
+        """How long (s) a touch's start ramp lasts: the drive's fade-in (ramp_ms) and the simulated plate's
+        envelope time constant at the default force after it."""
+        options = self.renderer.options
+        tau_s = float(self.renderer.device.envelope_time_constant_s(options.default_force_n))
+        return options.ramp_ms * 1e-3 + tau_s
+
+    def ramp_text(self) -> str:
+        """How many of the departed blocks lie in a touch's start ramp ("" when none departed)."""
+        if not self.departed_blocks:
+            return ""
+        return f"; {self.ramp_departed_blocks} of them in a touch's start ramp (the drive fading in)"
 
     def panel(self) -> Table:
         """The live status panel."""
@@ -306,7 +329,7 @@ class Session:
             if self.achieved is not None:
                 grid.add_row("simulated plate", f"{self.achieved:.2f}  (the friction the simulated plate gives now)")
                 grid.add_row("departures", f"{self.departed_blocks} of {self.judged_blocks} touching blocks further "
-                             f"than {DEPARTURE_TOLERANCE_MU:g} from the texture under the finger")
+                             f"than {DEPARTURE_TOLERANCE_MU:g} from the texture under the finger{self.ramp_text()}")
             grid.add_row("drive", f"{row['voltage_v']:5.1f} V of {self.renderer.device.max_voltage_v:g} V"
                          + ("  SATURATED" if int(row["saturated"]) & (FLAG_VOLTAGE | FLAG_POWER) else ""))
         grid.add_row("power", f"now {row.get('power_w', 0.0):.3f} W, mean {stats['power_mean_w']:.3f} W, "
@@ -369,5 +392,5 @@ class Session:
                          f"blocks: mean {self.error_sum / self.judged_blocks:.4f}, max {self.error_max:.4f}; "
                          f"departures: {self.departed_blocks} blocks "
                          f"({100 * self.departed_blocks / self.judged_blocks:.1f} %) further than "
-                         f"{DEPARTURE_TOLERANCE_MU:g}")
+                         f"{DEPARTURE_TOLERANCE_MU:g}{self.ramp_text()}")
         return [line.replace("nan", "n/a") for line in lines]
