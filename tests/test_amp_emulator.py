@@ -41,6 +41,7 @@ from cli_run import tpad_rt
 from tpad_rt.amp.emulator import (
     RECORDED_COLUMNS, Amplifier, Circuit, Plate, Recorder, amplifier_info, sim_rate_hz, write_recording,
 )
+from tpad_rt.cli.amp import REALTIME_PRIORITY
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError
 
@@ -163,6 +164,28 @@ def paused_gc() -> Iterator[None]:
             gc.enable()
 
 
+#: The SCHED_FIFO priority of the test's host threads where allowed: below the emulator's (it stands in for the
+#: amplifier's microcontroller), above every ordinary process, like tpad-rt's own streamer.
+HOST_PRIORITY = REALTIME_PRIORITY - 1
+
+
+@contextlib.contextmanager
+def realtime_thread() -> Iterator[None]:
+    """The calling thread at SCHED_FIFO HOST_PRIORITY inside, where the system allows it (root, as CI runs):
+    on a loaded 2-core machine an ordinary thread can wait longer than watchdog_ms for a core, and the
+    amplifier's watchdog then rightly trips mid-stream (A4). Back to the thread's own policy after."""
+    policy, param = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(HOST_PRIORITY))
+    except OSError:
+        yield
+        return
+    try:
+        yield
+    finally:
+        os.sched_setscheduler(0, policy, param)
+
+
 class Amp:
     """``tpad-rt amp emulate`` in its own process, recording to ``folder``, and the test as its host on its pty."""
 
@@ -214,6 +237,10 @@ class Amp:
     # --- the line ---
 
     def _read(self) -> None:
+        with realtime_thread():
+            self._read_frames()
+
+    def _read_frames(self) -> None:
         pending = b""
         while not self._leaving.is_set():
             if not select.select([self.fd], [], [], 0.05)[0]:
@@ -343,14 +370,17 @@ class Amp:
 
         A frame starting at an offset in ``instead`` is not sent; ``instead[offset](index, samples)`` is called.
         """
-        with paused_gc():
+        with paused_gc(), realtime_thread():
             self._stream(samples, first_index, fill, frame_samples, instead or {}, until)
 
     def _stream(self, samples: np.ndarray, first_index: int, fill: int, frame_samples: int,
                 instead: dict[int, Callable[[int, np.ndarray], None]], until: Callable[[Status], bool]) -> None:
         cursor = self.mark()
         sent = played = 0
+        streaming = False
+        progress_s = time.monotonic()
         while sent < len(samples):
+            assert time.monotonic() - progress_s < WAIT_S, f"nothing played for {WAIT_S:g} s: {self.frames[-1:]}"
             while sent < len(samples) and sent - played < fill:
                 chunk = samples[sent:sent + frame_samples]
                 if sent in instead:
@@ -370,7 +400,11 @@ class Amp:
                 if until(status):
                     return
                 if status.state in (PRIMING, RUNNING):
-                    played = (status.play_index - first_index) & 0xFFFFFFFF
+                    streaming = True
+                    if (status.play_index - first_index) & 0xFFFFFFFF != played:
+                        played, progress_s = (status.play_index - first_index) & 0xFFFFFFFF, time.monotonic()
+                elif streaming:
+                    return  # it left the stream (a fault, its watchdog): the test's checks say what follows
 
     # --- the end ---
 
