@@ -36,7 +36,8 @@ def test_device_schema_names() -> None:
         "format_version", "label", "description", "plate", "actuator", "carrier_hz", "amplifier",
         "circuit", "power_budget_w", "source",
     }  # fmt: skip
-    assert set(schema["properties"]) == set(schema["required"]) | {"friction_model", "speed_floor_mm_s", "preemphasis"}
+    assert set(schema["properties"]) == set(schema["required"]) | {"friction_model", "speed_floor_mm_s", "preemphasis",
+                                                                  "mode_shape"}
 
 
 def test_unknown_kind() -> None:

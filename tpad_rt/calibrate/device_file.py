@@ -91,8 +91,8 @@ def build_document(fits: list[BvdFit], gamma: GammaFit, template: DeviceFile,
     """``(document, notes)``: a format 2 device from ``fits`` (one per force), ``gamma`` and ``template``.
 
     The circuit is the fits' (C0 their median), gamma the amplitude fit's; the plate,
-    actuator, friction model, speed floor, pre-emphasis and volts per full scale are the
-    template's. The shunt and max volts are the template's unless given; the carrier is
+    actuator, friction model, speed floor, pre-emphasis, mode shape (if any) and volts per
+    full scale are the template's. The shunt and max volts are the template's unless given; the carrier is
     the loaded resonance at the lowest force unless given; the power budget
     POWER_BUDGET_MARGIN x the power at max volts at the lowest force, rounded up, unless
     given. ``notes`` are lines for the user (a C0 that varies with force).
@@ -168,6 +168,9 @@ def build_document(fits: list[BvdFit], gamma: GammaFit, template: DeviceFile,
             "preemphasis": template_source,
         },
     }
+    if template.mode_shape is not None:
+        document["mode_shape"] = _template_part(template, "mode_shape")
+        document["source"]["mode_shape"] = template_source
     return document, notes
 
 

@@ -150,6 +150,13 @@ class FrictionModel(StrictModel):
     psi_star: Annotated[float, Strict(), Ge(0.01), Le(1000)] = 4.69
 
 
+class ModeShape(StrictModel):
+    """The standing wave across the plate: the free-free ``m x 0`` bending mode (``m = plate.mode[0]``), and
+    the length (mm) of the fingertip's contact patch along the plate, over which the finger feels its mean."""
+
+    contact_width_mm: Annotated[float, Strict(), Ge(0), Le(1000)]
+
+
 class DeviceFile(StrictModel):
     """One TPaD: how it turns volts into vibration, and its limits."""
 
@@ -165,4 +172,19 @@ class DeviceFile(StrictModel):
     speed_floor_mm_s: Annotated[float, Strict(), Ge(0.1), Le(1000)] = 5.0
     power_budget_w: Annotated[float, Strict(), Ge(0.001), Le(1000)]
     preemphasis: Flag = True
+    mode_shape: ModeShape | None = None
     source: Annotated[dict[Text, Text], MinLen(1)]
+
+    @model_validator(mode="after")
+    def _mode_shape_fits(self) -> DeviceFile:
+        """A mode shape needs an m x 0 mode with m >= 2 and a contact patch no longer than the plate."""
+        if self.mode_shape is None:
+            return self
+        lines, across = self.plate.mode
+        if lines < 2 or across != 0:
+            raise rule_error(f"needs the plate's mode to be [m, 0] with m >= 2 (a free-free bending wave along the "
+                             f"length), got [{lines}, {across}]", "mode_shape")
+        if self.mode_shape.contact_width_mm > self.plate.length_mm:
+            raise rule_error(f"must be <= plate.length_mm ({self.plate.length_mm:g}), got "
+                             f"{self.mode_shape.contact_width_mm:g}", "mode_shape", "contact_width_mm")
+        return self
