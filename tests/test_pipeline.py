@@ -41,7 +41,7 @@ def test_bad_options_are_one_config_error_naming_every_field() -> None:
     with pytest.raises(ConfigError) as caught:
         RenderOptions(smoothing_ms=-1.0, control_interval=300, power_avg_w=math.nan, mu_floor=1.5,
                       finger_ring=1, telemetry_ring=2.5, preemphasis="yes", horizon_ms=-2.0,  # type: ignore[arg-type]
-                      braking=1)  # type: ignore[arg-type]
+                      braking=1, mode_compensation="no")  # type: ignore[arg-type]
     assert caught.value.errors == [
         "RenderOptions.power_avg_w: must be a finite number in [0.001, 1000], got nan",
         "RenderOptions.smoothing_ms: must be in [0.01, 1000], got -1",
@@ -52,6 +52,7 @@ def test_bad_options_are_one_config_error_naming_every_field() -> None:
         "RenderOptions.telemetry_ring: must be a whole number in [1, 4194304], got 2.5",
         "RenderOptions.preemphasis: must be true, false or None, got 'yes'",
         "RenderOptions.braking: must be true or false, got 1",
+        "RenderOptions.mode_compensation: must be true or false, got 'no'",
     ]
 
 
@@ -65,7 +66,8 @@ def test_options_that_would_allocate_without_bound_or_overflow_are_refused(optio
         RenderOptions(**{option: value})
 
 
-@pytest.mark.parametrize("name", [f.name for f in fields(RenderOptions) if f.name not in ("preemphasis", "braking", "track")])
+@pytest.mark.parametrize("name", [f.name for f in fields(RenderOptions)
+                                  if f.name not in ("preemphasis", "braking", "track", "mode_compensation")])
 def test_every_numeric_option_refuses_text(name: str) -> None:
     with pytest.raises(ConfigError, match=f"RenderOptions.{name}: must be a (finite|whole) number"):
         RenderOptions(**{name: "1"})  # type: ignore[arg-type]

@@ -201,11 +201,13 @@ def _device(draw: st.DrawFn) -> dict[str, Any]:
     carrier_hz = draw(_number(1000.0, 200_000.0))
     material = {"thickness_mm": draw(_number(0.01, 100.0, log=True)), "density_g_cm3": draw(_number(0.1, 50.0)),
                 "youngs_modulus_gpa": draw(_number(0.01, 2000.0, log=True))}
+    length_mm = draw(_number(1.0, 1000.0))
+    shaped = draw(st.booleans())  # a mode shape needs an [m >= 2, 0] mode
+    mode = [draw(st.integers(2, 1000)), 0] if shaped else [draw(st.integers(1, 1000)), draw(st.integers(0, 1000))]
     return {
         "format_version": 2, "label": "random", "description": "a random device across the accepted ranges",
-        "plate": {"material": "glass", **material, "length_mm": draw(_number(1.0, 1000.0)),
-                  "width_mm": draw(_number(1.0, 1000.0)),
-                  "mode": [draw(st.integers(1, 1000)), draw(st.integers(0, 1000))]},
+        "plate": {"material": "glass", **material, "length_mm": length_mm, "width_mm": draw(_number(1.0, 1000.0)),
+                  "mode": mode},
         "actuator": material,
         "carrier_hz": carrier_hz,
         "amplifier": {"volts_per_full_scale": full_scale_v,
@@ -218,6 +220,7 @@ def _device(draw: st.DrawFn) -> dict[str, Any]:
         "speed_floor_mm_s": draw(_number(0.1, 1000.0, log=True)),
         "power_budget_w": draw(_number(0.001, 1000.0, log=True)),
         "preemphasis": draw(st.booleans()),
+        **({"mode_shape": {"contact_width_mm": draw(_number(0.0, length_mm))}} if shaped else {}),
         "source": {"everything": "random"},
     }
 
@@ -241,7 +244,8 @@ def test_every_valid_file_renders_finite_in_limit_output(tmp_path_factory: pytes
     highest_hz = float(device_tables(device, track)[0][layout.DEV_CARRIER_HZ].max())
     fs_hz = max(192_000, math.ceil(highest_hz / MAX_CARRIER_FRACTION))
     assume(fs_hz <= MAX_RATE_HZ)
-    pipeline = Pipeline(device, texture, fs_hz, options=RenderOptions(track=track))
+    options = RenderOptions(track=track, mode_compensation=data.draw(st.booleans(), "mode_compensation"))
+    pipeline = Pipeline(device, texture, fs_hz, options=options)
     sim = SimOutput(device, fs_hz)
     length_mm, width_mm = device.plate.length_m * 1e3, device.plate.width_m * 1e3
     y_mm = data.draw(st.floats(0.0, width_mm), "y_mm")

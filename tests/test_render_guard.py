@@ -10,6 +10,7 @@ run), so their renders are short.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,10 +29,13 @@ BLOCK = 64
 SETTLE_BLOCKS = 24
 AFTER_BLOCKS = 24
 BAD_VALUES = (math.nan, math.inf, -math.inf, 1e308, -1e308)
+#: The default device with its standing wave modelled: the kernel reads its mode gain table.
+STANDING_WAVE = Device.from_file(Path(__file__).resolve().parents[1] / "examples" / "devices"
+                                 / "SLG_0.56_standing_wave.yaml")
 
 
-def pipeline() -> Pipeline:
-    p = Pipeline(Device.default(), load_compiled(TEXTURES / "grating.yaml"))
+def pipeline(device: Device | None = None) -> Pipeline:
+    p = Pipeline(Device.default() if device is None else device, load_compiled(TEXTURES / "grating.yaml"))
     p.start()
     return p
 
@@ -157,11 +161,11 @@ def test_tables_and_power_ring_overwritten_are_rebuilt() -> None:
 
 
 @pytest.mark.parametrize(("row", "value"), [
-    (row, value) for row in (layout.DEV_AMP_M_PER_V, layout.DEV_POWER_W_PER_V2, layout.DEV_TAU_S)
+    (row, value) for row in (layout.DEV_AMP_M_PER_V, layout.DEV_POWER_W_PER_V2, layout.DEV_TAU_S, layout.DEV_MODE_GAIN)
     for value in (math.nan, math.inf, -1.0, 0.0) if not (row == layout.DEV_TAU_S and value == 0.0)  # tau 0: valid
 ])
 def test_a_bad_device_table_is_a_device_fault(row: int, value: float) -> None:
-    p = pipeline()
+    p = pipeline(STANDING_WAVE if row == layout.DEV_MODE_GAIN else None)
     _, rows = render(p, SETTLE_BLOCKS)
     kept = p.arrays.dev[row].copy()
     p.arrays.dev[row] = value

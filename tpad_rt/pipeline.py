@@ -3,9 +3,9 @@
 API map
 -------
 RenderOptions(power_budget_w=None, power_avg_w=None, power_window_s=1.0, control_interval=32,
-              smoothing_ms=0.25, preemphasis=None, braking=True, track=False, horizon_ms=0.25,
-              velocity_window_ms=10.0, watchdog_ms=50.0, ramp_ms=5.0, default_force_n=0.5, mu_floor=0.01,
-              finger_ring=1024, telemetry_ring=8192)
+              smoothing_ms=0.25, preemphasis=None, braking=True, track=False, mode_compensation=True,
+              horizon_ms=0.25, velocity_window_ms=10.0, watchdog_ms=50.0, ramp_ms=5.0, default_force_n=0.5,
+              mu_floor=0.01, finger_ring=1024, telemetry_ring=8192)
     the renderer's settings (frozen; ConfigError naming each bad field)
 Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
     ``.fs_hz``, ``.sample_index``, ``.time_s``, ``.device``, ``.texture``, ``.options``, ``.running``
@@ -21,6 +21,8 @@ KernelArrays
     telem, telem_count``
 force_grid(device) -> (start_n, step_n, intervals), device_tables(device) -> (dev, start_n, step_n)
     the uniform force grid of the device tables, and the tables on it
+mode_gain_table(device, x_mm) -> gains
+    the mode gain the command divides by at ``x_mm`` (Device.mode_gain, floored at MODE_GAIN_FLOOR)
 
 docs/kernel.md is the design. :meth:`Pipeline.push_finger` validates the sample, then, under
 a lock (any number of producer threads), writes the ring row and bumps the count with a
@@ -36,6 +38,7 @@ from dataclasses import dataclass
 from typing import Callable, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, SampleError, TpadError
@@ -53,6 +56,9 @@ MAX_CARRIER_FRACTION = layout.MAX_CARRIER_FRACTION
 #: 4096 intervals over the shipped 0-2 N, linear interpolation is within 2e-8 of them).
 MAX_GRID_INTERVALS = 4096
 MIN_GRID_INTERVALS = 4096
+#: The least mode gain the command divides by: near a nodal line (a contact patch narrower than the nodal
+#: spacing) it asks at most 20x the antinode amplitude, which the volt and power caps then bound.
+MODE_GAIN_FLOOR = 0.05
 #: Relative tolerance for a force-table knot to count as lying on a grid point.
 _KNOT_TOLERANCE = 1e-9
 
@@ -105,6 +111,11 @@ class RenderOptions:
       (:meth:`Device.motional_resonance_hz`), the carrier's phase continuous, with the
       amplitude, power and time constant there. Only for carrier samples (a DAC): an
       amplifier that makes the carrier itself is not tracked yet (ConfigError).
+    - ``mode_compensation``: on a device with a mode shape (its file's ``mode_shape``),
+      ask for the texture's amplitude under the finger, not at an antinode: the command
+      divided by :meth:`Device.mode_gain` at the finger (floored at MODE_GAIN_FLOOR),
+      within the same volt and power limits. Off, or without a mode shape, the command
+      assumes the antinode amplitude everywhere.
     - ``horizon_ms``: extra extrapolation lead of the finger position (ms; latency
       compensation). The default equals the default ``smoothing_ms``: a one-pole filter
       delays a slowly varying envelope by its time constant, so looking that far ahead
@@ -131,6 +142,7 @@ class RenderOptions:
     preemphasis: bool | None = None
     braking: bool = True
     track: bool = False
+    mode_compensation: bool = True
     horizon_ms: float = 0.25
     velocity_window_ms: float = 10.0
     watchdog_ms: float = 50.0
@@ -159,10 +171,9 @@ class RenderOptions:
         ]
         if self.preemphasis is not None and not isinstance(self.preemphasis, bool):
             found.append(("preemphasis", f"must be true, false or None, got {self.preemphasis!r}"))
-        if not isinstance(self.braking, bool):
-            found.append(("braking", f"must be true or false, got {self.braking!r}"))
-        if not isinstance(self.track, bool):
-            found.append(("track", f"must be true or false, got {self.track!r}"))
+        for name in ("braking", "track", "mode_compensation"):
+            if not isinstance(getattr(self, name), bool):
+                found.append((name, f"must be true or false, got {getattr(self, name)!r}"))
         return [(name, problem) for name, problem in found if problem]
 
 
@@ -263,6 +274,8 @@ def device_tables(device: Device, track: bool = False) -> tuple[np.ndarray, floa
     amplitude per peak volt (m/V), ``dev[DEV_POWER_W_PER_V2]`` the most power a drive of 1 V
     peak can draw (W, :meth:`Device.power_w_per_v2`: the exact circuit, detuning included),
     ``dev[DEV_TAU_S]`` the loaded envelope time constant (s); forces ``start_n + k * step_n``.
+    ``dev[DEV_MODE_GAIN]`` is on a grid in x, not force: :func:`mode_gain_table` at ``x = k *
+    mode_step_mm(device, dev)`` (1 without a mode shape).
     """
     start_n, step_n, intervals = force_grid(device)
     forces_n = start_n + step_n * np.arange(intervals + 1)
@@ -273,7 +286,21 @@ def device_tables(device: Device, track: bool = False) -> tuple[np.ndarray, floa
     dev[layout.DEV_POWER_W_PER_V2] = device.power_w_per_v2(forces_n, carrier_hz)
     dev[layout.DEV_TAU_S] = device.envelope_time_constant_s(forces_n, carrier_hz)
     dev[layout.DEV_CARRIER_HZ] = carrier_hz
+    dev[layout.DEV_MODE_GAIN] = mode_gain_table(device, np.arange(intervals + 1) * mode_step_mm(device, dev))
     return dev, start_n, step_n
+
+
+def mode_step_mm(device: Device, dev: np.ndarray) -> float:
+    """The x step (mm) of ``dev[DEV_MODE_GAIN]``'s grid: the plate's length over the table's intervals."""
+    return device.plate.length_m * 1e3 / (dev.shape[1] - 1)
+
+
+def mode_gain_table(device: Device, x_mm: npt.ArrayLike) -> np.ndarray:
+    """:meth:`Device.mode_gain` at ``x_mm``, at least MODE_GAIN_FLOOR: what the command divides by.
+
+    Raises ValueError for a non-finite position.
+    """
+    return np.maximum(device.mode_gain(x_mm), MODE_GAIN_FLOOR)
 
 
 def _check_rate(device: Device, fs_hz: float, envelope_output: bool, highest_carrier_hz: float) -> None:
@@ -330,7 +357,7 @@ class Pipeline:
         self.position_range_mm = position_range_mm(device.plate.length_m * 1e3, device.plate.width_m * 1e3)
         window_steps = max(1, round(options.power_window_s * fs_hz / options.control_interval))
         self._arrays = KernelArrays(
-            cfg=self._config(start_n, step_n, window_steps),
+            cfg=self._config(start_n, step_n, window_steps, mode_step_mm(device, dev)),
             dev=dev,
             state=np.zeros(layout.STATE_SIZE),
             power_ring=np.zeros(window_steps),
@@ -345,8 +372,8 @@ class Pipeline:
         )
         self.set_texture(texture, 0.0)
 
-    def _config(self, grid_start_n: float, grid_step_n: float, window_steps: int) -> np.ndarray:
-        """The ``cfg`` array (layout.CFG_*), RUN off."""
+    def _config(self, grid_start_n: float, grid_step_n: float, window_steps: int, gain_step_mm: float) -> np.ndarray:
+        """The ``cfg`` array (layout.CFG_*), RUN off; ``gain_step_mm`` the x step of the mode gain table."""
         device, options = self.device, self.options
         cap_w = device.power_budget_w if options.power_budget_w is None else options.power_budget_w
         preemphasis = device.preemphasis if options.preemphasis is None else options.preemphasis
@@ -377,6 +404,8 @@ class Pipeline:
             layout.CFG_OUTPUT_ENVELOPE: 1.0 if self.envelope_output else 0.0,
             layout.CFG_BRAKING: 1.0 if options.braking else 0.0,
             layout.CFG_TRACK: 1.0 if options.track else 0.0,
+            layout.CFG_MODE_STEP_MM: (gain_step_mm if options.mode_compensation and device.contact_width_m is not None
+                                      else 0.0),
         }.items():
             cfg[index] = value
         return cfg

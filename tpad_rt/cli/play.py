@@ -45,7 +45,7 @@ from rich.live import Live
 from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number
-from tpad_rt.cli.render import add_session_arguments
+from tpad_rt.cli.render import add_session_arguments, session_options
 from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
@@ -60,7 +60,6 @@ from tpad_rt.kernel.texture_eval import eval_texture_points
 from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
 from tpad_rt.outputs import audio
 from tpad_rt.outputs.sim import SimOutput
-from tpad_rt.pipeline import RenderOptions
 
 if TYPE_CHECKING:
     from tpad_rt.engine import Renderer
@@ -143,8 +142,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable_target(args.record, "recordings")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
     output, finger = choose_output(args.output, args.rate), choose_input(args.input)
-    options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg, track=args.track,
-                            **({} if args.force is None else {"default_force_n": args.force}))
+    options = session_options(args)
     with contextlib.ExitStack() as compiling:
         # A first run compiles the kernels (about 10 s): say so at once, and compile everything
         # before the clock starts, so the run itself renders from its first second.

@@ -90,6 +90,16 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
     parser.add_argument("--track", action="store_true",
                         help="follow the plate's resonance as the contact force moves it (the device circuit's loaded "
                         "resonance at each force; DAC outputs only)")
+    parser.add_argument("--no-mode-compensation", dest="mode_compensation", action="store_false",
+                        help="on a device with a mode shape, command the texture's amplitude at an antinode instead of "
+                        "under the finger (the standing wave then shows)")
+
+
+def session_options(args: argparse.Namespace) -> RenderOptions:
+    """The RenderOptions of :func:`add_session_arguments`' options."""
+    return RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg, track=args.track,
+                         mode_compensation=args.mode_compensation,
+                         **({} if args.force is None else {"default_force_n": args.force}))
 
 
 def add_parser(subparsers: Subparsers) -> None:
@@ -130,8 +140,7 @@ def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_
         raise ConfigError(f"input {args.input}: follows a live finger, which cannot be rendered offline; "
                           "use tpad-rt play, or a scripted:// or file:// input")
     input_s = input_span_s(source, args.duration)
-    options = RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg, track=args.track,
-                            **({} if args.force is None else {"default_force_n": args.force}))
+    options = session_options(args)
     # The ramp down starts at the first control step after the stop and lasts ramp_ms:
     # one control interval plus the ramp, and a whole block more, end in silence.
     tail_s = options.ramp_ms * 1e-3 + (options.control_interval + args.block) / args.rate

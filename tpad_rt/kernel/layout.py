@@ -33,14 +33,16 @@ CFG_TEXTURE_T0_S = 23         # stream time the current texture was set (tempora
 CFG_OUTPUT_ENVELOPE = 24      # 1.0: samples are the envelope (for an amplifier that makes the carrier); 0.0: carrier
 CFG_BRAKING = 25              # 1.0: the shaper may drive in anti-phase (negative envelope) to brake the plate
 CFG_TRACK = 26                # 1.0: each control step drives at dev[DEV_CARRIER_HZ] at its force, phase continuous
-CFG_SIZE = 27
+CFG_MODE_STEP_MM = 27         # > 0: x step (mm) of dev[DEV_MODE_GAIN]'s grid from x = 0, and the command compensates it
+CFG_SIZE = 28
 
 # --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
 DEV_AMP_M_PER_V = 0           # plate amplitude (m) per peak drive volt
 DEV_POWER_W_PER_V2 = 1        # the most real power (W) a 1 V peak drive at the carrier draws (detuning bound)
 DEV_TAU_S = 2                 # plate envelope time constant, the loaded branch's 2 L / (R + Re Z_th)
 DEV_CARRIER_HZ = 3            # the carrier to drive at (the loaded resonance when tracking, else carrier_hz)
-DEV_ROWS = 4
+DEV_MODE_GAIN = 4             # on a grid in x, not force: amplitude under the finger / antinode amplitude (floored)
+DEV_ROWS = 5
 
 # --- finger: float64[R, FINGER_COLS], one writer at a time (Python, under a lock) ---
 FINGER_T_S = 0

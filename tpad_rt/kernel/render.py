@@ -55,6 +55,7 @@ from tpad_rt.kernel.layout import (
     CFG_FS_HZ,
     CFG_HORIZON_S,
     CFG_MAX_VOLTAGE_V,
+    CFG_MODE_STEP_MM,
     CFG_MU0,
     CFG_MU_FLOOR,
     CFG_OUTPUT_ENVELOPE,
@@ -74,6 +75,7 @@ from tpad_rt.kernel.layout import (
     CFG_WATCHDOG_S,
     DEV_AMP_M_PER_V,
     DEV_CARRIER_HZ,
+    DEV_MODE_GAIN,
     DEV_POWER_W_PER_V2,
     DEV_TAU_S,
     FINGER_DOWN,
@@ -247,15 +249,31 @@ def _unit_phasor(phase_units: int) -> tuple[float, float]:
 
 
 @_kernel
-def _force_cell(cfg: np.ndarray, dev: np.ndarray, force_n: float) -> tuple[int, int, float]:
-    """Columns ``(i, i + 1)`` of the force grid around ``force_n`` (N) and the weight of the second, clamped."""
+def _grid_cell(dev: np.ndarray, position: float) -> tuple[int, int, float]:
+    """Columns ``(i, i + 1)`` of ``dev`` around the fractional column ``position`` and the weight of the
+    second, clamped to the table (a NaN position is column 0: never an index from a non-finite value)."""
     last = dev.shape[1] - 1
-    position = (force_n - cfg[CFG_FORCE_GRID_START_N]) / cfg[CFG_FORCE_GRID_STEP_N]
-    if not position > 0.0:  # NaN too: never an index from a non-finite value
+    if not position > 0.0:
         position = 0.0
     position = min(position, float(last))
     i = min(int(position), max(last - 1, 0))
     return i, min(i + 1, last), position - i
+
+
+@_kernel
+def _force_cell(cfg: np.ndarray, dev: np.ndarray, force_n: float) -> tuple[int, int, float]:
+    """The :func:`_grid_cell` of the force grid around ``force_n`` (N)."""
+    return _grid_cell(dev, (force_n - cfg[CFG_FORCE_GRID_START_N]) / cfg[CFG_FORCE_GRID_STEP_N])
+
+
+@_kernel
+def _mode_gain(cfg: np.ndarray, dev: np.ndarray, x_mm: float) -> float:
+    """``dev[DEV_MODE_GAIN]`` at ``x_mm`` (mm, clamped to its grid): the amplitude the finger's contact patch
+    feels over the antinode amplitude; 1 when CFG_MODE_STEP_MM is not > 0 (no mode shape to compensate)."""
+    step_mm = cfg[CFG_MODE_STEP_MM]
+    if not step_mm > 0.0:
+        return 1.0
+    return _device_value(dev, DEV_MODE_GAIN, _grid_cell(dev, x_mm / step_mm))
 
 
 @_kernel
@@ -518,7 +536,8 @@ def _command_volts(
     prog: np.ndarray, params: np.ndarray, img: np.ndarray, stack: np.ndarray,
 ) -> tuple[float, int, int]:
     """Envelope volts (peak) the texture asks for at the step's finger, and FLAG_SPEED_FLOOR if floored; the
-    friction model's vibration frequency is the step's carrier ``carrier_hz`` (Hz).
+    friction model's vibration frequency is the step's carrier ``carrier_hz`` (Hz), ``amplitude_m_per_v``
+    the plate amplitude under the finger per peak volt (m/V).
 
     Returns ``(volts, FLAG_* bits, FAULT_* bits)``; writes the clamped target friction to
     ``state``. A texture value that is not finite is a FAULT_TEXTURE, a command that is
@@ -703,9 +722,12 @@ def _control_step(
         tau_s = 0.0
     command_v = 0.0
     flags = 0
+    mode_gain = _mode_gain(cfg, dev, state[STATE_X_MM])
+    if not 0.0 < mode_gain < math.inf:
+        fault |= FAULT_DEVICE
     if finger_status > 0 and fault == 0:
         command_v, flags, command_fault = _command_volts(
-            t_s, cfg, state, amplitude_m_per_v, carrier_hz, prog, params, img, stack)
+            t_s, cfg, state, amplitude_m_per_v * mode_gain, carrier_hz, prog, params, img, stack)
         fault |= command_fault
     elif finger_status == 0:
         command_v = state[STATE_COMMAND_V]
