@@ -7,10 +7,14 @@ at ``--t-s`` seconds after the texture was set:
 1. the target relative friction, evaluated by the compiled texture kernel;
 2. the peak drive volts that friction asks for (inverse friction model at the finger
    speed, at least the device's speed floor, divided by the plate's amplitude per
-   volt at that force), clipped at the device's ``max_voltage_v``; where it would
-   exceed it, the area is hatched and outlined (saturated);
+   volt at that force and, on a device with a mode shape, by the share of it the
+   finger's contact patch feels there), clipped at the device's ``max_voltage_v``;
+   where it would exceed it, the area is hatched and outlined (saturated);
 3. the estimated electrical power of the clipped drive, with a contour at the
-   device's power budget.
+   device's power budget;
+4. on a device with a mode shape (its file's ``mode_shape``), the standing wave along
+   the plate, its nodal lines, and the share of the antinode amplitude the contact
+   patch feels at each x (what the drive above is divided by).
 
 Prints one line: the file written and the share of the plate that saturates.
 """
@@ -31,6 +35,7 @@ from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.figures import figure_target, pyplot, save
 from tpad_rt.physics.friction import amplitude_for
+from tpad_rt.pipeline import mode_gain_table
 from tpad_rt.texture import CompiledTexture, load_compiled
 
 #: Most grid points a figure evaluates (a 130 x 60 mm plate at 0.02 mm).
@@ -152,7 +157,7 @@ def plate_maps(
     friction = texture.evaluate(x_mm[None, :], y_mm[:, None], ux, uy, t_s)
     speed_m_s = max(finger.speed_mm_s * 1e-3, device.speed_floor_m_s)
     amplitude_m = amplitude_for(friction, device.carrier_hz, speed_m_s, device.mu0, device.poisson, device.psi_star)
-    volts_asked = amplitude_m / device.amplitude_m_per_v(finger.force_n)
+    volts_asked = amplitude_m / (device.amplitude_m_per_v(finger.force_n) * mode_gain_table(device, x_mm)[None, :])
     volts = np.minimum(volts_asked, device.max_voltage_v)
     return PlateMaps(
         x_mm=x_mm,
@@ -169,7 +174,9 @@ def draw(maps: PlateMaps, texture: CompiledTexture, device: Device, finger: Fing
     """A matplotlib Figure of the three maps (module docstring), titled with the texture's description."""
     plt = pyplot()
 
-    figure, panels = plt.subplots(3, 1, figsize=(8.6, 11.0), layout="constrained", sharex=True)
+    shaped = device.contact_width_m is not None
+    figure, panels = plt.subplots(4 if shaped else 3, 1, figsize=(8.6, 13.4 if shaped else 11.0), layout="constrained",
+                                  sharex=True, height_ratios=[1, 1, 1, 0.55] if shaped else None)
     # printable: a control character (a NUL in a description) has no glyph, and matplotlib warns about it
     figure.suptitle(printable(texture.description), fontsize=12, fontweight="bold")
     moving = f"towards {finger.direction_deg:g}°" if finger.speed_mm_s > 0 else "(still)"
@@ -181,7 +188,9 @@ def draw(maps: PlateMaps, texture: CompiledTexture, device: Device, finger: Fing
         _direction_arrow(panels[0], finger.direction_deg)
     _volts_panel(figure, panels[1], maps, device, extent)
     _power_panel(figure, panels[2], maps, device, extent)
-    panels[2].set_xlabel("x (mm)")
+    if device.contact_width_m is not None:
+        _mode_panel(figure, panels[3], device, device.contact_width_m * 1e3)
+    panels[-1].set_xlabel("x (mm)")
     return figure
 
 
@@ -241,6 +250,32 @@ def _power_panel(figure: Any, axes: Any, maps: PlateMaps, device: Device, extent
         state = "not reached"
     axes.set_title(f"estimated power, peak {maps.power_w.max():.3g} W; budget {budget_w:g} W (cyan): {state}",
                    fontsize=10, loc="left")
+
+
+def _mode_panel(figure: Any, axes: Any, device: Device, contact_width_mm: float) -> None:
+    """The standing wave along the plate, its nodal lines, and the share of the antinode amplitude a
+    ``contact_width_mm`` patch feels; as wide as the maps above (an empty colourbar's room kept)."""
+    from matplotlib.cm import ScalarMappable
+
+    figure.colorbar(ScalarMappable(), ax=axes, shrink=0.9, pad=0.02).ax.set_visible(False)
+    length_mm = device.plate.length_m * 1e3
+    x_mm = np.linspace(0.0, length_mm, 4001)
+    wave = device.mode_deflection(x_mm)
+    felt = device.mode_gain(x_mm)
+    nodes_mm = x_mm[:-1][np.sign(wave[1:]) != np.sign(wave[:-1])]
+    axes.plot(x_mm, wave, color="0.6", linewidth=0.8, label="standing wave (antinode = 1)")
+    axes.plot(x_mm, felt, color="#d81b60", linewidth=1.8, label="felt over the contact patch")
+    for node_mm in nodes_mm:
+        axes.axvline(node_mm, color="0.8", linewidth=0.6, linestyle=":")
+    axes.axhline(0.0, color="0.5", linewidth=0.5)
+    axes.set_xlim(0.0, length_mm)
+    axes.set_ylabel("amplitude / antinode")
+    axes.legend(loc="lower right", fontsize=7, framealpha=0.9)
+    middle = (x_mm > 0.1 * length_mm) & (x_mm < 0.9 * length_mm)
+    spacing_mm = float(np.median(np.diff(nodes_mm))) if len(nodes_mm) > 1 else length_mm
+    axes.set_title(f"{device.plate.mode[0]} x {device.plate.mode[1]} mode, nodal lines {spacing_mm:.2g} mm apart: a "
+                   f"{contact_width_mm:g} mm contact patch feels {felt[middle].min():.2f} to {felt[middle].max():.2f} "
+                   "of the antinode amplitude", fontsize=10, loc="left")
 
 
 def _summary(out: Path, maps: PlateMaps, device: Device) -> None:

@@ -6,10 +6,12 @@ its resonance and loaded quality factor (``?q=`` holds the quality factor fixed
 instead), with the steady gain ``amplitude_m_per_v(force)`` at the carrier. A carrier
 off that resonance (contact detunes the plate) beats in every transient, as on the real
 circuit. Per block it records
-the plate's mean vibration amplitude ``plate_amplitude_um`` and the relative friction
-the finger would feel, ``achieved_mu``: the forward friction model (paper Eqs. 2-3) at
-that amplitude and the block's finger speed, raised to the device's speed floor when
-slower (or unknown).
+the plate's mean vibration amplitude ``plate_amplitude_um`` (at an antinode) and the
+relative friction the finger would feel, ``achieved_mu``: the forward friction model
+(paper Eqs. 2-3) at the amplitude under the finger and the block's finger speed, raised
+to the device's speed floor when slower (or unknown). The amplitude under the finger is
+the antinode's times :meth:`Device.mode_gain` at the block's ``x_mm`` on a device with a
+mode shape (the standing wave averaged over the contact patch), the antinode's without.
 """
 
 from __future__ import annotations
@@ -99,8 +101,17 @@ class SimOutput(Output):
         floor_m_s = self.device.speed_floor_m_s
         return np.where(np.isfinite(speed_m_s), np.maximum(speed_m_s, floor_m_s), floor_m_s)
 
+    def _mode_gains(self, blocks: Mapping[str, Any]) -> npt.NDArray[np.float64]:
+        """The amplitude under the finger over the antinode's at ``blocks["x_mm"]`` (read only on a device with a
+        mode shape: 1 without); a position that is not finite counts as the plate's end at x = 0."""
+        force_n = np.asarray(blocks["force_n"])
+        if self.device.contact_width_m is None:
+            return np.ones(force_n.shape)
+        return self.device.mode_gain(np.nan_to_num(np.asarray(blocks["x_mm"], dtype=np.float64), nan=0.0))
+
     def write(self, samples: npt.NDArray[np.float32], block: Mapping[str, float]) -> None:
-        """Drive the plate with ``samples`` (at least one); ``block`` must carry ``force_n`` (N) and ``speed_mm_s``.
+        """Drive the plate with ``samples`` (at least one); ``block`` must carry ``force_n`` (N) and ``speed_mm_s``,
+        and on a device with a mode shape ``x_mm``.
 
         A force below 0 (or NaN) counts as 0: the device tables are clamped at their ends anyway.
         """
@@ -112,15 +123,16 @@ class SimOutput(Output):
         amplitude_m = resonate(samples, device.volts_per_full_scale, self._coef(force_n), self._state, self._envelope_m)
         speed_m_s = float(block["speed_mm_s"]) * 1e-3
         speed_m_s = max(speed_m_s, device.speed_floor_m_s) if math.isfinite(speed_m_s) else device.speed_floor_m_s
+        under_finger_m = amplitude_m * float(self._mode_gains(block))
         self._amplitude_um.append(amplitude_m * 1e6)
         self._achieved_mu.append(relative_friction_core(
-            amplitude_m, device.carrier_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
+            under_finger_m, device.carrier_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
 
     def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
                      blocks: Mapping[str, npt.NDArray[Any]]) -> None:
         """Drive the plate with consecutive blocks of ``block_frames`` samples, block ``k`` at contact force
-        ``blocks["force_n"][k]`` (N; below 0 or NaN counts as 0) and finger speed ``blocks["speed_mm_s"][k]``;
-        natively, with the rules of :meth:`write` (the offline render's path; tests compare the two)."""
+        ``blocks["force_n"][k]`` (N; below 0 or NaN counts as 0), finger speed ``blocks["speed_mm_s"][k]`` and
+        (with a mode shape) position ``blocks["x_mm"][k]``; natively, with the rules of :meth:`write` (the offline render's path; tests compare the two)."""
         force_n = np.asarray(blocks["force_n"], dtype=np.float64)
         count = len(force_n)
         force_n = np.where(force_n >= 0.0, force_n, 0.0)
@@ -134,7 +146,7 @@ class SimOutput(Output):
                         self._state, self._envelope_m, amplitude_m)
         speed_m_s = self._speeds_m_s(np.asarray(blocks["speed_mm_s"], dtype=np.float64))
         achieved_mu = np.zeros(count)
-        felt_friction(amplitude_m, speed_m_s, device.carrier_hz, device.mu0, device.poisson, device.psi_star,
+        felt_friction(amplitude_m * self._mode_gains(blocks), speed_m_s, device.carrier_hz, device.mu0, device.poisson, device.psi_star,
                       achieved_mu)
         self._amplitude_um.extend((amplitude_m * 1e6).tolist())
         self._achieved_mu.extend(achieved_mu.tolist())
