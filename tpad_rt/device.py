@@ -29,6 +29,7 @@ from tpad_rt.config import DeviceFile, load_device
 from tpad_rt.config.breadcrumb import breadcrumb
 from tpad_rt.config.device_schema import MIN_Q
 from tpad_rt.errors import ConfigError
+from tpad_rt.kernel import layout
 from tpad_rt.physics import electromech, mode_shape
 from tpad_rt.physics._validate import ComplexOrArray, FloatOrArray, checked, finite, non_negative
 
@@ -40,7 +41,7 @@ MODE_GAIN_POINTS = 20_001
 DERIVED_CHECK_POINTS = 4097
 #: The loaded motional resonance must lie within this factor of the carrier at every force: a TPaD is driven
 #: near its resonance (the shipped plates: within 0.13 %), and the simulated plate resonates there.
-RESONANCE_CARRIER_FACTOR = 2.0
+RESONANCE_CARRIER_FACTOR = layout.TRACKED_CARRIER_FACTOR
 
 _Table = npt.NDArray[np.float64]
 _TABLE_FIELDS = (
@@ -223,6 +224,21 @@ class Device:
         l_h, c_f, r_ohm = self.motional(force_n)
         freq = self._driven(freq_hz)
         return electromech.motional_current(1.0, freq, self.c0_f, l_h, c_f, r_ohm, self.shunt_ohm)
+
+    def motional_reactance_ohm(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
+        """The motional branch's reactance ``w L - 1 / (w C)`` (ohm) at contact force ``force_n`` (N, >= 0) and
+        ``freq_hz`` (Hz, default: the carrier): what a serial amplifier's phase lock compares with the one its
+        measured voltage, current and phase imply."""
+        l_h, c_f, _ = self.motional(force_n)
+        omega = 2.0 * np.pi * np.asarray(self._driven(freq_hz), dtype=np.float64)
+        return omega * l_h - 1.0 / (omega * c_f)
+
+    def motional_reactance_slope_ohm_per_hz(self, force_n: npt.ArrayLike,
+                                            freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
+        """d/df of :meth:`motional_reactance_ohm` (ohm/Hz): ``2 pi (L + 1 / (w^2 C))``."""
+        l_h, c_f, _ = self.motional(force_n)
+        omega = 2.0 * np.pi * np.asarray(self._driven(freq_hz), dtype=np.float64)
+        return 2.0 * np.pi * (l_h + 1.0 / (omega * omega * c_f))
 
     def amplitude_m_per_v(self, force_n: npt.ArrayLike, freq_hz: npt.ArrayLike | None = None) -> FloatOrArray:
         """Steady plate vibration amplitude (m) per peak drive volt at contact force ``force_n`` (N, >= 0).

@@ -59,6 +59,11 @@ MIN_GRID_INTERVALS = 4096
 #: The least mode gain the command divides by: near a nodal line (a contact patch narrower than the nodal
 #: spacing) it asks at most 20x the antinode amplitude, which the volt and power caps then bound.
 MODE_GAIN_FLOOR = 0.05
+#: How far (a fraction of the device's carrier) a tracking serial amplifier's phase lock may move the carrier
+#: from the model's resonance: 0.1 %, 31 Hz on the default device (the model's resonance moves 27 Hz on SLG_0.4
+#: from 0 to 2 N); the power tables hold over that band.
+LOCK_RANGE = 1e-3
+
 #: Relative tolerance for a force-table knot to count as lying on a grid point.
 _KNOT_TOLERANCE = 1e-9
 
@@ -108,9 +113,11 @@ class RenderOptions:
       down, when the command falls.
     - ``track``: follow the plate's resonance as the contact force moves it: each control
       step drives at the device circuit's loaded resonance at the step's force
-      (:meth:`Device.motional_resonance_hz`), the carrier's phase continuous, with the
-      amplitude, power and time constant there. Only for carrier samples (a DAC): an
-      amplifier that makes the carrier itself is not tracked yet (ConfigError).
+      (:meth:`Device.motional_resonance_hz`) with the amplitude, power and time constant
+      there. Carrier samples (a DAC) keep the phase continuous; an amplifier that makes
+      the carrier itself (``serial://``) is sent the carrier as it moves, and, if it
+      measures phase, corrected towards the plate's real resonance within
+      LOCK_RANGE of the carrier (docs/amplifiers.md "Tracking").
     - ``mode_compensation``: on a device with a mode shape (its file's ``mode_shape``),
       ask for the texture's amplitude under the finger, not at an antinode: the command
       divided by :meth:`Device.mode_gain` at the finger (floored at MODE_GAIN_FLOOR),
@@ -265,7 +272,7 @@ def force_grid(device: Device) -> tuple[float, float, int]:
     return start_n, span_n / intervals, intervals
 
 
-def device_tables(device: Device, track: bool = False) -> tuple[np.ndarray, float, float]:
+def device_tables(device: Device, track: bool = False, band_hz: float = 0.0) -> tuple[np.ndarray, float, float]:
     """``(dev, start_n, step_n)``: the kernel's device tables on :func:`force_grid`'s grid.
 
     ``dev[DEV_CARRIER_HZ]`` the carrier driven at each force: the device's ``carrier_hz``, or
@@ -275,7 +282,11 @@ def device_tables(device: Device, track: bool = False) -> tuple[np.ndarray, floa
     peak can draw (W, :meth:`Device.power_w_per_v2`: the exact circuit, detuning included),
     ``dev[DEV_TAU_S]`` the loaded envelope time constant (s); forces ``start_n + k * step_n``.
     ``dev[DEV_MODE_GAIN]`` is on a grid in x, not force: :func:`mode_gain_table` at ``x = k *
-    mode_step_mm(device, dev)`` (1 without a mode shape).
+    mode_step_mm(device, dev)`` (1 without a mode shape). ``dev[DEV_REACTANCE_OHM]`` and
+    ``dev[DEV_REACTANCE_SLOPE_OHM_PER_HZ]``: the motional branch's reactance at the carrier and
+    its slope in frequency, for a serial amplifier's lock. With ``band_hz`` > 0 (an amplifier whose carrier may sit up to that far from
+    the table's) the power per squared volt is the most over the carrier, and the carrier
+    +- ``band_hz``.
     """
     start_n, step_n, intervals = force_grid(device)
     forces_n = start_n + step_n * np.arange(intervals + 1)
@@ -283,10 +294,13 @@ def device_tables(device: Device, track: bool = False) -> tuple[np.ndarray, floa
                   else np.full(len(forces_n), device.carrier_hz))
     dev = np.empty((layout.DEV_ROWS, intervals + 1))
     dev[layout.DEV_AMP_M_PER_V] = device.amplitude_m_per_v(forces_n, carrier_hz)
-    dev[layout.DEV_POWER_W_PER_V2] = device.power_w_per_v2(forces_n, carrier_hz)
+    dev[layout.DEV_POWER_W_PER_V2] = np.max([device.power_w_per_v2(forces_n, carrier_hz + shift_hz)
+                                            for shift_hz in {0.0, -band_hz, band_hz}], axis=0)
     dev[layout.DEV_TAU_S] = device.envelope_time_constant_s(forces_n, carrier_hz)
     dev[layout.DEV_CARRIER_HZ] = carrier_hz
     dev[layout.DEV_MODE_GAIN] = mode_gain_table(device, np.arange(intervals + 1) * mode_step_mm(device, dev))
+    dev[layout.DEV_REACTANCE_OHM] = device.motional_reactance_ohm(forces_n, carrier_hz)
+    dev[layout.DEV_REACTANCE_SLOPE_OHM_PER_HZ] = device.motional_reactance_slope_ohm_per_hz(forces_n, carrier_hz)
     return dev, start_n, step_n
 
 
@@ -341,10 +355,8 @@ class Pipeline:
         *,
         envelope_output: bool = False,
     ):
-        if options.track and envelope_output:
-            raise ConfigError("track: an amplifier that makes the carrier itself (serial://) is not tracked yet: "
-                              "render to a DAC output (audio://, sim://, wav://), or leave track off")
-        dev, start_n, step_n = device_tables(device, options.track)
+        band_hz = LOCK_RANGE * device.carrier_hz if options.track and envelope_output else 0.0
+        dev, start_n, step_n = device_tables(device, options.track, band_hz)
         _check_rate(device, fs_hz, envelope_output, float(dev[layout.DEV_CARRIER_HZ].max()))
         self.envelope_output = envelope_output
         self.device = device
@@ -406,6 +418,8 @@ class Pipeline:
             layout.CFG_TRACK: 1.0 if options.track else 0.0,
             layout.CFG_MODE_STEP_MM: (gain_step_mm if options.mode_compensation and device.contact_width_m is not None
                                       else 0.0),
+            layout.CFG_C0_F: device.c0_f,
+            layout.CFG_SHUNT_OHM: device.shunt_ohm,
         }.items():
             cfg[index] = value
         return cfg

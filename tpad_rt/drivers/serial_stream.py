@@ -61,7 +61,7 @@ class SerialStreamDriver(Driver):
     def start(self, table: CallbackTable) -> None:
         """START the amplifier at the table's next sample and stream in a thread of its own."""
         assert self.link is not None, "open() first"
-        self.link.start(table)
+        self.link.start(table, track=self.options.track)
 
     def poll(self, table: CallbackTable) -> BaseException | None:
         """The error that ended the stream (a BackendError: port lost, amplifier fault, silence...), or None."""

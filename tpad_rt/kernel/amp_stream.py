@@ -36,6 +36,12 @@ more than the amplifier's buffer ahead; if ``p`` has passed what was sent (the h
 held up), it skips the stream ahead, since samples for played indices are refused.
 A STATUS showing that the amplifier's watchdog tripped (it went IDLE) makes the host
 send START again from the next sample (``LINK_RESTARTS``): the run recovers.
+
+Tracking (``LINK_TRACK``, rule H9): after each frame the host sends SET_CARRIER when the
+carrier the kernel rendered its last step for (``STATE_STEP_CARRIER_HZ``, the model's
+resonance at the force) plus the lock's correction has moved from the amplifier's; with
+TRACK_LOCKED each RUNNING STATUS moves that correction towards where its voltage, current
+and phase put the plate's resonance (:func:`_lock`, docs/amplifiers.md "Tracking").
 """
 
 from __future__ import annotations
@@ -56,6 +62,7 @@ from tpad_rt.kernel.amp_codec import (
     MAX_ENCODED,
     MSG_ACK,
     MSG_ENVELOPE,
+    MSG_SET_CARRIER,
     MSG_START,
     MSG_STATUS,
     PAYLOAD,
@@ -82,7 +89,17 @@ from tpad_rt.kernel.amp_codec import (
 )
 from tpad_rt.kernel.atomics import load_acquire
 from tpad_rt.kernel.cache_stamp import stamp_cache
-from tpad_rt.kernel.layout import STATE_NEXT_INDEX
+from tpad_rt.kernel import render
+from tpad_rt.kernel.layout import (
+    CFG_C0_F,
+    CFG_SHUNT_OHM,
+    DEV_REACTANCE_OHM,
+    DEV_REACTANCE_SLOPE_OHM_PER_HZ,
+    STATE_FORCE_N,
+    STATE_NEXT_INDEX,
+    STATE_STEP_CARRIER_HZ,
+)
+from tpad_rt.kernel.render import _device_value, _force_cell
 from tpad_rt.kernel.libc import (
     EAGAIN,
     EINTR,
@@ -94,9 +111,9 @@ from tpad_rt.kernel.libc import (
     sleep_until_ns,
     write_fd,
 )
-from tpad_rt.kernel.table import TAB_STATE, TAB_STATE_SIZE
+from tpad_rt.kernel.table import kernel_views
 
-stamp_cache(__file__, codec.__file__, libc.__file__, atomics.__file__, tab.__file__)
+stamp_cache(__file__, codec.__file__, libc.__file__, atomics.__file__, tab.__file__, render.__file__)
 
 # --- link: int64[LINK_SIZE]; the Python side writes the first block before the run --------
 LINK_FD = 0                   # the port's file descriptor (non-blocking)
@@ -142,7 +159,27 @@ LINK_AMP_TIME_US = 38         # the amplifier's clock when it sent the last STAT
 LINK_STOP_RAMP_MS = 39        # the STOP the run ends with: its ramp (ms), set before LINK_STOP
 LINK_STOP_SEQ = 40            # the seq that STOP went out with (-1 if it could not)
 LINK_CALLBACK = 41            # the address of the compiled render callback (kernel.callback.render_callback)
-LINK_SIZE = 42
+# --- tracking (docs/amplifiers.md "Tracking"): the Python side writes these before the run ----------------
+LINK_TRACK = 42               # TRACK_* (the kernel's cfg has CFG_TRACK set for any but TRACK_OFF)
+LINK_CARRIER_MIN_MHZ = 43     # the amplifier's carrier range (INFO)
+LINK_CARRIER_MAX_MHZ = 44
+LINK_CARRIER_STEP_MHZ = 45    # a carrier this close to the amplifier's is not sent (at least its resolution)
+LINK_LOCK_RANGE_MHZ = 46      # the lock's correction stays within +- this of the model's resonance
+LINK_LOCK_MIN_CURRENT_UA = 47  # a STATUS with less current (uA RMS) does not move the lock
+LINK_CARRIER_MHZ = 48         # the carrier the amplifier makes: the handshake's, then each SET_CARRIER's ACK
+# --- written by the streamer while tracking ---------------------------------------------------------------
+LINK_CARRIER_ASKED_MHZ = 49   # the last SET_CARRIER sent
+LINK_CARRIER_PENDING_NS = 50  # when a SET_CARRIER awaiting its ACK went out (-1: none)
+LINK_CARRIER_SETS = 51        # SET_CARRIERs sent
+LINK_CARRIER_REFUSED = 52     # SET_CARRIERs the amplifier refused, or left unanswered for CARRIER_ACK_NS
+LINK_LOCK_OFFSET_MHZ = 53     # the lock's correction to the model's resonance
+LINK_LOCK_UPDATES = 54        # STATUS frames that moved it
+LINK_SIZE = 55
+
+# --- LINK_TRACK --------------------------------------------------------------------------------
+TRACK_OFF = 0                 # the handshake's carrier throughout
+TRACK_MODEL = 1               # the kernel's carrier at each step (the device circuit's resonance at its force)
+TRACK_LOCKED = 2              # that, corrected by the motional reactance the amplifier's STATUS implies
 
 # --- exit reasons -----------------------------------------------------------------------------
 EXIT_RUNNING = 0
@@ -172,6 +209,11 @@ PA_PRIMING_OUTPUT = 0x10
 CLOCK_SKEW = 1e-4
 #: Float32 envelope scratch (samples): the largest frame.
 ENVELOPE_SCRATCH = codec.MAX_FRAME_SAMPLES
+#: A SET_CARRIER unanswered this long (ns) counts as refused, and the next may go.
+CARRIER_ACK_NS = 100_000_000
+#: The share of the way from its correction to the shift a STATUS implies that the lock moves per STATUS
+#: (a first-order filter over STATUS periods: the amplifier's measurement is quantised, 0.01 degree and 1 uA).
+LOCK_GAIN = 0.25
 
 _F4 = np.float32
 _F8 = np.float64
@@ -241,6 +283,12 @@ def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.nda
         if link[LINK_ACK_CODE] == codec.ACK_BAD_VERSION:
             link[LINK_AMP_VERSION] = link[LINK_ACK_VALUE]
             return -EXIT_VERSION
+        if link[LINK_ACK_TYPE] == MSG_SET_CARRIER and link[LINK_CARRIER_PENDING_NS] >= 0:
+            if link[LINK_ACK_CODE] == codec.ACK_OK:
+                link[LINK_CARRIER_MHZ] = link[LINK_ACK_VALUE]
+            else:
+                link[LINK_CARRIER_REFUSED] += 1
+            link[LINK_CARRIER_PENDING_NS] = -1
         return 0
     link[LINK_RX_BAD] += 1  # a type the host does not expect, or a wrong length
     return 0
@@ -355,6 +403,68 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
 
 
 @njit(**_KERNEL)
+def _queue_carrier(state: np.ndarray, link: np.ndarray, buffers: np.ndarray, now_ns: int, end: int) -> int:
+    """While tracking: queue a SET_CARRIER when the carrier of the kernel's last step, plus the lock's
+    correction (within the amplifier's range), is LINK_CARRIER_STEP_MHZ or more from the amplifier's; one at
+    a time (its ACK, or CARRIER_ACK_NS without one, clears the way). The new end."""
+    if link[LINK_CARRIER_PENDING_NS] >= 0:
+        if now_ns - link[LINK_CARRIER_PENDING_NS] < CARRIER_ACK_NS:
+            return end
+        link[LINK_CARRIER_PENDING_NS] = -1
+        link[LINK_CARRIER_REFUSED] += 1
+    step_hz = state[STATE_STEP_CARRIER_HZ]
+    if not 0.0 < step_hz <= link[LINK_CARRIER_MAX_MHZ] * 1e-3 * 2.0:  # NaN too: a corrupt state sends nothing
+        return end
+    wanted_mhz = min(max(np.int64(round(step_hz * 1000.0)) + link[LINK_LOCK_OFFSET_MHZ], link[LINK_CARRIER_MIN_MHZ]),
+                     link[LINK_CARRIER_MAX_MHZ])
+    if abs(wanted_mhz - link[LINK_CARRIER_MHZ]) < link[LINK_CARRIER_STEP_MHZ] or \
+            end + MAX_ENCODED > buffers[BUF_TX].shape[0]:
+        return end
+    codec.put_u32(buffers[BUF_FRAME], PAYLOAD, wanted_mhz)
+    link[LINK_CARRIER_ASKED_MHZ] = wanted_mhz
+    link[LINK_CARRIER_PENDING_NS] = now_ns
+    link[LINK_CARRIER_SETS] += 1
+    return _queue(link, buffers, 4, MSG_SET_CARRIER, end)
+
+
+@njit(**_KERNEL)
+def _lock(cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, link: np.ndarray) -> None:
+    """From a RUNNING STATUS (no carrier change in flight, enough current): the motional reactance its RMS
+    voltage, current and phase imply (the amplifier's output across the shunt, then C0's current taken out),
+    against the model's at the kernel's last force and the amplifier's carrier, gives how far the plate's
+    resonance sits from the model's; the lock's correction moves LOCK_GAIN of the way there, within
+    LINK_LOCK_RANGE_MHZ."""
+    carrier_mhz = link[LINK_AMP_CARRIER_MHZ]
+    if (link[LINK_CARRIER_PENDING_NS] >= 0 or carrier_mhz != link[LINK_CARRIER_MHZ] or carrier_mhz <= 0
+            or link[LINK_AMP_CURRENT_UA_RMS] < max(link[LINK_LOCK_MIN_CURRENT_UA], 1)
+            or link[LINK_AMP_VOLTAGE_MV_RMS] <= 0):
+        return
+    carrier_hz = carrier_mhz * 1e-3
+    omega = 2.0 * np.pi * carrier_hz
+    phase_rad = link[LINK_AMP_PHASE_CDEG] * (np.pi / 18000.0)  # of the current against the voltage
+    total = (link[LINK_AMP_VOLTAGE_MV_RMS] * 1e-3) / (link[LINK_AMP_CURRENT_UA_RMS] * 1e-6) * complex(
+        np.cos(-phase_rad), np.sin(-phase_rad))
+    plate = total - cfg[CFG_SHUNT_OHM]
+    if plate == 0.0:
+        return
+    motional = 1.0 / plate - 1j * omega * cfg[CFG_C0_F]
+    if motional == 0.0:
+        return
+    measured_ohm = (1.0 / motional).imag
+    cell = _force_cell(cfg, dev, state[STATE_FORCE_N])
+    slope = _device_value(dev, DEV_REACTANCE_SLOPE_OHM_PER_HZ, cell)
+    model_ohm = _device_value(dev, DEV_REACTANCE_OHM, cell) + slope * (carrier_hz - state[STATE_STEP_CARRIER_HZ])
+    shift_hz = (model_ohm - measured_ohm) / slope
+    if not abs(shift_hz) < np.inf:
+        return
+    range_hz = link[LINK_LOCK_RANGE_MHZ] * 1e-3
+    offset_hz = link[LINK_LOCK_OFFSET_MHZ] * 1e-3
+    offset_hz = min(max(offset_hz + LOCK_GAIN * (shift_hz - offset_hz), -range_hz), range_hz)
+    link[LINK_LOCK_OFFSET_MHZ] = np.int64(round(offset_hz * 1000.0))
+    link[LINK_LOCK_UPDATES] += 1
+
+
+@njit(**_KERNEL)
 def _skip_to(table: np.ndarray, state: np.ndarray, link: np.ndarray, index: int) -> None:
     """Continue the stream at ``index`` (past the next one): the kernel renders on from there as if no
     sample were missing, and the drive ring's skipped samples read 0 (a recording shows the gap)."""
@@ -375,7 +485,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
     float32 of at least LINK_FRAME_SAMPLES samples, ``times`` float64[3] (the callback's
     time info).
     """
-    state = numba.carray(pointer(table[TAB_STATE]), table[TAB_STATE_SIZE], _F8)
+    cfg, dev, state = kernel_views(table)[:3]
     rate_hz = link[LINK_ENVELOPE_HZ]
     frame_samples = link[LINK_FRAME_SAMPLES]
     body_bytes = PAYLOAD + ENVELOPE_SAMPLES + 2 * frame_samples + codec.CRC_BYTES
@@ -416,6 +526,8 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
                 primed = False
                 ref_index, ref_ns = float(link[LINK_WRITTEN]), now_ns
             elif link[LINK_AMP_STATE] == codec.STATE_RUNNING:
+                if link[LINK_TRACK] == TRACK_LOCKED:
+                    _lock(cfg, dev, state, link)
                 # The amplifier played sample play_index at its time time_us: on the host's clock, at
                 # time_us + offset, where offset is the smallest (receive time - time_us) seen, the one the
                 # line delayed least (allowed to grow by CLOCK_SKEW, for a slower amplifier clock).
@@ -443,6 +555,8 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
             delay_ns = int((link[LINK_WRITTEN] - play) * 1e9 / rate_hz)
             end = _queue_envelope(table, state, link, buffers, envelope, times, delay_ns, skipped, not primed, end)
             skipped = False
+            if link[LINK_TRACK] != TRACK_OFF:
+                end = _queue_carrier(state, link, buffers, now_ns, end)
         if end > first:
             before = first
             first, end, exit_reason = _flush(link, tx, (first, end))

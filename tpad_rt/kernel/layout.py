@@ -34,7 +34,9 @@ CFG_OUTPUT_ENVELOPE = 24      # 1.0: samples are the envelope (for an amplifier 
 CFG_BRAKING = 25              # 1.0: the shaper may drive in anti-phase (negative envelope) to brake the plate
 CFG_TRACK = 26                # 1.0: each control step drives at dev[DEV_CARRIER_HZ] at its force, phase continuous
 CFG_MODE_STEP_MM = 27         # > 0: x step (mm) of dev[DEV_MODE_GAIN]'s grid from x = 0, and the command compensates it
-CFG_SIZE = 28
+CFG_C0_F = 28                 # the device's static capacitance (a serial amplifier's lock)
+CFG_SHUNT_OHM = 29            # the device's series shunt
+CFG_SIZE = 30
 
 # --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
 DEV_AMP_M_PER_V = 0           # plate amplitude (m) per peak drive volt
@@ -42,7 +44,9 @@ DEV_POWER_W_PER_V2 = 1        # the most real power (W) a 1 V peak drive at the 
 DEV_TAU_S = 2                 # plate envelope time constant, the loaded branch's 2 L / (R + Re Z_th)
 DEV_CARRIER_HZ = 3            # the carrier to drive at (the loaded resonance when tracking, else carrier_hz)
 DEV_MODE_GAIN = 4             # on a grid in x, not force: amplitude under the finger / antinode amplitude (floored)
-DEV_ROWS = 5
+DEV_REACTANCE_OHM = 5         # the motional branch's reactance at DEV_CARRIER_HZ (a serial amplifier's lock)
+DEV_REACTANCE_SLOPE_OHM_PER_HZ = 6  # its derivative in frequency there
+DEV_ROWS = 7
 
 # --- finger: float64[R, FINGER_COLS], one writer at a time (Python, under a lock) ---
 FINGER_T_S = 0
@@ -128,6 +132,7 @@ PROFILE_STEP = 3
 GAUSSIAN_REACH_SIGMAS = 3.0   # gaussian bumps end at 3 sigma (sigma = radius / 2)
 LAYER_FLOOR = 0.01            # every COMBINE result is clamped to [LAYER_FLOOR, 1]
 MAX_CARRIER_FRACTION = 0.45   # the carrier stays at or below this fraction of the sample rate (a tracked one too)
+TRACKED_CARRIER_FACTOR = 2.0  # an amplifier's tracked carrier stays within this factor of CFG_CARRIER_HZ
 
 # --- state: float64[STATE_SIZE], written by the render kernel only ------------
 # All zeros is a fresh stream (tpad_rt/kernel/render.py says how the values are used).

@@ -98,6 +98,7 @@ from tpad_rt.kernel.layout import (
     MAX_CARRIER_FRACTION,
     MAX_CONTROL_INTERVAL,
     MAX_SPEED_MM_S,
+    TRACKED_CARRIER_FACTOR,
     STATE_AMPLITUDE_M,
     STATE_CAP_V,
     STATE_CARRIER_COS,
@@ -646,16 +647,16 @@ def _step_phase(n: int, cfg: np.ndarray, state: np.ndarray, carrier_hz: float) -
     ``carrier_hz`` (Hz), recorded in ``state`` for the next step.
 
     A fixed carrier's phase is ``n * S mod 2**60`` (exact, from the index alone). A tracked one
-    (CFG_TRACK) runs on from the last step's phase, at the last step's carrier, over the samples
-    between: the phase never jumps when the carrier moves. Recorded phase halves that are not
+    (CFG_TRACK, carrier samples) runs on from the last step's phase, at the last step's carrier, over
+    the samples between: the phase never jumps when the carrier moves. Recorded phase halves that are not
     whole numbers in ``[0, 2**30)``, or an index that is not a whole number in ``[0, n]``, are
     corrupt: the phase restarts from ``n * S`` (FAULT_STATE).
     """
     fs_hz = cfg[CFG_FS_HZ]
     step_units = carrier_step_units(carrier_hz, fs_hz)
     fault = 0
-    if cfg[CFG_TRACK] == 0.0 or state[STATE_STEP_OPEN] == 0.0:
-        phase_units = carrier_phase_units(n, step_units)
+    if cfg[CFG_TRACK] == 0.0 or cfg[CFG_OUTPUT_ENVELOPE] != 0.0 or state[STATE_STEP_OPEN] == 0.0:
+        phase_units = carrier_phase_units(n, step_units)  # (envelope output: the amplifier keeps the phase)
     else:
         hi, lo, index, last_hz = (state[STATE_PHASE_HI], state[STATE_PHASE_LO], state[STATE_PHASE_INDEX],
                                   state[STATE_STEP_CARRIER_HZ])
@@ -705,7 +706,11 @@ def _control_step(
     carrier_hz = cfg[CFG_CARRIER_HZ]
     if cfg[CFG_TRACK] != 0.0:
         tracked_hz = _device_value(dev, DEV_CARRIER_HZ, cell)
-        if 0.0 < tracked_hz <= MAX_CARRIER_FRACTION * fs_hz:
+        # Carrier samples must stay below the sample rate's limit; an amplifier that makes the carrier itself
+        # (envelope output) is sent the carrier instead, within twice the device's (its derived checks).
+        highest_hz = (MAX_CARRIER_FRACTION * fs_hz if cfg[CFG_OUTPUT_ENVELOPE] == 0.0
+                      else TRACKED_CARRIER_FACTOR * cfg[CFG_CARRIER_HZ])
+        if 0.0 < tracked_hz <= highest_hz:
             carrier_hz = tracked_hz
         else:
             fault |= FAULT_DEVICE

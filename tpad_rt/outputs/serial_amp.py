@@ -10,7 +10,7 @@ AmpLink.open(target, *, carrier_hz, timeout_s=HELLO_TIMEOUT_S) -> AmpLink
     open the port (pyserial), say HELLO, check INFO (rule H1), set the carrier (H2);
     BackendError for a port that cannot open, no or a bad answer, another protocol
     version, a carrier or envelope rate the amplifier cannot make
-AmpLink.start(table) / .failure() / .stop(ramp_ms) / .stats() / .info / .carrier_hz
+AmpLink.start(table, track=False) / .failure() / .stop(ramp_ms) / .stats() / .info / .carrier_hz
     stream with the GIL-free streamer (:mod:`tpad_rt.kernel.amp_stream`) in a thread;
     the error that ended the stream (a BackendError), or None; end with STOP (H8), close
 AmpLink.set_carrier(carrier_hz) / .tone(envelope_v, seconds) -> AmpStatus
@@ -39,6 +39,7 @@ from tpad_rt.kernel import amp_codec as codec
 from tpad_rt.kernel import amp_stream
 from tpad_rt.kernel.atomics import publish
 from tpad_rt.outputs.base import Consumes, OutputKind, Runs
+from tpad_rt.pipeline import LOCK_RANGE
 from tpad_rt.urls import Option, Url, UrlForm, count, number, parse_url
 
 FORMS = (UrlForm("serial", "/dev/ttyACM0", (
@@ -55,6 +56,14 @@ STOP_ACK_TIMEOUT_S = 0.2
 #: The SCHED_FIFO priority of the streamer thread where allowed (below a JACK server's, typically 70-90): like
 #: an audio callback, it sleeps between frames and must run as soon as one is due.
 STREAMER_PRIORITY = 20
+#: INFO's ``measures`` bits a phase lock needs: current, voltage and phase.
+MEASURES_FOR_LOCK = 1 | 2 | 4
+#: A tracked carrier closer than this (mHz) to the amplifier's is not sent (nor closer than its resolution).
+CARRIER_RESEND_MHZ = 10
+#: Less current than this (uA RMS) and a STATUS does not move the lock: its measured phase is then too coarse.
+LOCK_MIN_CURRENT_UA = 1000
+#: AmpLink.stats()["tracking"] for LINK_TRACK's values.
+TRACKING_NAMES = ("off", "model", "model + phase lock")
 #: What the host calls itself in HELLO.
 HOST_NAME = b"tpad-rt"
 
@@ -419,8 +428,10 @@ class AmpLink:
 
     # --- streaming --------------------------------------------------------------------
 
-    def start(self, table: object) -> None:
-        """START at the table's next sample (prefill: the target fill), then stream in a thread of its own."""
+    def start(self, table: object, track: bool = False) -> None:
+        """START at the table's next sample (prefill: the target fill), then stream in a thread of its own;
+        with ``track`` (the kernel's cfg tracking too) send the carrier of each control step as it moves, and
+        lock it onto the plate's resonance if the amplifier measures voltage, current and phase."""
         link = self.link
         info = self.info
         assert info is not None
@@ -437,8 +448,24 @@ class AmpLink:
         link[amp_stream.LINK_STATUS_TIMEOUT_NS] = (4 * info.status_period_ms + 100) * 1_000_000
         link[amp_stream.LINK_START_INDEX] = index
         link[amp_stream.LINK_CALLBACK] = render_callback_address()
+        self._track_with(track)
         self._thread = threading.Thread(target=self._run, args=(table,), name="tpad-rt serial streamer", daemon=True)
         self._thread.start()
+
+    def _track_with(self, track: bool) -> None:
+        """Set the link's tracking fields: off, the model's carrier, or that locked by the measured phase."""
+        link, info = self.link, self.info
+        assert info is not None
+        locked = info.measures & MEASURES_FOR_LOCK == MEASURES_FOR_LOCK
+        link[amp_stream.LINK_TRACK] = (amp_stream.TRACK_OFF if not track
+                                       else amp_stream.TRACK_LOCKED if locked else amp_stream.TRACK_MODEL)
+        link[amp_stream.LINK_CARRIER_MIN_MHZ] = round(info.carrier_min_hz * 1000)
+        link[amp_stream.LINK_CARRIER_MAX_MHZ] = round(info.carrier_max_hz * 1000)
+        link[amp_stream.LINK_CARRIER_STEP_MHZ] = max(round(info.carrier_step_hz * 1000), CARRIER_RESEND_MHZ)
+        link[amp_stream.LINK_LOCK_RANGE_MHZ] = round(LOCK_RANGE * self.carrier_hz * 1000)
+        link[amp_stream.LINK_LOCK_MIN_CURRENT_UA] = LOCK_MIN_CURRENT_UA
+        link[amp_stream.LINK_CARRIER_MHZ] = round(self.carrier_hz * 1000)
+        link[amp_stream.LINK_CARRIER_PENDING_NS] = -1
 
     def _run(self, table: object) -> None:
         self.realtime = _realtime_thread()
@@ -548,6 +575,10 @@ class AmpLink:
             "amp_voltage_v_rms": link[s.LINK_AMP_VOLTAGE_MV_RMS] / 1e3,
             "amp_current_a_rms": link[s.LINK_AMP_CURRENT_UA_RMS] / 1e6,
             "amp_phase_deg": link[s.LINK_AMP_PHASE_CDEG] / 100,
+            "tracking": TRACKING_NAMES[int(link[s.LINK_TRACK]) % len(TRACKING_NAMES)],
+            "tracked_carrier_hz": link[s.LINK_CARRIER_MHZ] / 1e3 if link[s.LINK_TRACK] else self.carrier_hz,
+            "carrier_sets": int(link[s.LINK_CARRIER_SETS]), "carrier_refused": int(link[s.LINK_CARRIER_REFUSED]),
+            "lock_offset_hz": link[s.LINK_LOCK_OFFSET_MHZ] / 1e3, "lock_updates": int(link[s.LINK_LOCK_UPDATES]),
         }
 
 

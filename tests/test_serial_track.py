@@ -1,0 +1,105 @@
+"""Tracking through a serial amplifier (issue 11, Deliver 6): the streamer sends the carrier of each control step
+as the contact force moves the plate's resonance (from the device model), and locks it onto the emulated plate's
+own resonance from the voltage, current and phase the amplifier measures; the emulator (``tpad-rt amp
+emulate``, a real pty) makes the carrier and simulates its own device file's circuit."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from amp_emulator import Emulator
+from test_track import _even
+
+from tpad_rt.device import Device
+from tpad_rt.engine import Renderer
+from tpad_rt.kernel import layout
+from tpad_rt.pipeline import LOCK_RANGE, Pipeline, RenderOptions
+from tpad_rt.shipped import DEVICES_DIR
+from tpad_rt.texture import load_compiled
+
+SLG04_PATH = DEVICES_DIR / "SLG_0.4.yaml"
+SLG04 = Device.from_file(SLG04_PATH)
+FORCE_N = 2.0
+RUN_S = 1.2
+
+
+def _run(tmp_path: Path, amplifier_device: Path, track: bool) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """A finger pressing FORCE_N and sliding at 50 mm/s for RUN_S over an even 0.6, rendered for SLG_0.4 through
+    an emulator of ``amplifier_device`` at that force: the host's amplifier stats and the emulator's recording."""
+    tmp_path.mkdir(exist_ok=True)
+    with Emulator(tmp_path, "--device", str(amplifier_device), "--force-n", str(FORCE_N)) as amp:
+        renderer = Renderer(SLG04, f"serial://{amp.port}", texture=_even(tmp_path, 0.6),
+                            options=RenderOptions(track=track))
+        with renderer:
+            started = time.monotonic()
+            while (elapsed_s := time.monotonic() - started) < RUN_S:
+                renderer.push_finger(20.0 + 50.0 * elapsed_s, 20.0, FORCE_N)
+                time.sleep(0.002)
+        stats = renderer.stats()["amplifier"]
+        recording = amp.finish()
+    return stats, recording
+
+
+def _last(recording: dict[str, np.ndarray], name: str, seconds: float = 0.2) -> np.ndarray:
+    """``name`` over the last ``seconds`` the emulator played a sample the host sent."""
+    played = np.flatnonzero(recording["index"] >= 0)
+    t_s = recording["t_s"]
+    return recording[name][played[t_s[played] >= t_s[played[-1]] - seconds]]
+
+
+def test_the_amplifier_is_sent_the_resonance_at_the_force_and_needs_fewer_volts_there(tmp_path: Path) -> None:
+    resonance_hz = float(SLG04.motional_resonance_hz(FORCE_N))
+    assert resonance_hz - SLG04.carrier_hz > 25.0  # a 2 N finger moves SLG_0.4's resonance 28 Hz
+    fixed, fixed_recording = _run(tmp_path / "fixed", SLG04_PATH, track=False)
+    tracked, tracked_recording = _run(tmp_path / "tracked", SLG04_PATH, track=True)
+    assert fixed["tracking"] == "off" and fixed["carrier_sets"] == 0
+    np.testing.assert_array_equal(_last(fixed_recording, "carrier_hz"), SLG04.carrier_hz)
+    assert tracked["tracking"] == "model + phase lock" and tracked["carrier_sets"] >= 1
+    assert tracked["carrier_refused"] == 0
+    # The emulator's plate is the host's model: the lock finds nothing to correct (the carrier's 10 mHz steps).
+    assert abs(tracked["lock_offset_hz"]) < 0.05
+    np.testing.assert_allclose(_last(tracked_recording, "carrier_hz"), resonance_hz, atol=0.05)
+    # On the resonance the same plate amplitude takes fewer volts (the DAC path's test: 0.64x on SLG_0.4 at 2 N).
+    fixed_v, tracked_v = (np.median(np.abs(_last(r, "envelope_v", 0.5))) for r in (fixed_recording, tracked_recording))
+    fixed_um, tracked_um = (np.median(_last(r, "plate_amplitude_um", 0.5)) for r in (fixed_recording,
+                                                                                       tracked_recording))
+    assert tracked_um == pytest.approx(fixed_um, rel=0.05)
+    assert tracked_v < 0.75 * fixed_v
+
+
+def test_the_lock_finds_a_plate_whose_resonance_the_model_misses(tmp_path: Path) -> None:
+    """The emulated plate's motional C is 0.1 % below the host's model: it resonates about 11 Hz higher (half the
+    lock's range). From the measured voltage, current and phase the streamer finds it."""
+    text = SLG04_PATH.read_text()
+    start = text.index("  motional_c_pf: [") + len("  motional_c_pf: [")
+    values = [float(v) for v in text[start:text.index("]", start)].split(",")]
+    shifted = tmp_path / "shifted.yaml"
+    shifted.write_text(text[:start] + ", ".join(f"{v * 0.999:.7g}" for v in values) + text[text.index("]", start):])
+    real_hz = float(Device.from_file(shifted).motional_resonance_hz(FORCE_N))
+    model_hz = float(SLG04.motional_resonance_hz(FORCE_N))
+    assert 5.0 < real_hz - model_hz < LOCK_RANGE * SLG04.carrier_hz
+    stats, recording = _run(tmp_path, shifted, track=True)
+    assert stats["lock_updates"] > 20
+    assert stats["lock_offset_hz"] == pytest.approx(real_hz - model_hz, abs=0.3)
+    np.testing.assert_allclose(_last(recording, "carrier_hz", 0.1), real_hz, atol=0.3)
+
+
+def test_an_envelope_pipeline_tracks_the_force_without_faults(tmp_path: Path) -> None:
+    """The kernel's side: at an envelope rate far below the carrier, each step's carrier is the model's resonance
+    at its force (what the streamer sends), and nothing faults."""
+    pipeline = Pipeline(SLG04, load_compiled(_even(tmp_path, 0.5)), 16000, options=RenderOptions(track=True),
+                        envelope_output=True)
+    pipeline.start()
+    block = np.empty(64, dtype=np.float32)
+    carriers, forces = [], np.linspace(0.0, FORCE_N, 40)
+    for force_n in forces:
+        for _ in range(4):
+            pipeline.push_finger(pipeline.time_s, 20.0 + 100.0 * pipeline.time_s, 20.0, float(force_n))
+            pipeline.render(block)
+        carriers.append(pipeline.arrays.state[layout.STATE_STEP_CARRIER_HZ])
+    assert pipeline.faults()["faults"] == 0
+    np.testing.assert_allclose(carriers[5:], SLG04.motional_resonance_hz(forces[5:]), atol=1e-3)
