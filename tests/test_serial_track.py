@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 from amp_emulator import Emulator
+from cli_run import tpad_rt
 from test_track import _even
 
 from tpad_rt.device import Device
@@ -103,3 +104,16 @@ def test_an_envelope_pipeline_tracks_the_force_without_faults(tmp_path: Path) ->
         carriers.append(pipeline.arrays.state[layout.STATE_STEP_CARRIER_HZ])
     assert pipeline.faults()["faults"] == 0
     np.testing.assert_allclose(carriers[5:], SLG04.motional_resonance_hz(forces[5:]), atol=1e-3)
+
+
+def test_play_tracks_through_the_amplifier_and_says_so(tmp_path: Path) -> None:
+    with Emulator(tmp_path, "--device", str(SLG04_PATH), "--force-n", str(FORCE_N)) as amp:
+        done = tpad_rt("play", "textures/grating.yaml", "--device", "SLG_0.4", "--output", f"serial://{amp.port}",
+                       "--input", "scripted://swipe?speed_mm_s=50&repeat=0", "--force", str(FORCE_N),
+                       "--duration", "1", "--track")
+        amp.finish()
+    assert done.returncode == 0, done.stderr
+    line = next(line for line in done.stdout.splitlines() if line.startswith("tracking ("))
+    carrier_hz = float(line.split("carrier now ")[1].split(" Hz")[0])
+    assert line.startswith("tracking (model + phase lock): ") and "(0 refused)" in line
+    assert carrier_hz == pytest.approx(float(SLG04.motional_resonance_hz(FORCE_N)), abs=0.05)

@@ -385,6 +385,11 @@ class Session:
                 f"bad, {amplifier['amp_frames_rejected']} refused, {amplifier['amp_sequence_gaps']} sequence gaps; "
                 f"{amplifier['amp_underruns']} samples underrun, {amplifier['amp_watchdog_trips']} watchdog trips"
                 + ("" if amplifier["realtime"] else " (no real-time priority for the streamer here)"))
+            if amplifier["tracking"] != "off":
+                lines.append(f"tracking ({amplifier['tracking']}): carrier now {amplifier['tracked_carrier_hz']:.2f} Hz "
+                             f"after {amplifier['carrier_sets']} SET_CARRIER ({amplifier['carrier_refused']} refused); "
+                             f"lock correction {amplifier['lock_offset_hz']:+.2f} Hz over {amplifier['lock_updates']} "
+                             "STATUS frames")
         if self.judged_blocks:
             lines.append(f"friction |texture under the finger - simulated plate| over {self.judged_blocks} touching "
                          f"blocks: mean {self.error_sum / self.judged_blocks:.4f}, max {self.error_max:.4f}; "
