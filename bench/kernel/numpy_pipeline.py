@@ -20,6 +20,7 @@ import numpy as np
 from reference.texture_ref import reference_friction
 
 from tpad_rt.device import Device
+from tpad_rt.kernel import layout
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_SPEED_FLOOR, FLAG_VOLTAGE, FLAG_WATCHDOG
 from tpad_rt.kernel.render import SAFETY_MARGIN
 from tpad_rt.pipeline import RenderOptions, device_tables
@@ -31,7 +32,9 @@ class NumpyPipeline:
     def __init__(self, device: Device, texture: Any, fs_hz: float, options: RenderOptions):
         self.device, self.texture, self.fs_hz, self.options = device, texture, fs_hz, options
         self.interval = options.control_interval
-        self.tables, self.grid_start_n, self.grid_step_n = device_tables(device)
+        tables, self.grid_start_n, self.grid_step_n = device_tables(device)
+        # The rows this pipeline models (the kernel's tables hold more: carrier, mode gain, reactance).
+        self.tables = tables[[layout.DEV_AMP_M_PER_V, layout.DEV_POWER_W_PER_V2, layout.DEV_TAU_S]]
         self.cap_w = device.power_budget_w if options.power_budget_w is None else options.power_budget_w
         self.avg_w = self.cap_w if options.power_avg_w is None else options.power_avg_w
         self.ring = np.zeros(max(1, round(options.power_window_s * fs_hz / self.interval)))
