@@ -189,9 +189,7 @@ class Device:
 
         Raises ValueError for a non-finite position.
         """
-        x = np.asarray(x_mm, dtype=np.float64)
-        if not np.all(np.isfinite(x)):
-            raise ValueError("x_mm: must be finite numbers")
+        x = mode_shape.positions(x_mm, self.plate.length_m * 1e3)
         if self.contact_width_m is None:
             return np.ones_like(x)
         grid_mm, gains = self._mode_gain_table

@@ -27,6 +27,8 @@ free_free_beta_l(nodal_lines) -> float
     ``beta L`` of the free-free mode with ``nodal_lines`` nodal lines (>= 2)
 deflection(x_mm, length_mm, nodal_lines) -> array
     the normalised mode shape ``W`` at ``x_mm`` (0 .. ``length_mm``; clamped to the plate)
+positions(x_mm, length_mm) -> array
+    ``x_mm`` as floats clamped to the plate; ValueError if any is not finite
 patch_mean(x_mm, length_mm, nodal_lines, contact_width_mm) -> array
     the mean ``|W|`` over a patch ``contact_width_mm`` long centred at ``x_mm``
 """
@@ -79,7 +81,7 @@ def _checked_plate(length_mm: float, nodal_lines: int) -> float:
     return free_free_beta_l(nodal_lines) / float(length_mm)
 
 
-def _positions(x_mm: npt.ArrayLike, length_mm: float) -> np.ndarray:
+def positions(x_mm: npt.ArrayLike, length_mm: float) -> np.ndarray:
     """``x_mm`` as floats clamped to ``[0, length_mm]``; ValueError if any is not finite."""
     x = np.asarray(x_mm, dtype=np.float64)
     if not np.all(np.isfinite(x)):
@@ -95,7 +97,7 @@ def deflection(x_mm: npt.ArrayLike, length_mm: float, nodal_lines: int) -> np.nd
     > 0, or ``nodal_lines`` below 2.
     """
     beta = _checked_plate(length_mm, nodal_lines)
-    return _shape(beta * _positions(x_mm, float(length_mm)), beta * float(length_mm))
+    return _shape(beta * positions(x_mm, float(length_mm)), beta * float(length_mm))
 
 
 def patch_mean(x_mm: npt.ArrayLike, length_mm: float, nodal_lines: int, contact_width_mm: float) -> np.ndarray:
@@ -109,7 +111,7 @@ def patch_mean(x_mm: npt.ArrayLike, length_mm: float, nodal_lines: int, contact_
     if not (isinstance(contact_width_mm, (int, float)) and 0.0 <= contact_width_mm < math.inf):
         raise ValueError(f"contact_width_mm: must be a finite number >= 0, got {contact_width_mm!r}")
     length = float(length_mm)
-    x = _positions(x_mm, length)
+    x = positions(x_mm, length)
     if contact_width_mm == 0.0:
         return np.abs(_shape(beta * x, beta * length))
     spacing_mm = math.pi / beta
