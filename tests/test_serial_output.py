@@ -350,8 +350,9 @@ def test_gil_load_does_not_starve_the_streamer_while_a_python_writer_degrades(tm
           f"Python writer (frames, expected, missed) idle {control_idle}, under GIL load {control_loaded}")
     expected_frames = seconds * idle["envelope_hz"] / idle["frame_samples"]
     assert loaded["frames_sent"] == pytest.approx(expected_frames, rel=0.05)
-    # The machine's other work also costs the streamer samples (idle runs here missed 48 and 1639; CI's loaded run
-    # 355): it must stay within its idle figure and the margin, or an order of magnitude below the Python writer
-    # under the same GIL load (which misses 12000+ here), whichever is looser.
-    assert missed(loaded) <= max(missed(idle) + MISSED_MARGIN, control_loaded[2] / 10)
+    # The machine's other work costs the streamer samples with or without the GIL thread (idle runs missed 35 to
+    # 1639 samples): what the GIL load adds must stay within the margin, or an order of magnitude below what it
+    # adds to the Python writer (a fresh-clone run: streamer 1419 -> 2413, writer 768 -> 18904), the looser.
+    added = missed(loaded) - missed(idle)
+    assert added <= max(MISSED_MARGIN, (control_loaded[2] - control_idle[2]) / 10)
     assert control_loaded[2] > control_idle[2] + 5 * MISSED_MARGIN, "the control must visibly degrade"
