@@ -231,7 +231,9 @@ def envelope_after_stop(envelope: np.ndarray) -> tuple[int, int, float]:
 def test_capture_carrier_envelope_and_stop_ramp(jack: str, tmp_path: Path) -> None:
     device = Device.default()
     speed_mm_s, period_mm, window = 50.0, 2.5, 64
-    with Renderer(output="audio://", texture=GRATING) as renderer:
+    renderer = Renderer(output="audio://", texture=GRATING)
+    renderer.record(tmp_path / "stop.npz")
+    with renderer:
         capture = Capture(DRIVE_PORT, tmp_path / "capture.npy", 1.5)
         swipe(renderer, 10.0, speed_mm_s, 0.8, hold_s=0.35)
         time.sleep(1.0)  # the swipe, then part of the hold (finger still, drive steady)
@@ -249,6 +251,10 @@ def test_capture_carrier_envelope_and_stop_ramp(jack: str, tmp_path: Path) -> No
     ripple_spectrum = np.abs(np.fft.rfft(ripple - ripple.mean()))
     ripple_hz = np.fft.rfftfreq(len(ripple), window / RATE_HZ)[np.argmax(ripple_spectrum)]
     assert ripple_hz == pytest.approx(speed_mm_s / period_mm, abs=2)
+    # The stop ramp and its click from the samples the callback made (lossless: a capture slipped by an xrun
+    # can splice other drive into the ramp); the carrier and the ripple above are what JACK received.
+    samples = read_recording(tmp_path / "stop.npz").drive
+    envelope = np.abs(carrier_baseband(samples, device.carrier_hz, window))
     start, end, plateau = envelope_after_stop(envelope)
     options = renderer.options
     ramp_samples = options.ramp_ms * 1e-3 * RATE_HZ
