@@ -170,6 +170,35 @@ def test_corrupted_and_dropped_bytes_are_counted_never_applied_and_the_stream_re
     assert recent > 0.8 * 0.5 * recording["envelope_hz"], "the stream did not recover: its last 0.5 s lost samples"
 
 
+def test_status_frames_are_dated_by_the_read_that_returned_them_not_an_earlier_clock_reading() -> None:
+    """A streamer held up between its clock reading and its read() (preempted, or its process stopped) finds the
+    STATUS frames that piled up meanwhile: they are dated after the read, so the hold is not taken for the
+    amplifier's silence (H7). Dated by the stale reading, a stopped host read its amplifier as lost (CI)."""
+    from tpad_rt.amp import wire
+    from tpad_rt.kernel import amp_stream
+
+    status = wire.Status(time_us=1000, play_index=0, buffer_fill=0, state=wire.State.IDLE, faults=0, frames_ok=0,
+                         frames_bad=0, frames_rejected=0, sequence_gaps=0, underruns=0, watchdog_trips=1,
+                         last_seq=0, phase_cdeg=0, envelope_mv=0, voltage_mv_rms=0, current_ua_rms=0, carrier_mhz=0)
+    reader, writer = os.pipe()
+    try:
+        os.set_blocking(reader, False)
+        os.write(writer, b"".join(wire.encode(wire.Type.STATUS, seq, status.pack()) for seq in range(3)))
+        link = np.zeros(amp_stream.LINK_SIZE, dtype=np.int64)
+        link[amp_stream.LINK_FD] = reader
+        buffers = np.zeros((amp_stream.BUF_ROWS, amp_stream.BUF_BYTES), dtype=np.uint8)
+        stale_ns = time.monotonic_ns() - 300_000_000  # the clock read before a 0.3 s hold
+        before_ns = time.monotonic_ns()
+        kept, statuses, reason, received_ns = amp_stream._receive(link, buffers, 0, stale_ns)
+    finally:
+        os.close(reader)
+        os.close(writer)
+    assert (kept, statuses, reason) == (0, 3, 0)
+    assert link[amp_stream.LINK_STATUS_NS] >= before_ns
+    assert received_ns == link[amp_stream.LINK_STATUS_NS]
+    assert link[amp_stream.LINK_AMP_WATCHDOG_TRIPS] == 1
+
+
 class Host:
     """tests/serial_host.py in its own process: a Renderer streaming to PORT until stdin closes."""
 

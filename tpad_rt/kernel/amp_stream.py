@@ -295,30 +295,38 @@ def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.nda
 
 
 @njit(**_KERNEL)
-def _receive(link: np.ndarray, buffers: np.ndarray, rx_length: int, now_ns: int) -> tuple[int, int, int]:
-    """Read what the port holds and act on each whole frame; (bytes kept, STATUS frames, exit reason or 0)."""
+def _receive(link: np.ndarray, buffers: np.ndarray, rx_length: int, now_ns: int) -> tuple[int, int, int, int]:
+    """Read what the port holds and act on each whole frame; (bytes kept, STATUS frames, exit reason or 0,
+    the time of the last read that returned bytes, else ``now_ns``).
+
+    Frames are timed by the clock read after the read() that returned them, never by an
+    earlier reading: a host thread held up (preempted, or the process stopped) between
+    ``now_ns`` and the read would otherwise date the STATUS frames that piled up meanwhile
+    to before the hold, and take the hold for the amplifier's silence (H7).
+    """
     rx = buffers[BUF_RX]
     body = buffers[BUF_BODY]
     statuses = 0
     while True:
         got = read_fd(link[LINK_FD], rx.ctypes.data + rx_length, rx.shape[0] - rx_length)
         if got == 0:  # a tty with VMIN = 0 says "nothing now" so; a silent loss shows as no STATUS (H7)
-            return rx_length, statuses, 0
+            return rx_length, statuses, 0, now_ns
         if got < 0:
             error = errno()
             if error == EAGAIN:
-                return rx_length, statuses, 0
+                return rx_length, statuses, 0, now_ns
             if error != EINTR:
                 link[LINK_ERRNO] = error
-                return rx_length, statuses, EXIT_PORT_LOST
+                return rx_length, statuses, EXIT_PORT_LOST, now_ns
             continue
+        now_ns = max(now_ns, monotonic_ns())
         end = rx_length + got
         start = 0
         for i in range(rx_length, end):
             if rx[i] == 0:
                 taken = _take_frame(link, rx[start:i], i - start, body, now_ns)
                 if taken < 0:
-                    return 0, statuses, -taken
+                    return 0, statuses, -taken, now_ns
                 statuses += taken
                 start = i + 1
         rx_length = end - start
@@ -512,7 +520,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
             exit_reason = EXIT_STOPPED
             break
         now_ns = monotonic_ns()
-        rx_length, statuses, exit_reason = _receive(link, buffers, rx_length, now_ns)
+        rx_length, statuses, exit_reason, now_ns = _receive(link, buffers, rx_length, now_ns)
         if exit_reason != EXIT_RUNNING:
             break
         if statuses > 0:

@@ -260,9 +260,11 @@ class AmpLink:
                 if body[1] == wanted:
                     return body
             left = deadline - time.monotonic()
-            if left <= 0:
+            # Past the deadline, what the port already holds is still read once: a host held up (preempted,
+            # stopped) past it must not take the frames that came meanwhile for silence.
+            readable, _, _ = select.select([self._fd], [], [], max(left, 0.0))
+            if not readable and left <= 0:
                 return None
-            readable, _, _ = select.select([self._fd], [], [], left)
             if readable:
                 try:
                     chunk = os.read(self._fd, 4096)
