@@ -541,7 +541,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
                 # line delayed least (allowed to grow by CLOCK_SKEW, for a slower amplifier clock).
                 amp_ns = _unwrap(link[LINK_AMP_TIME_US], amp_us) * 1000
                 amp_us = amp_ns // 1000
-                offset_ns = min(now_ns - amp_ns, offset_ns + np.int64((now_ns - synced_ns) * CLOCK_SKEW))
+                offset_ns = min(np.int64(now_ns - amp_ns), offset_ns + np.int64((now_ns - synced_ns) * CLOCK_SKEW))
                 synced_ns = now_ns
                 ref_index, ref_ns, primed = float(link[LINK_AMP_PLAY_INDEX]), amp_ns + offset_ns, True
         if link[LINK_ACK_TYPE] == MSG_START and link[LINK_ACK_CODE] != codec.ACK_OK:
