@@ -68,17 +68,24 @@ def add_session_arguments(parser: argparse.ArgumentParser, *, input_default: str
     ``--block`` by MAX_RATE_HZ and MAX_BLOCK_FRAMES.
     """
     parser.add_argument("texture", metavar="TEXTURE", help="texture file (YAML)")
-    parser.add_argument("--device", metavar="FILE", help="device file, or a shipped device's name such as SLG_0.4 (default: default, SLG_0.56)")
     parser.add_argument("--input", metavar="URL", required=input_default is None, default=input_default,
                         help=input_help + (f" (default {input_default})" if input_default else ""))
     parser.add_argument("--output", metavar="URL", default=output_default,
                         help=f"{output_help} (default {output_default})")
+    parser.add_argument("--duration", metavar="S", type=number(0, False, max_duration_s, "s"),
+                        help=f"seconds of input, at most {max_duration_s:g} (default: the input's own duration)")
+    add_drive_arguments(parser)
+
+
+def add_drive_arguments(parser: argparse.ArgumentParser) -> None:
+    """The device and drive options every real-time or offline session takes (``--device``, ``--rate``,
+    ``--block``, the power budgets, ``--force``, ``--track``, ``--no-mode-compensation``): see
+    :func:`session_options`."""
+    parser.add_argument("--device", metavar="FILE", help="device file, or a shipped device's name such as SLG_0.4 (default: default, SLG_0.56)")
     parser.add_argument("--rate", metavar="HZ", type=whole(MAX_RATE_HZ, "Hz, the highest rate tpad-rt runs at"),
                         default=192000, help=f"sample rate, at most {MAX_RATE_HZ} Hz (default 192000)")
     parser.add_argument("--block", metavar="N", type=whole(MAX_BLOCK_FRAMES, "frames"), default=64,
                         help=f"samples per block, 1 to {MAX_BLOCK_FRAMES} (default 64)")
-    parser.add_argument("--duration", metavar="S", type=number(0, False, max_duration_s, "s"),
-                        help=f"seconds of input, at most {max_duration_s:g} (default: the input's own duration)")
     parser.add_argument("--power-budget", metavar="W", type=number(0, False, MAX_POWER_W, "W"),
                         help=f"instantaneous power cap, at most {MAX_POWER_W:g} W "
                         "(default: the device's power_budget_w)")

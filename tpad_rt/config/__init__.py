@@ -2,8 +2,11 @@
 
 API map
 -------
-load_texture(path) -> TextureFile
-    one of Grating, Bitmap, Gradient, Bumps, Edges, Temporal, Layers
+load_texture(path, image_dirs=None) -> TextureFile
+    one of Grating, Bitmap, Gradient, Bumps, Edges, Temporal, Layers (images only from
+    ``image_dirs`` when given)
+parse_texture(text, source, base_dir, image_dirs) -> TextureFile
+    a texture file's bytes (``tpad-rt serve``'s inline textures)
 load_device(path) -> DeviceFile
 load_any(path) -> TextureFile | DeviceFile
     a device file has ``format_version`` (format 1: ``resonance_hz``), a texture file has ``kind``
@@ -20,7 +23,7 @@ The models are frozen pydantic models; image-based textures have
 
 from tpad_rt.config.device_schema import DeviceFile
 from tpad_rt.config.json_schema import schema_json
-from tpad_rt.config.loader import check_file, load_any, load_device, load_texture
+from tpad_rt.config.loader import check_file, load_any, load_device, load_texture, parse_texture
 from tpad_rt.config.texture_schema import (
     Bitmap,
     Bumps,
@@ -46,5 +49,6 @@ __all__ = [
     "load_any",
     "load_device",
     "load_texture",
+    "parse_texture",
     "schema_json",
 ]

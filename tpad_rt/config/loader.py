@@ -11,8 +11,8 @@ from pydantic import TypeAdapter, ValidationError
 from tpad_rt.config.breadcrumb import breadcrumb
 from tpad_rt.config.device_schema import DEVICE_FORMAT_VERSION, DeviceFile
 from tpad_rt.config.messages import explain
-from tpad_rt.config.texture_schema import BASE_DIR, IMAGE_PIXELS, TextureFile
-from tpad_rt.config.yaml_io import YamlDocument, load_yaml
+from tpad_rt.config.texture_schema import BASE_DIR, IMAGE_DIRS, IMAGE_PIXELS, TextureFile
+from tpad_rt.config.yaml_io import YamlDocument, load_yaml, parse_yaml
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.shipped import any_file, device_file, texture_file
 
@@ -21,11 +21,18 @@ PathLike = str | os.PathLike[str]
 _ADAPTERS: dict[Any, TypeAdapter[Any]] = {TextureFile: TypeAdapter(TextureFile), DeviceFile: TypeAdapter(DeviceFile)}
 
 
-def load_texture(path: PathLike) -> TextureFile:
-    """The texture file at ``path`` (or the shipped texture of that name, :mod:`tpad_rt.shipped`);
-    raises ConfigError listing every problem in it."""
+def load_texture(path: PathLike, image_dirs: list[Path] | None = None) -> TextureFile:
+    """The texture file at ``path`` (or the shipped texture of that name, :mod:`tpad_rt.shipped`), its images
+    only from ``image_dirs`` (resolved folders) when given; raises ConfigError listing every problem in it."""
     path = texture_file(path)
-    return _validate(TextureFile, path, load_yaml(Path(path), str(path)))
+    return _validate(TextureFile, path, load_yaml(Path(path), str(path)), image_dirs=image_dirs)
+
+
+def parse_texture(text: bytes, source: str, base_dir: Path, image_dirs: list[Path]) -> TextureFile:
+    """The texture file whose bytes are ``text`` (its errors prefixed with ``source``); relative image paths
+    start from ``base_dir`` and every image must lie in one of ``image_dirs`` (resolved folders). Raises
+    ConfigError listing every problem."""
+    return _validate(TextureFile, source, parse_yaml(text, source), base_dir, image_dirs)
 
 
 def load_device(path: PathLike) -> DeviceFile:
@@ -100,10 +107,14 @@ def check_file(path: PathLike) -> list[str]:
     return []
 
 
-def _validate(root: Any, path: PathLike, document: YamlDocument) -> Any:
-    """``document`` validated as ``root``; raises ConfigError with one line per problem."""
+def _validate(root: Any, path: PathLike, document: YamlDocument, base_dir: Path | None = None,
+              image_dirs: list[Path] | None = None) -> Any:
+    """``document`` validated as ``root`` (relative image paths from ``base_dir``, default the file's folder;
+    images only within ``image_dirs`` when given); raises ConfigError with one line per problem."""
     try:
-        context = {BASE_DIR: Path(path).parent, IMAGE_PIXELS: [0]}
+        context: dict[str, Any] = {BASE_DIR: Path(path).parent if base_dir is None else base_dir, IMAGE_PIXELS: [0]}
+        if image_dirs is not None:
+            context[IMAGE_DIRS] = image_dirs
         return _ADAPTERS[root].validate_python(document.data, context=context)
     except ValidationError as err:
         lines = []

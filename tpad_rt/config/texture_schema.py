@@ -45,6 +45,8 @@ from tpad_rt.errors import ConfigError
 BASE_DIR = "base_dir"
 #: Validation-context key: a one-item list counting the pixels of the images validated so far.
 IMAGE_PIXELS = "image_pixels"
+#: Validation-context key (optional): the folders images must lie in, resolved (``tpad-rt serve``'s clients).
+IMAGE_DIRS = "image_dirs"
 #: Most pixels all the images of one texture may hold (each reference counts: every one is loaded).
 MAX_TEXTURE_PIXELS = 4096 * 4096
 MAX_LAYERS = 16
@@ -72,10 +74,14 @@ def _usable_image(value: Path, info: ValidationInfo) -> Path:
 
     Counts its pixels in ``context[IMAGE_PIXELS]`` (a one-item list) when the context has
     it: every image a texture names is held in memory once rendered, so all of them
-    together may have at most MAX_TEXTURE_PIXELS pixels.
+    together may have at most MAX_TEXTURE_PIXELS pixels. With ``context[IMAGE_DIRS]`` an
+    image (links resolved) outside those folders is refused before it is opened.
     """
     context = info.context or {}
     path = Path(context.get(BASE_DIR, ".")) / value
+    allowed: list[Path] | None = context.get(IMAGE_DIRS)
+    if allowed is not None and not any(path.resolve().is_relative_to(folder) for folder in allowed):
+        raise rule_error(f"the image {str(value)!r} lies outside the folders this server reads textures from")
     try:
         pixels = read_image(path).size
     except ImageError as err:

@@ -65,7 +65,15 @@ def load_yaml(path: Path, source: str) -> YamlDocument:
     """
     if source == "":  # Path("") is the current folder: say what was given instead
         raise ConfigError("'': the file name is empty; give the path of a texture or device file")
-    text = read_regular(path, "texture and device files", MAX_FILE_BYTES, source)
+    return parse_yaml(read_regular(path, "texture and device files", MAX_FILE_BYTES, source), source)
+
+
+def parse_yaml(text: bytes, source: str) -> YamlDocument:
+    """``text`` (a texture or device file's bytes, at most MAX_FILE_BYTES) as :func:`load_yaml` reads a file;
+    ConfigError (lines prefixed with ``source``) as there."""
+    if len(text) > MAX_FILE_BYTES:
+        raise ConfigError(breadcrumb(source, (), f"{len(text):,} bytes, more than the {MAX_FILE_BYTES:,} a texture "
+                                     "or device file may hold"))
     try:
         return _compose_and_construct(text, source)
     except _LimitExceeded as err:

@@ -1,0 +1,463 @@
+"""``tpad-rt serve``'s network side: the WebSocket API, the page's static files, and OSC over UDP, on one
+asyncio loop in front of one :class:`~tpad_rt.engine.Renderer`.
+
+API map
+-------
+Settings(host, port, osc_port, token, allowed_origins, texture_dirs)
+    where to listen and who may connect
+Server(renderer, settings, texture_label)
+    ``await run(stop)``: serve until ``stop`` is set or the renderer fails (re-raised);
+    ``port``, ``osc_port`` (bound, also when 0 was asked), ``counters``
+
+docs/serve.md is the contract. One loop thread runs everything: a message is read,
+checked (:mod:`tpad_rt.serve.protocol`), limited (:class:`~tpad_rt.serve.core.TokenBucket`)
+and acted on before the next; the renderer's own threads render. Loading a texture runs
+in a worker thread (an image can take a while), one at a time. Errors go back as
+``error`` messages and the connection stays open; only a message past MAX_FRAME_BYTES
+(the WebSocket layer closes with 1009) or a failed handshake ends one.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import itertools
+import json
+import math
+import time
+from collections import Counter, OrderedDict
+from dataclasses import dataclass, field
+from http import HTTPStatus
+from importlib import resources
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+from urllib.parse import parse_qs
+
+from websockets.asyncio.server import ServerConnection, broadcast, serve
+from websockets.datastructures import Headers
+from websockets.exceptions import ConnectionClosed
+from websockets.http11 import Request as HttpRequest
+from websockets.http11 import Response
+
+from tpad_rt import __version__
+from tpad_rt.errors import SampleError
+from tpad_rt.serve import protocol
+from tpad_rt.serve.core import (
+    ClockMap, FingerOwner, TelemetryFeed, TextureLibrary, TokenBucket, colorbar_png, device_info, friction_map_png, json_safe,
+)
+from tpad_rt.serve.osc import OscEndpoint
+from tpad_rt.serve.protocol import ProtocolError, Request, Sample
+from tpad_rt.shipped import texture_names
+
+if TYPE_CHECKING:
+    from tpad_rt.engine import Renderer
+
+#: A client's sustained and burst messages per second; finger samples per second; bytes per second.
+MESSAGES_PER_S, MESSAGES_BURST = 1000.0, 200.0
+SAMPLES_PER_S, SAMPLES_BURST = 4000.0, 2 * protocol.MAX_BATCH
+BYTES_PER_S, BYTES_BURST = float(2 * protocol.MAX_MESSAGE_BYTES), float(2 * protocol.MAX_MESSAGE_BYTES)
+#: Texture loads per second (each compiles; an image texture reads its file).
+TEXTURES_PER_S, TEXTURES_BURST = 2.0, 4.0
+#: Texture loads running or waiting at once, server-wide (more are refused as rate_limited).
+MAX_TEXTURE_LOADS = 4
+#: At most one ``rate_limited`` error per this many seconds to a client (the count of dropped messages in it).
+LIMIT_NOTICE_S = 0.25
+#: The finger is freed when its holder sends nothing for this long (s); the kernel's watchdog ramped it already.
+OWNER_IDLE_S = 1.0
+#: The telemetry feed's pump period (s).
+PUMP_S = 0.02
+#: How often the renderer is checked for a failure (s).
+CHECK_S = 0.1
+#: Most OSC senders whose limits are kept (the oldest forgotten first).
+MAX_OSC_SENDERS = 64
+#: The page's files (package data) and their content types.
+STATIC_FILES = {"/": ("index.html", "text/html; charset=utf-8"),
+                "/index.html": ("index.html", "text/html; charset=utf-8"),
+                "/page.js": ("page.js", "text/javascript; charset=utf-8"),
+                "/page.css": ("page.css", "text/css; charset=utf-8")}
+_SECURITY_HEADERS = [("Cache-Control", "no-store"), ("X-Content-Type-Options", "nosniff"),
+                     ("Content-Security-Policy", "default-src 'self'; connect-src 'self' ws: wss:; img-src 'self'; "
+                      "script-src 'self'; style-src 'self'; frame-ancestors 'none'")]
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Where ``serve`` listens (``port`` 0: any free one; ``osc_port`` None: no OSC), the token clients must
+    show (None: none), the page origins besides the server's own that may open the WebSocket, and the folders
+    clients may name texture files in (the shipped textures' first)."""
+
+    host: str = "127.0.0.1"
+    port: int = 8765
+    osc_port: int | None = 8766
+    token: str | None = None
+    allowed_origins: tuple[str, ...] = ()
+    texture_dirs: tuple[Path, ...] = ()
+
+
+@dataclass(eq=False)
+class Client:
+    """One WebSocket connection (or OSC sender): its limits, clock map and telemetry subscription."""
+
+    name: str
+    connection: ServerConnection | None = None
+    clock: ClockMap = field(default_factory=ClockMap)
+    messages: TokenBucket = field(default_factory=lambda: TokenBucket(MESSAGES_PER_S, MESSAGES_BURST))
+    samples: TokenBucket = field(default_factory=lambda: TokenBucket(SAMPLES_PER_S, SAMPLES_BURST))
+    bytes: TokenBucket = field(default_factory=lambda: TokenBucket(BYTES_PER_S, BYTES_BURST))
+    textures: TokenBucket = field(default_factory=lambda: TokenBucket(TEXTURES_PER_S, TEXTURES_BURST))
+    dropped: int = 0
+    noticed_s: float = -math.inf
+    subscription: asyncio.Task[None] | None = None
+
+
+class Server:
+    """The API of ``tpad-rt serve`` in front of a started ``renderer`` (module docstring)."""
+
+    def __init__(self, renderer: Renderer, settings: Settings, texture_label: str | None = None):
+        self.renderer = renderer
+        self.settings = settings
+        self.library = TextureLibrary(list(settings.texture_dirs))
+        self.owner = FingerOwner(OWNER_IDLE_S)
+        self.feed = TelemetryFeed(renderer)
+        self.counters: Counter[str] = Counter()
+        self.port = settings.port
+        self.osc_port = settings.osc_port
+        self._clients: set[Client] = set()
+        self._osc_senders: OrderedDict[tuple[str, int], Client] = OrderedDict()
+        self._names = itertools.count(1)
+        self._texture_lock = asyncio.Lock()
+        self._texture_serial = 0
+        self._texture_loads = 0
+        self._texture_label = texture_label or ("none" if renderer.texture.kind == "none" else "the command line")
+        self._map_png = friction_map_png(renderer.texture, renderer.device)
+        self._colorbar_png = colorbar_png()
+        self._static = {path: (resources.files("tpad_rt.serve").joinpath("static", name).read_bytes(), kind)
+                        for path, (name, kind) in STATIC_FILES.items()}
+
+    # --- running ---------------------------------------------------------------------------------
+
+    async def run(self, stop: asyncio.Event, ready: asyncio.Event | None = None) -> None:
+        """Serve until ``stop`` is set (connections closed with 1001, the finger lifted) or the renderer fails
+        (its error re-raised); ``ready`` is set once listening (``port``/``osc_port`` then bound)."""
+        loop = asyncio.get_running_loop()
+        async with serve(self._connected, self.settings.host, self.settings.port, process_request=self._http,
+                         max_size=protocol.MAX_FRAME_BYTES, max_queue=16, compression=None,
+                         server_header=f"tpad-rt/{__version__}") as server:
+            self.port = next(iter(server.sockets)).getsockname()[1]
+            osc = None
+            if self.settings.osc_port is not None:
+                osc = await OscEndpoint.open(loop, "127.0.0.1", self.settings.osc_port, self._osc_message)
+                self.osc_port = osc.port
+            tasks = [asyncio.create_task(self._pump()), asyncio.create_task(self._watch(stop))]
+            if ready is not None:
+                ready.set()
+            try:
+                await stop.wait()
+            finally:
+                for task in tasks:
+                    task.cancel()
+                if osc is not None:
+                    osc.close()
+                if self.owner.holder is not None:
+                    self.renderer.lift()
+                server.close(close_connections=True)
+        for task in tasks:
+            if task.done() and not task.cancelled() and task.exception() is not None:
+                raise task.exception()  # type: ignore[misc]
+
+    async def _pump(self) -> None:
+        while True:
+            self.feed.pump()
+            await asyncio.sleep(PUMP_S)
+
+    async def _watch(self, stop: asyncio.Event) -> None:
+        """Set ``stop`` when the renderer fails, and raise its error."""
+        try:
+            while True:
+                self.renderer.check()
+                await asyncio.sleep(CHECK_S)
+        finally:
+            stop.set()
+
+    # --- HTTP: the page, the map, the handshake's checks -----------------------------------------
+
+    def _http(self, connection: ServerConnection, request: HttpRequest) -> Response | None:
+        """The page's files, the friction map, or (for ``/ws``) None to go on with the handshake once the
+        origin and the token pass."""
+        path, _, query = request.path.partition("?")
+        self.counters["http_requests"] += 1
+        if path == "/ws":
+            origin = request.headers.get("Origin")
+            if origin is not None and origin not in self._origins(request):
+                self.counters["refused_origin"] += 1
+                return connection.respond(HTTPStatus.FORBIDDEN, f"origin {origin} may not open this WebSocket "
+                                          "(tpad-rt serve --allow-origin adds one)\n")
+            if self.settings.token is not None and not self._token_ok(request, query):
+                self.counters["refused_token"] += 1
+                return connection.respond(HTTPStatus.UNAUTHORIZED, "a token is needed: ws://HOST:PORT/ws?token=... "
+                                          "(the one tpad-rt serve printed)\n")
+            return None
+        if path == "/map.png":
+            return self._response(self._map_png, "image/png")
+        if path == "/colorbar.png":
+            return self._response(self._colorbar_png, "image/png")
+        if path in self._static:
+            return self._response(*self._static[path])
+        return connection.respond(HTTPStatus.NOT_FOUND, "not found: this server has /, /map.png, /colorbar.png and /ws\n")
+
+    def _response(self, body: bytes, kind: str) -> Response:
+        headers = Headers([("Content-Type", kind), ("Content-Length", str(len(body))), *_SECURITY_HEADERS])
+        return Response(200, "OK", headers, body)
+
+    def _origins(self, request: HttpRequest) -> set[str]:
+        """The origins whose pages may open the WebSocket: this server's own (as the browser reached it, and
+        its loopback names), and ``allowed_origins``."""
+        port = self.port
+        own = {f"http://{name}:{port}" for name in ("127.0.0.1", "localhost", "[::1]", self.settings.host)}
+        return own | set(self.settings.allowed_origins)
+
+    def _token_ok(self, request: HttpRequest, query: str) -> bool:
+        token = self.settings.token
+        assert token is not None
+        shown = parse_qs(query).get("token", [""])[0]
+        bearer = request.headers.get("Authorization", "")
+        return hmac.compare_digest(shown.encode(), token.encode()) or \
+            hmac.compare_digest(bearer.encode(), f"Bearer {token}".encode())
+
+    # --- WebSocket -----------------------------------------------------------------------------
+
+    async def _connected(self, connection: ServerConnection) -> None:
+        client = Client(f"ws#{next(self._names)}", connection)
+        self._clients.add(client)
+        self.counters["connections"] += 1
+        try:
+            await connection.send(json.dumps(self._hello(client)))
+            async for raw in connection:
+                reply = await self._handle(client, raw)
+                if reply is not None:
+                    await connection.send(json.dumps(reply))
+        except ConnectionClosed:
+            pass
+        finally:
+            self._clients.discard(client)
+            if client.subscription is not None:
+                client.subscription.cancel()
+            self._let_go(client)
+
+    def _hello(self, client: Client) -> dict[str, Any]:
+        return {
+            "type": "hello", "protocol": protocol.PROTOCOL_VERSION, "server": f"tpad-rt {__version__}",
+            "client": client.name, "device": device_info(self.renderer), "texture": self._texture_message(),
+            "textures": texture_names(), "stream_t": self.renderer.now_s(),
+            "limits": {"max_message_bytes": protocol.MAX_MESSAGE_BYTES, "max_batch": protocol.MAX_BATCH,
+                       "messages_per_s": MESSAGES_PER_S, "samples_per_s": SAMPLES_PER_S,
+                       "max_subscribe_hz": protocol.MAX_SUBSCRIBE_HZ, "finger_idle_s": OWNER_IDLE_S},
+            "finger": self._finger_state(client),
+        }
+
+    async def _handle(self, client: Client, raw: str | bytes) -> dict[str, Any] | None:
+        """Act on one message; the reply (an error included), or None."""
+        now_s = time.monotonic()
+        self.counters["messages"] += 1
+        size = len(raw)
+        if not (client.messages.take(1, now_s) and client.bytes.take(min(size, BYTES_BURST), now_s)):
+            return self._limited(client, now_s)
+        try:
+            if size > protocol.MAX_MESSAGE_BYTES:
+                raise ProtocolError("too_large", f"a message of {size:,} bytes; at most {protocol.MAX_MESSAGE_BYTES:,}")
+            request = protocol.parse(raw)
+            return await self._act(client, request, now_s)
+        except ProtocolError as problem:
+            self.counters[f"error_{problem.code}"] += 1
+            return problem.reply()
+
+    def _limited(self, client: Client, now_s: float) -> dict[str, Any] | None:
+        """Drop the message; a ``rate_limited`` error at most every LIMIT_NOTICE_S."""
+        client.dropped += 1
+        self.counters["rate_limited"] += 1
+        if now_s - client.noticed_s < LIMIT_NOTICE_S:
+            return None
+        client.noticed_s, dropped, client.dropped = now_s, client.dropped, 0
+        return protocol.error("rate_limited", f"too many messages: {dropped} dropped (at most {MESSAGES_PER_S:g} "
+                              f"messages, {SAMPLES_PER_S:g} finger samples and {BYTES_PER_S:,.0f} bytes a second)")
+
+    async def _act(self, client: Client, request: Request, now_s: float) -> dict[str, Any] | None:
+        kind = request.type
+        if kind == "finger" or kind == "fingers":
+            samples = [request] if isinstance(request, protocol.Finger) else request.samples  # type: ignore[union-attr]
+            if not client.samples.take(len(samples), now_s):
+                return self._limited(client, now_s)
+            self.push(client, samples, request.id)  # type: ignore[arg-type]
+            return None
+        if isinstance(request, protocol.Lift):
+            self.lift(client, request.t, request.id)
+            return None
+        if isinstance(request, protocol.SetTexture):
+            if not client.textures.take(1, now_s):
+                return self._limited(client, now_s)
+            await self.set_texture(request, client)
+            return None
+        if isinstance(request, protocol.DeviceInfo):
+            return {**device_info(self.renderer), **({"id": request.id} if request.id is not None else {})}
+        if isinstance(request, protocol.Subscribe):
+            self._subscribe(client, request.rate_hz)
+            return {"type": "subscribed", "rate_hz": request.rate_hz, **_echo(request)}
+        if isinstance(request, protocol.Stats):
+            return {"type": "stats", "renderer": json_safe(self.renderer.stats()),
+                    "server": {"clients": len(self._clients), "finger": self._finger_state(client),
+                               **dict(self.counters)}, **_echo(request)}
+        assert isinstance(request, protocol.Ping)
+        return {"type": "pong", "t": request.t, "stream_t": self.renderer.now_s(), **_echo(request)}
+
+    # --- the finger ------------------------------------------------------------------------------
+
+    def push(self, client: Client, samples: list[Sample], request_id: Any = None) -> None:
+        """Push ``samples`` for ``client`` (it takes the finger if free), their times mapped onto the stream
+        clock; ProtocolError ``finger_busy`` or ``bad_sample`` (the renderer's SampleError: nothing of the
+        message after the bad sample is pushed)."""
+        now_s = time.monotonic()
+        if not self.owner.free_for(client, now_s):
+            raise ProtocolError("finger_busy", f"another client ({getattr(self.owner.holder, 'name', '?')}) has the "
+                                f"finger until it lifts, disconnects or sends nothing for {OWNER_IDLE_S:g} s",
+                                request_id, "finger")
+        stamped = [sample.t for sample in samples if sample.t is not None]
+        offset_s = client.clock.update(max(stamped), self.renderer.now_s()) if stamped else 0.0
+        pushed = 0
+        try:
+            for sample in samples:
+                t = None if sample.t is None else sample.t + offset_s
+                self.renderer.push_finger(sample.x_mm, sample.y_mm, sample.force_n, t)
+                pushed += 1
+        except SampleError as problem:
+            raise ProtocolError("bad_sample", str(problem), request_id, "finger") from None
+        finally:
+            if pushed:
+                self.counters["samples"] += pushed
+                previous = self.owner.holder
+                self.owner.claim(client, now_s)
+                if previous is not client:
+                    self._announce_owner()
+
+    def lift(self, client: Client, t: float | None, request_id: Any = None) -> None:
+        """The holder's finger leaves the plate (at client time ``t``); ignored from a client when nobody
+        holds it, ``finger_busy`` when another does."""
+        if self.owner.holder is None:
+            return
+        if self.owner.holder is not client:
+            raise ProtocolError("finger_busy", "another client has the finger: only it can lift it", request_id,
+                                "lift")
+        mapped = None
+        if t is not None and client.clock.offset_s is not None:
+            mapped = t + client.clock.offset_s
+        try:
+            self.renderer.lift(mapped)
+        except SampleError as problem:
+            self.renderer.lift()
+            raise ProtocolError("bad_sample", str(problem), request_id, "lift") from None
+        finally:
+            self.owner.release(client)
+            self._announce_owner()
+
+    def _let_go(self, client: Client) -> None:
+        """A client left: lift its finger if it held it."""
+        if self.owner.holder is client:
+            self.renderer.lift()
+            self.owner.release(client)
+            self._announce_owner()
+
+    def _finger_state(self, client: Client) -> dict[str, Any]:
+        holder = self.owner.holder
+        return {"held": holder is not None, "yours": holder is client,
+                "holder": getattr(holder, "name", None), "policy": "first-come, until lift, disconnect or "
+                f"{OWNER_IDLE_S:g} s idle"}
+
+    def _announce_owner(self) -> None:
+        for client in list(self._clients):
+            if client.connection is not None:
+                broadcast([client.connection], json.dumps({"type": "finger", **self._finger_state(client)}))
+
+    # --- textures --------------------------------------------------------------------------------
+
+    async def set_texture(self, request: protocol.SetTexture, client: Client | None = None) -> None:
+        """Load, compile and render ``request``'s texture, then tell every client (the requester's copy
+        carries its ``id``); ProtocolError ``texture``/``forbidden_path``."""
+        if self._texture_loads >= MAX_TEXTURE_LOADS:
+            raise ProtocolError("rate_limited", f"{self._texture_loads} textures are loading already; send this one "
+                                "once one is set", request.id, "texture")
+        self._texture_loads += 1
+        try:
+            await self._load_texture(request)
+        finally:
+            self._texture_loads -= 1
+        message = self._texture_message()
+        self.counters["textures_set"] += 1
+        for other in list(self._clients):
+            if other.connection is not None:
+                reply = {**message, **_echo(request)} if other is client else message
+                broadcast([other.connection], json.dumps(reply))
+
+    async def _load_texture(self, request: protocol.SetTexture) -> None:
+        """Load and compile (in a worker thread, one at a time), then render ``request``'s texture."""
+        async with self._texture_lock:
+            compiled, label = await asyncio.to_thread(self.library.load, request)
+            png = await asyncio.to_thread(friction_map_png, compiled, self.renderer.device)
+            self.renderer.set_texture(compiled)
+            self._texture_serial += 1
+            self._texture_label, self._map_png = label, png
+
+    def _texture_message(self) -> dict[str, Any]:
+        texture = self.renderer.texture
+        return {"type": "texture", "source": self._texture_label, "kind": texture.kind,
+                "description": texture.description, "map": f"/map.png?v={self._texture_serial}"}
+
+    # --- telemetry -------------------------------------------------------------------------------
+
+    def _subscribe(self, client: Client, rate_hz: float) -> None:
+        if client.subscription is not None:
+            client.subscription.cancel()
+            client.subscription = None
+        if rate_hz > 0:
+            client.subscription = asyncio.create_task(self._send_telemetry(client, max(rate_hz,
+                                                                                   protocol.MIN_SUBSCRIBE_HZ)))
+
+    async def _send_telemetry(self, client: Client, rate_hz: float) -> None:
+        assert client.connection is not None
+        since_t = self.renderer.now_s()
+        period_s = 1.0 / rate_hz
+        next_s = time.monotonic()
+        try:
+            while True:
+                next_s = max(next_s + period_s, time.monotonic())
+                await asyncio.sleep(next_s - time.monotonic())
+                summary = self.feed.summary(since_t)
+                if summary is not None:
+                    since_t = summary["t"]
+                    await client.connection.send(json.dumps(summary))
+        except ConnectionClosed:
+            pass
+
+    # --- OSC -------------------------------------------------------------------------------------
+
+    async def _osc_message(self, sender: tuple[str, int], data: dict[str, Any]) -> dict[str, Any] | None:
+        """One OSC message as a request dict (:mod:`tpad_rt.serve.osc`): its reply; ProtocolError as for
+        WebSocket."""
+        client = self._osc_senders.get(sender)
+        if client is None:
+            client = Client(f"osc {sender[0]}:{sender[1]}")
+            self._osc_senders[sender] = client
+            while len(self._osc_senders) > MAX_OSC_SENDERS:
+                _, forgotten = self._osc_senders.popitem(last=False)
+                self._let_go(forgotten)
+        self._osc_senders.move_to_end(sender)
+        now_s = time.monotonic()
+        self.counters["osc_messages"] += 1
+        if not client.messages.take(1, now_s):
+            client.dropped += 1
+            self.counters["rate_limited"] += 1
+            raise ProtocolError("rate_limited", "too many OSC messages")
+        return await self._act(client, protocol.validate(data), now_s)
+
+
+def _echo(request: Request) -> dict[str, Any]:
+    """``{"id": ...}`` when the request had one."""
+    return {"id": request.id} if request.id is not None else {}
