@@ -57,7 +57,7 @@ MESSAGES_PER_S, MESSAGES_BURST = 1000.0, 200.0
 SAMPLES_PER_S, SAMPLES_BURST = 4000.0, 2 * protocol.MAX_BATCH
 BYTES_PER_S, BYTES_BURST = float(2 * protocol.MAX_MESSAGE_BYTES), float(2 * protocol.MAX_MESSAGE_BYTES)
 #: Texture loads per second (each compiles; an image texture reads its file).
-TEXTURES_PER_S, TEXTURES_BURST = 2.0, 4.0
+TEXTURES_PER_S, TEXTURES_BURST = 10.0, 10.0
 #: Texture loads running or waiting at once, server-wide (more are refused as rate_limited).
 MAX_TEXTURE_LOADS = 4
 #: At most one ``rate_limited`` error per this many seconds to a client (the count of dropped messages in it).
@@ -260,33 +260,47 @@ class Server:
         now_s = time.monotonic()
         self.counters["messages"] += 1
         size = len(raw)
-        if not (client.messages.take(1, now_s) and client.bytes.take(min(size, BYTES_BURST), now_s)):
-            return self._limited(client, now_s)
         try:
-            if size > protocol.MAX_MESSAGE_BYTES:
+            if size > protocol.MAX_MESSAGE_BYTES:  # refused unread
                 raise ProtocolError("too_large", f"a message of {size:,} bytes; at most {protocol.MAX_MESSAGE_BYTES:,}")
+            if not client.bytes.take(size, now_s):  # what parsing costs
+                return self._limited(client, now_s, f"bytes (at most {BYTES_PER_S:,.0f} a second)")
             request = protocol.parse(raw)
+        except ProtocolError as problem:
+            if not client.messages.take(1, now_s):
+                return self._limited(client, now_s, self._message_limit, problem.request_id)
+            return self._refused(problem)
+        if not client.messages.take(1, now_s):
+            return self._limited(client, now_s, self._message_limit, request.id)
+        try:
             return await self._act(client, request, now_s)
         except ProtocolError as problem:
-            self.counters[f"error_{problem.code}"] += 1
-            return problem.reply()
+            return self._refused(problem)
 
-    def _limited(self, client: Client, now_s: float) -> dict[str, Any] | None:
-        """Drop the message; a ``rate_limited`` error at most every LIMIT_NOTICE_S."""
+    _message_limit = f"messages (at most {MESSAGES_PER_S:g} a second)"
+
+    def _refused(self, problem: ProtocolError) -> dict[str, Any]:
+        self.counters[f"error_{problem.code}"] += 1
+        return problem.reply()
+
+    def _limited(self, client: Client, now_s: float, what: str, request_id: Any = None) -> dict[str, Any] | None:
+        """Drop the message (too many ``what``): a ``rate_limited`` error carrying ``request_id`` when the message
+        had one (a client waiting for a reply gets one), else at most one every LIMIT_NOTICE_S, saying how many
+        were dropped since the last."""
         client.dropped += 1
         self.counters["rate_limited"] += 1
-        if now_s - client.noticed_s < LIMIT_NOTICE_S:
+        if request_id is None and now_s - client.noticed_s < LIMIT_NOTICE_S:
             return None
         client.noticed_s, dropped, client.dropped = now_s, client.dropped, 0
-        return protocol.error("rate_limited", f"too many messages: {dropped} dropped (at most {MESSAGES_PER_S:g} "
-                              f"messages, {SAMPLES_PER_S:g} finger samples and {BYTES_PER_S:,.0f} bytes a second)")
+        return protocol.error("rate_limited", f"too many {what}: {dropped} message{'s' * (dropped != 1)} dropped",
+                              request_id)
 
     async def _act(self, client: Client, request: Request, now_s: float) -> dict[str, Any] | None:
         kind = request.type
         if kind == "finger" or kind == "fingers":
             samples = [request] if isinstance(request, protocol.Finger) else request.samples  # type: ignore[union-attr]
             if not client.samples.take(len(samples), now_s):
-                return self._limited(client, now_s)
+                return self._limited(client, now_s, f"finger samples (at most {SAMPLES_PER_S:g} a second)", request.id)
             self.push(client, samples, request.id)  # type: ignore[arg-type]
             return None
         if isinstance(request, protocol.Lift):
@@ -294,7 +308,7 @@ class Server:
             return None
         if isinstance(request, protocol.SetTexture):
             if not client.textures.take(1, now_s):
-                return self._limited(client, now_s)
+                return self._limited(client, now_s, f"textures (at most {TEXTURES_PER_S:g} a second)", request.id)
             await self.set_texture(request, client)
             return None
         if isinstance(request, protocol.DeviceInfo):
