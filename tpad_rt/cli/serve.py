@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import dataclasses
 import errno
 import ipaddress
 import os
@@ -45,6 +46,9 @@ if TYPE_CHECKING:
     from tpad_rt.engine import Renderer
     from tpad_rt.serve.server import Server, Settings
 
+#: The span (ms) the finger's velocity is estimated over: a 60 Hz client's samples are 16.7 ms apart, and the
+#: estimate needs two within it (RenderOptions' 10 ms default suits play's inputs, about 1 kHz).
+VELOCITY_WINDOW_MS = 40.0
 #: Token length bounds (characters) and the characters a token may hold (URL-safe, no escaping needed).
 MIN_TOKEN_CHARS, MAX_TOKEN_CHARS = 8, 256
 _TOKEN_CHARS = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789-_.~")
@@ -89,6 +93,11 @@ def add_parser(subparsers: Subparsers) -> None:
     parser.add_argument("--record", metavar="FILE.npz", help="also write a recording of the run (the format of render)")
     parser.add_argument("--stall-timeout", metavar="S", type=number(0, False, MAX_STALL_TIMEOUT_S, "s"), default=0.5,
                         help="an audio stream without a callback for S seconds has stalled (default 0.5)")
+    parser.add_argument("--velocity-window-ms", metavar="MS", type=number(0, False, 1000.0, "ms"),
+                        default=VELOCITY_WINDOW_MS,
+                        help="span the finger's velocity is estimated over (default "
+                        f"{VELOCITY_WINDOW_MS:g}: network clients send at display rates, 60-120 samples a second; "
+                        "play's inputs send about 1000)")
     add_drive_arguments(parser)
     parser.set_defaults(func=run)
 
@@ -109,8 +118,9 @@ def run(args: argparse.Namespace) -> int:
     with compile_notice():
         from tpad_rt.engine import Renderer
 
+        options = dataclasses.replace(session_options(args), velocity_window_ms=args.velocity_window_ms)
         renderer = Renderer(device, output.url, texture=texture, rate_hz=args.rate, block_frames=args.block,
-                            options=session_options(args), stall_timeout_s=args.stall_timeout)
+                            options=options, stall_timeout_s=args.stall_timeout)
         if args.record is not None:
             renderer.record(args.record)
         renderer.start()

@@ -4,7 +4,8 @@
 
 const PROTOCOL_VERSION = 1;
 const TELEMETRY_HZ = 30;
-const RESEND_MS = 20;          // while pressed, the last position again: the renderer's watchdog wants samples
+const RESEND_MS = 25;          // a finger held still: its position again after this long (the renderer's
+                               // watchdog ramps the drive down after 50 ms without a sample)
 const HISTORY_S = 5;
 const RECONNECT_MS = 1000;
 
@@ -15,7 +16,7 @@ const ctx = plate.getContext("2d");
 // Everything the page knows; window.tpadPage exposes it (the tests read it, and so can a console).
 const state = {
   connected: false, hello: null, device: null, texture: null, map: null, mapDrawn: 0, telemetry: null,
-  finger: null, history: [], pressedPointer: null, lastPosition: null, sent: 0, errors: [],
+  finger: null, history: [], pressedPointer: null, lastPosition: null, lastT: 0, sent: 0, errors: [],
 };
 window.tpadPage = state;
 
@@ -206,10 +207,18 @@ function platePosition(event) {
     (event.clientY - box.top) / box.height * device.plate.width_mm];
 }
 
-function sample(event) {
-  const [x_mm, y_mm] = platePosition(event);
-  state.lastPosition = [x_mm, y_mm];
-  return { x_mm, y_mm, t: event.timeStamp / 1000 };  // the page's clock (performance.now's), seconds
+// Samples are stamped with the page's clock (performance.now, seconds) when handled: an input event's own
+// timeStamp can lag that by a frame or more (moves are dispatched once per frame), which would put it before a
+// held-still resend. Coalesced events keep their spacing before the handled one; no time goes backwards.
+function samples(events) {
+  const now = performance.now() / 1000;
+  const newest = events[events.length - 1].timeStamp / 1000;
+  return events.map((event) => {
+    const [x_mm, y_mm] = platePosition(event);
+    state.lastPosition = [x_mm, y_mm];
+    state.lastT = Math.max(now - (newest - event.timeStamp / 1000), state.lastT);
+    return { x_mm, y_mm, t: state.lastT };
+  });
 }
 
 plate.addEventListener("pointerdown", (event) => {
@@ -217,30 +226,34 @@ plate.addEventListener("pointerdown", (event) => {
   event.preventDefault();
   plate.setPointerCapture(event.pointerId);
   state.pressedPointer = event.pointerId;
-  send({ type: "finger", ...sample(event) });
+  send({ type: "finger", ...samples([event])[0] });
 });
 
 plate.addEventListener("pointermove", (event) => {
   if (event.pointerId !== state.pressedPointer) return;
-  const events = event.getCoalescedEvents ? event.getCoalescedEvents() : [];
-  const samples = (events.length ? events : [event]).map(sample);
-  send(samples.length === 1 ? { type: "finger", ...samples[0] } : { type: "fingers", samples });
+  const coalesced = event.getCoalescedEvents ? event.getCoalescedEvents() : [];
+  const batch = samples(coalesced.length ? coalesced : [event]);
+  send(batch.length === 1 ? { type: "finger", ...batch[0] } : { type: "fingers", samples: batch });
 });
 
 function release(event) {
   if (event.pointerId !== state.pressedPointer) return;
   state.pressedPointer = null;
-  send({ type: "lift", t: event.timeStamp / 1000 });
+  state.lastT = Math.max(performance.now() / 1000, state.lastT);
+  send({ type: "lift", t: state.lastT });
 }
 plate.addEventListener("pointerup", release);
 plate.addEventListener("pointercancel", release);
 plate.addEventListener("lostpointercapture", release);
 
+// A finger held still sends no events: send its position again once RESEND_MS passed without a sample.
 setInterval(() => {
-  if (state.pressedPointer !== null && state.lastPosition) {
+  const now = performance.now() / 1000;
+  if (state.pressedPointer !== null && state.lastPosition && now - state.lastT >= RESEND_MS / 1000) {
     const [x_mm, y_mm] = state.lastPosition;
-    send({ type: "finger", x_mm, y_mm, t: performance.now() / 1000 });
+    state.lastT = now;
+    send({ type: "finger", x_mm, y_mm, t: now });
   }
-}, RESEND_MS);
+}, RESEND_MS / 5);
 
 connect();
