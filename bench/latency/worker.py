@@ -194,21 +194,27 @@ def stream_native(callback: str, block: int, seconds: float, gil_threads: int) -
     return result
 
 
-def _latency(rows, pushes: list[tuple[int, int]], cb) -> dict:
-    """Each push's latency to the DAC time of the first block that read it, and its two parts."""
+def read_by(rows, pushes: list[tuple[int, int]]):
+    """For each push ``(time ns, sample index)`` whose reading block was recorded: ``(push time ns, that
+    block's entry time ns, its DAC delay ns)``, arrays. The reading block is the first whose start saw the
+    sample (its BLOCK_FINGER_COUNT passes the index); the first record is left out (it may have been read
+    earlier)."""
     import numpy as np
 
     from tpad_rt.kernel import table as tab
+    pushed_ns, index = np.array(pushes, dtype=np.int64).reshape(-1, 2).T
+    counts = rows[:, tab.BLOCK_FINGER_COUNT]
+    first = np.searchsorted(counts, index, side="right")
+    kept = (first > 0) & (first < len(rows))
+    first = first[kept]
+    return pushed_ns[kept], rows[first, tab.BLOCK_ENTRY_NS], rows[first, tab.BLOCK_DAC_DELAY_NS]
+
+
+def _latency(rows, pushes: list[tuple[int, int]], cb) -> dict:
+    """Each push's latency to the DAC time of the first block that read it, and its two parts."""
     if not pushes or len(rows) < 2:
         return {"latency_ms": {"n": 0}}
-    pushed_ns, index = np.array(pushes, dtype=np.int64).T
-    counts = rows[:, tab.BLOCK_FINGER_COUNT]
-    first = np.searchsorted(counts, index, side="right")  # first block whose start saw sample `index`
-    # keep samples whose reading block was recorded, and not the first record (it may have been read earlier)
-    kept = (first > 0) & (first < len(rows))
-    first, pushed_ns = first[kept], pushed_ns[kept]
-    entry_ns = rows[first, tab.BLOCK_ENTRY_NS]
-    dac_ns = rows[first, tab.BLOCK_DAC_DELAY_NS]
+    pushed_ns, entry_ns, dac_ns = read_by(rows, pushes)
     return {
         "latency_ms": _percentiles(entry_ns + dac_ns - pushed_ns, 1e-6),
         "wait_ms": _percentiles(entry_ns - pushed_ns, 1e-6),
