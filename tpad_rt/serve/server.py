@@ -24,6 +24,7 @@ import hmac
 import itertools
 import json
 import math
+import sys
 import time
 from collections import Counter, OrderedDict
 from dataclasses import dataclass, field
@@ -276,6 +277,15 @@ class Server:
             return await self._act(client, request, now_s)
         except ProtocolError as problem:
             return self._refused(problem)
+        except Exception as error:  # noqa: BLE001 - a bug: say so to the client and on stderr, keep serving
+            return self._refused(self.internal_error(error, request))
+
+    def internal_error(self, error: Exception, request: Request) -> ProtocolError:
+        """A bug met handling ``request``: one line on stderr, and the ``internal`` error for the client."""
+        print(f"tpad-rt serve: internal error handling a {request.type} message: {error!r} (please report it)",
+              file=sys.stderr, flush=True)
+        return ProtocolError("internal", f"the server failed on this message ({type(error).__name__}); it keeps "
+                             "serving", request.id, request.type)
 
     _message_limit = f"messages (at most {MESSAGES_PER_S:g} a second)"
 
@@ -469,7 +479,13 @@ class Server:
             client.dropped += 1
             self.counters["rate_limited"] += 1
             raise ProtocolError("rate_limited", "too many OSC messages")
-        return await self._act(client, protocol.validate(data), now_s)
+        request = protocol.validate(data)
+        try:
+            return await self._act(client, request, now_s)
+        except ProtocolError:
+            raise
+        except Exception as error:  # noqa: BLE001 - as for a WebSocket message
+            raise self.internal_error(error, request) from None
 
 
 def _echo(request: Request) -> dict[str, Any]:
