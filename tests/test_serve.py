@@ -370,3 +370,35 @@ def test_beyond_loopback_every_client_needs_the_token() -> None:
         with Client(serve.ws_url, additional_headers={"Authorization": "Bearer s3cret-token"}) as client:
             assert client.hello["type"] == "hello"
         stopped_by_signal_cleanly(serve)
+
+
+def test_connections_beyond_the_limit_are_refused_until_one_leaves(server: Serve) -> None:
+    from tpad_rt.serve.server import MAX_CLIENTS
+
+    clients = [Client(server.ws_url) for _ in range(MAX_CLIENTS)]
+    try:
+        with pytest.raises(InvalidStatus) as refused:
+            Client(server.ws_url)
+        assert refused.value.response.status_code == 503
+        clients.pop().close()
+        deadline = time.monotonic() + 20.0
+        while True:  # the server lets the next one in once it has seen the close (its handler ended)
+            try:
+                latecomer = Client(server.ws_url)
+                break
+            except InvalidStatus as full:
+                assert full.response.status_code == 503 and time.monotonic() < deadline
+        clients.append(latecomer)
+        assert latecomer.request({"type": "ping"}, "pong")["type"] == "pong"
+    finally:
+        for client in clients:
+            client.close()
+
+
+def test_device_and_stats_requests_have_their_own_budget(server: Serve) -> None:
+    with Client(server.ws_url) as client:
+        replies = [client.request({"type": "stats"}, "stats") for _ in range(40)]
+        kinds = [reply["type"] for reply in replies]
+        assert kinds.count("stats") >= 20 and "error" in kinds  # a burst of 20, then 20 a second
+        assert {reply["code"] for reply in replies if reply["type"] == "error"} == {"rate_limited"}
+        assert client.request({"type": "ping"}, "pong")["type"] == "pong"  # other requests are not held

@@ -59,6 +59,12 @@ SAMPLES_PER_S, SAMPLES_BURST = 4000.0, 2 * protocol.MAX_BATCH
 BYTES_PER_S, BYTES_BURST = float(2 * protocol.MAX_MESSAGE_BYTES), float(2 * protocol.MAX_MESSAGE_BYTES)
 #: Texture loads per second (each compiles; an image texture reads its file).
 TEXTURES_PER_S, TEXTURES_BURST = 10.0, 10.0
+#: ``device`` and ``stats`` requests per second (each computes the renderer's statistics).
+HEAVY_PER_S = 20.0
+#: Most WebSocket clients at once (more are refused with 503).
+MAX_CLIENTS = 32
+#: A client that leaves this many bytes of the server's messages unread is closed (1008).
+MAX_UNREAD_BYTES = 1 << 20
 #: Texture loads running or waiting at once, server-wide (more are refused as rate_limited).
 MAX_TEXTURE_LOADS = 4
 #: At most one ``rate_limited`` error per this many seconds to a client (the count of dropped messages in it).
@@ -106,6 +112,7 @@ class Client:
     samples: TokenBucket = field(default_factory=lambda: TokenBucket(SAMPLES_PER_S, SAMPLES_BURST))
     bytes: TokenBucket = field(default_factory=lambda: TokenBucket(BYTES_PER_S, BYTES_BURST))
     textures: TokenBucket = field(default_factory=lambda: TokenBucket(TEXTURES_PER_S, TEXTURES_BURST))
+    heavy: TokenBucket = field(default_factory=lambda: TokenBucket(HEAVY_PER_S, HEAVY_PER_S))
     dropped: int = 0
     noticed_s: float = -math.inf
     subscription: asyncio.Task[None] | None = None
@@ -188,6 +195,10 @@ class Server:
         path, _, query = request.path.partition("?")
         self.counters["http_requests"] += 1
         if path == "/ws":
+            if len(self._clients) >= MAX_CLIENTS:
+                self.counters["refused_full"] += 1
+                return connection.respond(HTTPStatus.SERVICE_UNAVAILABLE, f"{MAX_CLIENTS} clients are connected "
+                                          "already; try again when one has left\n")
             origin = request.headers.get("Origin")
             if origin is not None and origin not in self._origins(request):
                 self.counters["refused_origin"] += 1
@@ -321,8 +332,11 @@ class Server:
                 return self._limited(client, now_s, f"textures (at most {TEXTURES_PER_S:g} a second)", request.id)
             await self.set_texture(request, client)
             return None
+        if isinstance(request, (protocol.DeviceInfo, protocol.Stats)) and not client.heavy.take(1, now_s):
+            return self._limited(client, now_s, f"device and stats requests (at most {HEAVY_PER_S:g} a second)",
+                                 request.id)
         if isinstance(request, protocol.DeviceInfo):
-            return {**device_info(self.renderer), **({"id": request.id} if request.id is not None else {})}
+            return {**device_info(self.renderer), **_echo(request)}
         if isinstance(request, protocol.Subscribe):
             self._subscribe(client, request.rate_hz)
             return {"type": "subscribed", "rate_hz": request.rate_hz, **_echo(request)}
@@ -397,8 +411,20 @@ class Server:
 
     def _announce_owner(self) -> None:
         for client in list(self._clients):
-            if client.connection is not None:
-                broadcast([client.connection], json.dumps({"type": "finger", **self._finger_state(client)}))
+            self._push(client, {"type": "finger", **self._finger_state(client)})
+
+    def _push(self, client: Client, message: dict[str, Any]) -> None:
+        """Queue ``message`` for ``client`` without waiting (a broadcast); a client that has left more than
+        MAX_UNREAD_BYTES unread is closed (1008) instead: it does not read, and would grow without bound."""
+        connection = client.connection
+        if connection is None:
+            return
+        unread = connection.transport.get_write_buffer_size() if connection.transport is not None else 0
+        if unread > MAX_UNREAD_BYTES:
+            self.counters["closed_slow"] += 1
+            asyncio.ensure_future(connection.close(1008, f"too slow: {unread} bytes unread"))
+            return
+        broadcast([connection], json.dumps(message))
 
     # --- textures --------------------------------------------------------------------------------
 
@@ -416,9 +442,7 @@ class Server:
         message = self._texture_message()
         self.counters["textures_set"] += 1
         for other in list(self._clients):
-            if other.connection is not None:
-                reply = {**message, **_echo(request)} if other is client else message
-                broadcast([other.connection], json.dumps(reply))
+            self._push(other, {**message, **_echo(request)} if other is client else message)
 
     async def _load_texture(self, request: protocol.SetTexture) -> None:
         """Load and compile (in a worker thread, one at a time), then render ``request``'s texture."""
