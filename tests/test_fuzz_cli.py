@@ -440,6 +440,74 @@ def test_fuzz_play() -> None:
     outcomes.assert_mostly_errors()
 
 
+#: Values for serve's own flags that take a string: addresses, tokens, origins, folders.
+SERVE_STRINGS = ["0.0.0.0", "::", "example.com", "256.1.1.1", "", "localhost", "::1", "short", "x" * 300, "to ken!",
+                 "http://", "null", "evil.example", "/nonexistent", "/dev/null", "/tmp", "\u00e9"]
+
+
+@st.composite
+def serve_case(draw: st.DrawFn) -> Callable[[Path], tuple[list[str], list[str]]]:
+    """A serve that stops by itself within a second or is refused: null:// or sim://, any free port, no OSC
+    unless fuzzed, ``--duration 0.2`` unless only refused durations are fuzzed."""
+    part = draw(st.sampled_from(["texture", "device", "output", "flags", "strings", "record"]))
+    texture = draw(bad_file(TEXTURES)) if part == "texture" else None
+    device = draw(bad_file(DEVICES)) if part == "device" else None
+    output = draw(output_url()) if part == "output" else draw(st.sampled_from(["null://", "sim://"]))
+    extra = draw(flags(["--rate", "--block", "--duration", "--power-budget", "--port", "--osc-port",
+                        "--velocity-window-ms", "--stall-timeout"])) if part == "flags" else []
+    if part == "strings":
+        extra = draw(st.lists(st.tuples(st.sampled_from(["--host", "--token", "--allow-origin", "--texture-dir"]),
+                                        st.sampled_from(SERVE_STRINGS)), min_size=1, max_size=3, unique_by=lambda p: p[0])
+                     .map(lambda pairs: [part for name, value in pairs for part in (name, value)]))
+    if "--duration" in extra:
+        index = extra.index("--duration") + 1
+        if extra[index] not in ("nan", "inf", "-inf", "-1", "0", "-0", "1e308", "abc", "", "1e9",
+                                "99999999999999999999", "0x10"):
+            extra[index] = "1e308"
+    for port_flag in ("--port", "--osc-port"):  # a valid fixed port could be taken: any free one instead
+        if port_flag in extra and extra[extra.index(port_flag) + 1].isdigit():
+            extra[extra.index(port_flag) + 1] = "0"
+    record = draw(st.sampled_from(["d.npz", "f.npz", "z.npz", "missing/x.npz", "x.wav", ""])) \
+        if part == "record" else None
+
+    def make(folder: Path) -> tuple[list[str], list[str]]:
+        files = []
+        texture_path = texture(folder) if texture else GRATING
+        files.append(texture_path)
+        argv = ["serve", texture_path, "--output", output.replace("/tmp", str(folder))]
+        if device:
+            files.append(device(folder))
+            argv += ["--device", files[-1]]
+        if "--duration" not in extra:
+            argv += ["--duration", "0.2"]
+        if "--port" not in extra:
+            argv += ["--port", "0"]
+        if "--osc-port" not in extra:
+            argv += ["--no-osc"]
+        (folder / "d.npz").mkdir()
+        os.mkfifo(folder / "f.npz")
+        (folder / "z.npz").symlink_to("/dev/zero")
+        if record is not None:
+            argv += ["--record", str(folder / record) if record else ""]
+        return [*argv, *extra], files
+
+    return make
+
+
+def test_fuzz_serve() -> None:
+    outcomes = Outcomes()
+
+    @FUZZ_SLOW
+    @given(make=serve_case())
+    def run(make: Callable[[Path], tuple[list[str], list[str]]]) -> None:
+        with workdir() as folder:
+            argv, files = make(folder)
+            outcomes.add(run_cli(argv, "serve", files, timeout_s=120))
+
+    run()
+    outcomes.assert_mostly_errors()
+
+
 @st.composite
 def show_case(draw: st.DrawFn) -> Callable[[Path], tuple[list[str], list[str]]]:
     part = draw(st.sampled_from(["texture", "texture", "device", "flags", "out"]))
