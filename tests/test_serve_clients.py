@@ -4,9 +4,11 @@ headless Chromium, each setting a texture, swiping a finger and reading the tele
 
 from __future__ import annotations
 
+import functools
 import re
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -38,30 +40,30 @@ def node_command() -> list[str]:
     return [node, "--experimental-websocket"] if major < 22 else [node]
 
 
-def csharp_command(tmp_path: Path) -> list[str]:
-    """The C# example compiled with mcs into ``tmp_path``: mono and the program."""
+@functools.cache
+def csharp_command() -> list[str]:
+    """The C# example compiled with mcs (once): mono and the program."""
     mcs, mono = require_program("mcs"), require_program("mono")
-    program = tmp_path / "tpad_client.exe"
+    program = Path(tempfile.mkdtemp(prefix="tpad-rt-csharp-")) / "tpad_client.exe"
     built = subprocess.run([mcs, f"-out:{program}", "Program.cs", "TpadClient.cs"], cwd=CLIENTS / "csharp",
                            capture_output=True, text=True, timeout=120)
     assert built.returncode == 0 and "warning" not in built.stdout, built.stdout + built.stderr
     return [mono, str(program)]
 
 
-def run_client(kind: str, url: str, texture: str, tmp_path: Path) -> subprocess.CompletedProcess[str]:
+def run_client(kind: str, url: str, texture: str) -> subprocess.CompletedProcess[str]:
     if kind == "python":
         command = [sys.executable, str(CLIENTS / "python_client.py"), "--url", url, "--texture", texture]
     elif kind == "node":
         command = [*node_command(), str(CLIENTS / "node_client.mjs"), url, texture]
     else:
-        command = [*csharp_command(tmp_path), url, texture]
+        command = [*csharp_command(), url, texture]
     return subprocess.run(command, capture_output=True, text=True, timeout=120)
 
 
 @pytest.mark.parametrize("kind", ["python", "node", "csharp"])
-def test_each_client_sets_a_texture_swipes_and_reads_the_renderer_back(server: Serve, kind: str,
-                                                                        tmp_path: Path) -> None:
-    done = run_client(kind, server.ws_url, "square_grating", tmp_path)
+def test_each_client_sets_a_texture_swipes_and_reads_the_renderer_back(server: Serve, kind: str) -> None:
+    done = run_client(kind, server.ws_url, "square_grating")
     assert done.returncode == 0, done.stdout + done.stderr
     assert f"texture set: {SQUARE}" in done.stdout
     lines = TELEMETRY_LINE.findall(done.stdout)
@@ -71,21 +73,21 @@ def test_each_client_sets_a_texture_swipes_and_reads_the_renderer_back(server: S
 
 
 @pytest.mark.parametrize("kind", ["python", "node", "csharp"])
-def test_each_client_reports_a_refusal_and_exits_1(server: Serve, kind: str, tmp_path: Path) -> None:
-    done = run_client(kind, server.ws_url, "no_such_texture", tmp_path)
+def test_each_client_reports_a_refusal_and_exits_1(server: Serve, kind: str) -> None:
+    done = run_client(kind, server.ws_url, "no_such_texture")
     assert done.returncode == 1
     assert "no shipped texture is called 'no_such_texture'" in done.stdout + done.stderr
 
 
 @pytest.mark.parametrize("kind", ["python", "node", "csharp"])
-def test_each_client_says_when_no_server_answers(kind: str, tmp_path: Path) -> None:
-    done = run_client(kind, "ws://127.0.0.1:9/ws", "grating", tmp_path)
+def test_each_client_says_when_no_server_answers(kind: str) -> None:
+    done = run_client(kind, "ws://127.0.0.1:9/ws", "grating")
     assert done.returncode == 1 and "is tpad-rt serve running?" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr
 
 
 @pytest.mark.system
-def test_the_browser_example_on_a_page_of_another_allowed_origin(tmp_path: Path) -> None:
+def test_the_browser_example_on_a_page_of_another_allowed_origin() -> None:
     static = subprocess.Popen([sys.executable, "-m", "http.server", "0", "--bind", "127.0.0.1", "--directory",
                                str(CLIENTS)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:

@@ -153,6 +153,7 @@ def test_one_client_holds_the_finger_until_it_lets_go_or_idles() -> None:
     assert owner.claim(a, 0.0) and owner.holder is a
     assert not owner.free_for(b, 0.5) and not owner.claim(b, 0.5)
     assert owner.claim(a, 0.9) and not owner.claim(b, 1.8)  # a's sample at 0.9 s kept it
+    assert owner.holder_at(1.8) is a and owner.holder_at(1.95) is None  # idle: nobody holds it for the others
     assert owner.claim(b, 2.0) and owner.holder is b  # a idle for 1.1 s
     assert not owner.release(a) and owner.holder is b
     assert owner.release(b) and owner.holder is None and owner.claim(a, 2.1)

@@ -87,3 +87,18 @@ def test_a_repository_path_outside_the_repository_names_the_shipped_texture(
     assert done.returncode != 0
     assert done.stderr.strip() == ("tpad-rt play: textures/grating.yaml: no such file; the package ships a texture "
                                    "of that name: give just 'grating'")
+
+
+def test_serve_finds_its_page_in_the_installed_package(installed: tuple[Path, dict[str, str]]) -> None:
+    """The page's files are package data: the installed package holds them, and ``serve`` starts with them."""
+    bin_dir, env = installed
+    elsewhere = bin_dir.parent.parent / "elsewhere"
+    files = _run([str(bin_dir / "python"), "-c",
+                  "from importlib import resources; from tpad_rt.serve.server import STATIC_FILES; "
+                  "print(*sorted({len(resources.files('tpad_rt.serve').joinpath('static', name).read_bytes()) > 0 "
+                  "for name, _ in STATIC_FILES.values()}))"], elsewhere, env)
+    assert files.returncode == 0 and files.stdout.split() == ["True"], files.stderr
+    served = _run([str(bin_dir / "tpad-rt"), "serve", "grating", "--output", "null://", "--port", "0", "--no-osc",
+                   "--duration", "0.5"], elsewhere, env)
+    assert served.returncode == 0, served.stderr
+    assert "serving http://127.0.0.1:" in served.stdout and "served until --duration" in served.stdout

@@ -6,7 +6,8 @@ API map
 ClockMap()
     ``update(newest_t, now_s) -> offset_s``: a client's clock (s) onto the stream clock
 FingerOwner(idle_s)
-    ``free_for(client, now_s)``, ``claim(client, now_s) -> bool``, ``release(client)``, ``holder``: one client's finger at a time
+    ``free_for(client, now_s)``, ``claim(client, now_s) -> bool``, ``release(client)``, ``holder``,
+    ``holder_at(now_s)``: one client's finger at a time
 TokenBucket(rate_per_s, burst)
     ``take(amount, now_s) -> bool``: the rate limits
 TextureLibrary(folders)
@@ -97,6 +98,10 @@ class FingerOwner:
             self._last_s = now_s
             return True
         return False
+
+    def holder_at(self, now_s: float) -> object | None:
+        """Who holds the finger at ``now_s``: None when nobody does or the holder is idle."""
+        return None if self.holder is None or now_s - self._last_s > self.idle_s else self.holder
 
     def release(self, client: object) -> bool:
         """Free the finger if ``client`` holds it; whether it did."""

@@ -271,7 +271,7 @@ class Server:
         """Act on one message; the reply (an error included), or None."""
         now_s = time.monotonic()
         self.counters["messages"] += 1
-        size = len(raw)
+        size = len(raw) if isinstance(raw, bytes) or raw.isascii() else len(raw.encode("utf-8", "surrogatepass"))
         try:
             if size > protocol.MAX_MESSAGE_BYTES:  # refused unread
                 raise ProtocolError("too_large", f"a message of {size:,} bytes; at most {protocol.MAX_MESSAGE_BYTES:,}")
@@ -377,13 +377,13 @@ class Server:
                     self._announce_owner()
 
     def lift(self, client: Client, t: float | None, request_id: Any = None) -> None:
-        """The holder's finger leaves the plate (at client time ``t``); ignored from a client when nobody
-        holds it, ``finger_busy`` when another does."""
-        if self.owner.holder is None:
-            return
+        """The holder's finger leaves the plate (at client time ``t``); from another client ignored when nobody
+        holds it (or its holder is idle), ``finger_busy`` when another does."""
         if self.owner.holder is not client:
-            raise ProtocolError("finger_busy", "another client has the finger: only it can lift it", request_id,
-                                "lift")
+            if self.owner.holder_at(time.monotonic()) is not None:
+                raise ProtocolError("finger_busy", "another client has the finger: only it can lift it",
+                                    request_id, "lift")
+            return
         mapped = None
         if t is not None and client.clock.offset_s is not None:
             mapped = t + client.clock.offset_s
@@ -404,7 +404,7 @@ class Server:
             self._announce_owner()
 
     def _finger_state(self, client: Client) -> dict[str, Any]:
-        holder = self.owner.holder
+        holder = self.owner.holder_at(time.monotonic())
         return {"held": holder is not None, "yours": holder is client,
                 "holder": getattr(holder, "name", None), "policy": "first-come, until lift, disconnect or "
                 f"{OWNER_IDLE_S:g} s idle"}
