@@ -3,7 +3,8 @@
     python tests/serial_host.py PORT
 
 Starts a Renderer with the grating on PORT and pushes a slow swipe every 2 ms. Prints
-``streaming`` once the amplifier reports RUNNING, and runs until its stdin closes; then
+``streaming`` once the amplifier reports RUNNING, ``resumed`` once it plays again (over
+1 V RMS) after a START sent again after its watchdog, and runs until its stdin closes; then
 stops (STOP and all) and prints ``restarts N start_index I`` (STARTs sent again after the
 amplifier's watchdog, and the stream index the last START named). An error ends it with one line on stderr and exit status 1, as tpad-rt's
 commands do.
@@ -11,6 +12,7 @@ commands do.
 
 from __future__ import annotations
 
+import itertools
 import sys
 import threading
 import time
@@ -28,13 +30,21 @@ def main(port: str) -> int:
     try:
         with Renderer(output=f"serial://{port}", texture=GRATING) as renderer:
             started = time.monotonic()
-            announced = False
-            while not closed.is_set():
+            announced = resumed = False
+            for step in itertools.count():
+                if closed.is_set():
+                    break
                 renderer.check()
                 renderer.push_finger(20.0 + 10.0 * ((time.monotonic() - started) % 5.0), 20.0, 0.5)
-                if not announced and renderer.stats()["amplifier"]["amp_state"] == "RUNNING":
-                    print("streaming", flush=True)
-                    announced = True
+                if not resumed and step % 10 == 0:
+                    amplifier = renderer.stats()["amplifier"]
+                    if not announced and amplifier["amp_state"] == "RUNNING":
+                        print("streaming", flush=True)
+                        announced = True
+                    elif announced and amplifier["restarts"] >= 1 and amplifier["amp_state"] == "RUNNING" \
+                            and amplifier["amp_voltage_v_rms"] > 1.0:
+                        print("resumed", flush=True)
+                        resumed = True
                 time.sleep(0.002)
         amplifier = renderer.stats()["amplifier"]
         print(f"restarts {amplifier['restarts']} start_index {amplifier['start_index']}", flush=True)

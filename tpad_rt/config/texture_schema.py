@@ -8,6 +8,7 @@ pixels for the renderer.
 
 from __future__ import annotations
 
+import os
 from contextvars import ContextVar
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
@@ -80,7 +81,7 @@ def _usable_image(value: Path, info: ValidationInfo) -> Path:
     context = info.context or {}
     path = Path(context.get(BASE_DIR, ".")) / value
     allowed: list[Path] | None = context.get(IMAGE_DIRS)
-    if allowed is not None and not any(path.resolve().is_relative_to(folder) for folder in allowed):
+    if allowed is not None and not any(Path(os.path.realpath(path)).is_relative_to(folder) for folder in allowed):
         raise rule_error(f"the image {str(value)!r} lies outside the folders this server reads textures from")
     try:
         pixels = read_image(path).size
