@@ -95,8 +95,10 @@ class Client:
     """A WebSocket client of the server: JSON in and out, messages kept until asked for."""
 
     def __init__(self, url: str, **options: Any):
-        # __enter__ connects on every websockets version (17.1 made connect() a context manager to be entered)
-        self.connection: ClientConnection = connect(url, open_timeout=REPLY_TIMEOUT_S, max_size=None,
+        # __enter__ connects on every websockets version (17.1 made connect() a context manager to be entered).
+        # max_queue=None: the client's thread keeps reading whatever the test has not asked for yet (telemetry),
+        # so that a close from the server is seen at once, not after the client's close_timeout.
+        self.connection: ClientConnection = connect(url, open_timeout=REPLY_TIMEOUT_S, max_size=None, max_queue=None,
                                                     **options).__enter__()
         self.hello = self.expect("hello")
 

@@ -69,6 +69,8 @@ MAX_UNREAD_BYTES = 1 << 20
 MAX_TEXTURE_LOADS = 4
 #: At most one ``rate_limited`` error per this many seconds to a client (the count of dropped messages in it).
 LIMIT_NOTICE_S = 0.25
+#: Seconds a closing connection waits for the client's side of the close (Ctrl-C waits at most about this).
+CLOSE_TIMEOUT_S = 1.0
 #: The finger is freed when its holder sends nothing for this long (s); the kernel's watchdog ramped it already.
 OWNER_IDLE_S = 1.0
 #: The telemetry feed's pump period (s).
@@ -150,7 +152,7 @@ class Server:
         loop = asyncio.get_running_loop()
         async with serve(self._connected, self.settings.host, self.settings.port, process_request=self._http,
                          max_size=protocol.MAX_FRAME_BYTES, max_queue=16, compression=None,
-                         server_header=f"tpad-rt/{__version__}") as server:
+                         close_timeout=CLOSE_TIMEOUT_S, server_header=f"tpad-rt/{__version__}") as server:
             self.port = next(iter(server.sockets)).getsockname()[1]
             osc = None
             if self.settings.osc_port is not None:
@@ -168,6 +170,9 @@ class Server:
                     osc.close()
                 if self.owner.holder is not None:
                     self.renderer.lift()
+                for client in self._clients:  # a telemetry send may wait on a client that does not read
+                    if client.subscription is not None:
+                        client.subscription.cancel()
                 server.close(close_connections=True)
         for task in tasks:
             if task.done() and not task.cancelled() and task.exception() is not None:
