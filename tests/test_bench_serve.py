@@ -18,7 +18,7 @@ RUN = Path(__file__).resolve().parents[1] / "bench" / "latency" / "serve_run.py"
 
 def test_the_serve_latency_bench_measures_both_ways_of_pushing(tmp_path: Path) -> None:
     require_program("jackd")
-    done = subprocess.run([sys.executable, str(RUN), "--rounds", "2", "--seconds", "0.5", "--out", str(tmp_path)],
+    done = subprocess.run([sys.executable, str(RUN), "--rounds", "1", "--seconds", "0.5", "--out", str(tmp_path)],
                           capture_output=True, text=True, timeout=240)
     assert done.returncode == 0, done.stderr
     report = json.loads((tmp_path / "latency_serve.json").read_text())

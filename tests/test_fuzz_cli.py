@@ -497,7 +497,7 @@ def serve_case(draw: st.DrawFn) -> Callable[[Path], tuple[list[str], list[str]]]
 def test_fuzz_serve() -> None:
     outcomes = Outcomes()
 
-    @FUZZ_SLOW
+    @settings(FUZZ, max_examples=8)  # a valid example serves 0.2 s
     @given(make=serve_case())
     def run(make: Callable[[Path], tuple[list[str], list[str]]]) -> None:
         with workdir() as folder:

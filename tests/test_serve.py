@@ -330,13 +330,6 @@ def test_ctrl_c_lifts_and_ramps_the_drive_to_zero_in_the_recording(tmp_path: Pat
     assert last_driven - fading >= 0.8 * ramp_blocks  # faded over the ramp, not cut
 
 
-def test_sigterm_stops_it_as_ctrl_c_does() -> None:
-    serve = Serve("--output", "null://", "--no-osc", port_args=("--port", "0"))
-    with serve:
-        out = stopped_by_signal_cleanly(serve, signal.SIGTERM)
-    assert "served until SIGTERM" in out
-
-
 @pytest.mark.parametrize(("args", "message"), [
     (["--host", "0.0.0.0"], "listens beyond this machine; add --allow-remote"),
     (["--token", "short"], "--token: must be 8-256 characters"),
@@ -356,7 +349,7 @@ def test_a_port_in_use_is_one_clear_line(server: Serve) -> None:
     assert "Address already in use" in run.stderr
 
 
-def test_beyond_loopback_every_client_needs_the_token() -> None:
+def test_beyond_loopback_every_client_needs_the_token_and_sigterm_stops_it() -> None:
     serve = Serve("--output", "null://", "--host", "0.0.0.0", "--allow-remote", "--token", "s3cret-token",
                   "--no-osc", port_args=("--port", "0"))
     with serve:
@@ -369,7 +362,7 @@ def test_beyond_loopback_every_client_needs_the_token() -> None:
             assert client.hello["type"] == "hello"
         with Client(serve.ws_url, additional_headers={"Authorization": "Bearer s3cret-token"}) as client:
             assert client.hello["type"] == "hello"
-        stopped_by_signal_cleanly(serve)
+        assert "served until SIGTERM" in stopped_by_signal_cleanly(serve, signal.SIGTERM)  # stops as Ctrl-C does
 
 
 def test_connections_beyond_the_limit_are_refused_until_one_leaves(server: Serve) -> None:

@@ -49,16 +49,17 @@ def screen_point(box: dict[str, float], x_mm: float, y_mm: float) -> tuple[float
 
 
 def drag(browser: Browser, box: dict[str, float], y_mm: float, touch: bool) -> None:
-    """Press at x = 20 mm, slide to 100 mm at 100 mm/s (an event every 4 ms), lift; mouse or touch."""
-    points = [screen_point(box, 20.0 + 0.4 * step, y_mm) for step in range(201)]
+    """Press at x = 20 mm, slide to 100 mm (an event per 0.8 mm, every 8 ms or as fast as DevTools delivers
+    them), lift; mouse or touch."""
+    points = [screen_point(box, 20.0 + 0.8 * step, y_mm) for step in range(101)]
     if touch:
         kinds = ["touchStart"] + ["touchMove"] * (len(points) - 1)
-        for step in paced(len(points), 0.004):
+        for step in paced(len(points), 0.008):
             x, y = points[step]
             browser.call("Input.dispatchTouchEvent", type=kinds[step], touchPoints=[{"x": x, "y": y}])
         browser.call("Input.dispatchTouchEvent", type="touchEnd", touchPoints=[])
         return
-    for step in paced(len(points), 0.004):
+    for step in paced(len(points), 0.008):
         x, y = points[step]
         kind = "mousePressed" if step == 0 else "mouseMoved"
         browser.call("Input.dispatchMouseEvent", type=kind, x=x, y=y, button="left", buttons=1, clickCount=1)
@@ -106,7 +107,7 @@ def test_the_page_draws_the_map_and_mouse_and_touch_are_the_finger(tmp_path: Pat
         for seen in (mouse, touch):
             assert seen["voltage_peak_v"] > 1.0 and 0.7 < seen["target_mu"] <= 1.0
         sent = browser.evaluate("window.tpadPage.sent")
-        assert sent > 200  # the page sent samples (and its watchdog resends) for both drags
+        assert sent > 150  # the page sent samples (and its still-finger resends) for both drags
         errors = browser.evaluate("window.tpadPage.errors")
         assert errors == []
         # The page's texture menu sets a shipped texture for everyone, and the page draws its map.
