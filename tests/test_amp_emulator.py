@@ -662,14 +662,24 @@ def test_gaps_and_bad_frames_play_as_zero(amps: Callable[..., Amp]) -> None:
     assert amp.command(STOP, struct.pack("<H", 0)).code == OK
     recording = amp.finish()
     assert [ack[2:] for ack in amp.acks(after)][:1] == [(BAD_VERSION, 1)]
-    assert (recording["frames_bad"], recording["frames_rejected"], recording["underruns"]) == (2, 1, 128)
+    # The two bad frames and the other version's (rejected) leave samples 1600-1727 unplayed. A frame this test's
+    # host sent late (a busy machine: a CI run had one) is rejected as out of window and its 64 samples underrun
+    # too: such frames are counted apart, and must be whole frames the host sent.
+    late = int(recording["frames_rejected"]) - 1
+    assert 0 <= late <= 3
+    assert (recording["frames_bad"], recording["underruns"]) == (2, 128 + 64 * late)
     assert recording["sequence_gaps"] == 1  # the valid frame after the two bad ones
     at = played(recording)
     index = recording["index"][at]
-    assert np.array_equal(index, np.r_[0:1600, 1728:1728 + len(at) - 1600])
+    assert np.all(np.diff(index) > 0) and index[0] == 0
+    absent = np.setdiff1d(np.arange(index[-1] + 1), index)
+    late_frames = np.setdiff1d(absent // 64, [1600 // 64, 1664 // 64])
+    assert np.isin(np.arange(1600, 1728), absent).all() and len(late_frames) == late
+    assert len(absent) == 128 + 64 * late  # whole frames: the two bad ones and the late ones
     assert np.allclose(recording["envelope_v"][at], volts(samples[index]), rtol=1e-12)
-    missing = np.arange(at[1599] + 1, at[1600])  # the gap: recorded as no index, played as 0
-    assert len(missing) == 128
+    before, after_gap = at[index == 1599][0], at[np.searchsorted(index, 1600)]
+    missing = np.arange(before + 1, after_gap)  # the gap: recorded as no index, played as 0
+    assert len(missing) == index[np.searchsorted(index, 1600)] - 1600
     assert (recording["index"][missing] == -1).all() and (recording["envelope_v"][missing] == 0).all()
 
 
