@@ -212,3 +212,14 @@ def test_texture_requests_outside_the_rules_are_refused(library: TextureLibrary,
              for key, value in ref.items()}
     refused, message = _set(library, **given)
     assert (refused, fragment in message) == (code, True), message
+
+
+def test_what_the_server_sends_is_json_a_browser_reads() -> None:
+    """NaN and infinities (a statistic with nothing measured yet) go out as null; numpy numbers as numbers."""
+    import numpy as np
+
+    from tpad_rt.serve.server import _wire
+
+    sent = _wire({"type": "stats", "p50": float("nan"), "peak": [np.float64(np.inf), np.int64(3)], "ok": 1.5})
+    assert json.loads(sent, parse_constant=lambda name: pytest.fail(f"{name} on the wire")) == \
+        {"type": "stats", "p50": None, "peak": [None, 3], "ok": 1.5}

@@ -248,11 +248,11 @@ class Server:
         self._clients.add(client)
         self.counters["connections"] += 1
         try:
-            await connection.send(json.dumps(self._hello(client)))
+            await connection.send(_wire(self._hello(client)))
             async for raw in connection:
                 reply = await self._handle(client, raw)
                 if reply is not None:
-                    await connection.send(json.dumps(reply))
+                    await connection.send(_wire(reply))
         except ConnectionClosed:
             pass
         finally:
@@ -429,7 +429,7 @@ class Server:
             self.counters["closed_slow"] += 1
             asyncio.ensure_future(connection.close(1008, f"too slow: {unread} bytes unread"))
             return
-        broadcast([connection], json.dumps(message))
+        broadcast([connection], _wire(message))
 
     # --- textures --------------------------------------------------------------------------------
 
@@ -485,7 +485,7 @@ class Server:
                 summary = self.feed.summary(since_t)
                 if summary is not None:
                     since_t = summary["t"]
-                    await client.connection.send(json.dumps(summary))
+                    await client.connection.send(_wire(summary))
         except ConnectionClosed:
             pass
 
@@ -515,6 +515,11 @@ class Server:
             raise
         except Exception as error:  # noqa: BLE001 - as for a WebSocket message
             raise self.internal_error(error, request) from None
+
+
+def _wire(message: dict[str, Any]) -> str:
+    """``message`` as the JSON text sent: NaN and infinities as null (JSON has neither; browsers refuse them)."""
+    return json.dumps(json_safe(message), allow_nan=False)
 
 
 def _echo(request: Request) -> dict[str, Any]:
