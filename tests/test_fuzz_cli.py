@@ -386,6 +386,37 @@ def test_fuzz_render() -> None:
     outcomes.assert_mostly_errors()
 
 
+#: --duration values every real-time command refuses.
+REFUSED_DURATIONS = ("nan", "inf", "-inf", "-1", "0", "-0", "1e308", "abc", "", "1e9", "99999999999999999999", "0x10")
+
+
+def only_refused_duration(extra: list[str]) -> None:
+    """Make a fuzzed ``--duration`` in ``extra`` one that is refused (a valid one could run long)."""
+    if "--duration" in extra and extra[extra.index("--duration") + 1] not in REFUSED_DURATIONS:
+        extra[extra.index("--duration") + 1] = "1e308"
+
+
+def realtime_argv(folder: Path, command: list[str], texture: Callable[[Path], str] | None,
+                  device: Callable[[Path], str] | None, output: str, extra: list[str],
+                  record: str | None) -> tuple[list[str], list[str]]:
+    """``(argv, files)`` of a play or serve in ``folder``: ``command`` (its name and own arguments), the texture
+    (a bad one, or the grating), ``--output``, a bad ``--device``, ``--duration 0.2`` unless fuzzed, and
+    ``--record`` to ``record`` among a folder, a FIFO and /dev/zero made there; then ``extra``."""
+    files = [texture(folder) if texture else GRATING]
+    argv = [command[0], files[0], *command[1:], "--output", output.replace("/tmp", str(folder))]
+    if device:
+        files.append(device(folder))
+        argv += ["--device", files[-1]]
+    if "--duration" not in extra:
+        argv += ["--duration", "0.2"]
+    (folder / "d.npz").mkdir()
+    os.mkfifo(folder / "f.npz")
+    (folder / "z.npz").symlink_to("/dev/zero")
+    if record is not None:
+        argv += ["--record", str(folder / record) if record else ""]
+    return [*argv, *extra], files
+
+
 @st.composite
 def play_case(draw: st.DrawFn) -> Callable[[Path], tuple[list[str], list[str]]]:
     """A play that ends by itself within a second or is refused: null:// or sim://, a finite input, 0.2 s."""
@@ -398,30 +429,12 @@ def play_case(draw: st.DrawFn) -> Callable[[Path], tuple[list[str], list[str]]]:
     output = draw(output_url()) if part == "output" else draw(st.sampled_from(["null://", "sim://"]))
     extra = draw(flags(["--rate", "--block", "--duration", "--power-budget", "--power-avg", "--force",
                         "--stall-timeout"])) if part == "flags" else []
-    if "--duration" in extra:  # only refused durations: a fuzzed play must not run long
-        index = extra.index("--duration") + 1
-        if extra[index] not in ("nan", "inf", "-inf", "-1", "0", "-0", "1e308", "abc", "", "1e9",
-                                "99999999999999999999", "0x10"):
-            extra[index] = "1e308"
+    only_refused_duration(extra)  # a fuzzed play must not run long
     record = draw(st.sampled_from(["d.npz", "f.npz", "z.npz", "missing/x.npz", "x.wav", ""])) \
         if part == "record" else None
 
     def make(folder: Path) -> tuple[list[str], list[str]]:
-        files = []
-        texture_path = texture(folder) if texture else GRATING
-        files.append(texture_path)
-        argv = ["play", texture_path, "--input", source, "--output", output.replace("/tmp", str(folder))]
-        if device:
-            files.append(device(folder))
-            argv += ["--device", files[-1]]
-        if "--duration" not in extra:
-            argv += ["--duration", "0.2"]
-        (folder / "d.npz").mkdir()
-        os.mkfifo(folder / "f.npz")
-        (folder / "z.npz").symlink_to("/dev/zero")
-        if record is not None:
-            argv += ["--record", str(folder / record) if record else ""]
-        return [*argv, *extra], files
+        return realtime_argv(folder, ["play", "--input", source], texture, device, output, extra, record)
 
     return make
 
@@ -459,37 +472,17 @@ def serve_case(draw: st.DrawFn) -> Callable[[Path], tuple[list[str], list[str]]]
         extra = draw(st.lists(st.tuples(st.sampled_from(["--host", "--token", "--allow-origin", "--texture-dir"]),
                                         st.sampled_from(SERVE_STRINGS)), min_size=1, max_size=3, unique_by=lambda p: p[0])
                      .map(lambda pairs: [part for name, value in pairs for part in (name, value)]))
-    if "--duration" in extra:
-        index = extra.index("--duration") + 1
-        if extra[index] not in ("nan", "inf", "-inf", "-1", "0", "-0", "1e308", "abc", "", "1e9",
-                                "99999999999999999999", "0x10"):
-            extra[index] = "1e308"
+    only_refused_duration(extra)
     for port_flag in ("--port", "--osc-port"):  # a valid fixed port could be taken: any free one instead
         if port_flag in extra and extra[extra.index(port_flag) + 1].isdigit():
             extra[extra.index(port_flag) + 1] = "0"
     record = draw(st.sampled_from(["d.npz", "f.npz", "z.npz", "missing/x.npz", "x.wav", ""])) \
         if part == "record" else None
 
+    ports = ([] if "--port" in extra else ["--port", "0"]) + ([] if "--osc-port" in extra else ["--no-osc"])
+
     def make(folder: Path) -> tuple[list[str], list[str]]:
-        files = []
-        texture_path = texture(folder) if texture else GRATING
-        files.append(texture_path)
-        argv = ["serve", texture_path, "--output", output.replace("/tmp", str(folder))]
-        if device:
-            files.append(device(folder))
-            argv += ["--device", files[-1]]
-        if "--duration" not in extra:
-            argv += ["--duration", "0.2"]
-        if "--port" not in extra:
-            argv += ["--port", "0"]
-        if "--osc-port" not in extra:
-            argv += ["--no-osc"]
-        (folder / "d.npz").mkdir()
-        os.mkfifo(folder / "f.npz")
-        (folder / "z.npz").symlink_to("/dev/zero")
-        if record is not None:
-            argv += ["--record", str(folder / record) if record else ""]
-        return [*argv, *extra], files
+        return realtime_argv(folder, ["serve", *ports], texture, device, output, extra, record)
 
     return make
 
