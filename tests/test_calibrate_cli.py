@@ -91,6 +91,29 @@ def test_build_writes_a_device_that_checks_renders_and_says_where_each_value_cam
         assert float(np.max(data["plate_amplitude_um"])) > 0.5
 
 
+def test_build_fits_gamma_at_the_carrier_it_is_given(tmp_path: Path) -> None:
+    """Amplitudes measured off the resonance (at --carrier-hz, no freq_hz column) give the device's gamma back:
+    the fit reads them at that carrier, not at the resonance."""
+    carrier_hz = TRUTH.carrier_hz + 50.0
+    omega = 2 * np.pi * carrier_hz
+    rows = ["force_n,voltage_v,amplitude_um"]
+    for force in (0.0, 1.0, 2.0):
+        l_h, c_f, r_ohm = (float(value) for value in TRUTH.motional(force))
+        branch_ohm = abs(r_ohm + 1j * (omega * l_h - 1 / (omega * c_f)))
+        rows += [f"{force},{volts},{volts / branch_ohm / (TRUTH.gamma_n_per_v * omega) * 1e6!r}" for volts in (10, 30)]
+    amplitudes = tmp_path / "off_resonance.csv"
+    amplitudes.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "rig.yaml"
+    run = tpad_rt("calibrate", "build", "--impedance", str(EXAMPLE / "sweeps.csv"), "--amplitude", str(amplitudes),
+                  "--out", str(out), "--carrier-hz", str(carrier_hz))
+    assert run.returncode == 0, run.stderr
+    assert "gamma" not in run.stderr  # one gamma explains every force
+    built = Device.from_file(out)
+    assert built.carrier_hz == carrier_hz
+    assert built.gamma_n_per_v == pytest.approx(TRUTH.gamma_n_per_v, rel=0.01)
+    assert built.amplitude_m_per_v(1.0) == pytest.approx(TRUTH.amplitude_m_per_v(1.0, carrier_hz), rel=0.02)
+
+
 def test_convert_turns_a_format_1_file_into_one_that_loads(tmp_path: Path) -> None:
     old = REPO / "tests" / "bad_files" / "device_format_1.yaml"
     out = tmp_path / "new.yaml"

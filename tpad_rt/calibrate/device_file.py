@@ -86,6 +86,15 @@ def _template_part(template: DeviceFile, key: str) -> Any:
     return template.model_dump(mode="json")[key]
 
 
+def default_carrier_hz(fits: list[BvdFit], shunt_ohm: float) -> float:
+    """The carrier (Hz, to 0.01) a device built from ``fits`` (one per force, lowest first) drives at unless told:
+    the circuit's loaded resonance (shunt ``shunt_ohm`` and the fits' median C0 included) at the lowest force."""
+    c0_f = float(np.median([fit.c0_f for fit in fits]))
+    lowest = fits[0]
+    l_h, c_f = _significant(lowest.l_h), _significant(lowest.c_f * 1e12) * 1e-12
+    return round(float(electromech.loaded_resonance_hz(c0_f, l_h, c_f, shunt_ohm)), 2)
+
+
 def build_document(fits: list[BvdFit], gamma: GammaFit, template: DeviceFile,
                    options: BuildOptions) -> tuple[dict[str, Any], list[str]]:
     """``(document, notes)``: a format 2 device from ``fits`` (one per force), ``gamma`` and ``template``.
@@ -114,7 +123,7 @@ def build_document(fits: list[BvdFit], gamma: GammaFit, template: DeviceFile,
     r_ohm = [_significant(fit.r_ohm) for fit in fits]
     lowest = fits[0]
     if options.carrier_hz is None:
-        carrier_hz = round(float(electromech.loaded_resonance_hz(c0_f, l_h[0], c_pf[0] * 1e-12, shunt_ohm)), 2)
+        carrier_hz = default_carrier_hz(fits, shunt_ohm)
         carrier_source = f"derived: the fitted circuit's loaded resonance (shunt and C0 included) at {lowest.force_n:g} N"
     else:
         carrier_hz, carrier_source = options.carrier_hz, "given: calibrate build --carrier-hz"

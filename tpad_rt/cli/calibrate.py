@@ -37,7 +37,9 @@ from rich.table import Table
 
 from tpad_rt.calibrate import sweep
 from tpad_rt.calibrate.amplitude import Circuit, GammaFit, fit_gamma
-from tpad_rt.calibrate.device_file import BuildOptions, build_document, circuit_of, convert_document, write_device
+from tpad_rt.calibrate.device_file import (
+    BuildOptions, build_document, circuit_of, convert_document, default_carrier_hz, write_device,
+)
 from tpad_rt.calibrate.impedance import QUANTITIES, BvdFit, fit_sweep
 from tpad_rt.calibrate.measurements import ImpedanceSweep, read_amplitudes, read_impedance_sweeps
 from tpad_rt.cli.arguments import Subparsers, number
@@ -97,6 +99,8 @@ def add_parser(subparsers: Subparsers) -> None:
     build.add_argument("--label", help="the device's label (default: the output file's name)")
     build.add_argument("--carrier-hz", type=number(MIN_CARRIER_HZ, True, MAX_CARRIER_HZ, "Hz"),
                        help="drive frequency (default: the loaded resonance at the lowest force)")
+    build.add_argument("--freq-hz", type=number(0, False, MAX_CARRIER_HZ, "Hz"),
+                       help="drive frequency of --amplitude rows without freq_hz (default: the carrier)")
     build.add_argument("--shunt-ohm", type=number(1e-3, True, 1e6, "ohm"), help="shunt resistor (default: --like's)")
     build.add_argument("--max-voltage-v", type=number(0.1, True, MAX_VOLTS, "V"),
                        help="peak drive never exceeded (default: --like's)")
@@ -269,7 +273,10 @@ def run_build(args: argparse.Namespace) -> int:
                           f"({full_scale_v:g} V), got {args.max_voltage_v:g}")
     sweeps, fits = _fits(args.impedance)
     measurements = read_amplitudes(args.amplitude)
-    gamma = fit_gamma(measurements, circuit_of(fits), None)
+    shunt_ohm = template.circuit.shunt_ohm if args.shunt_ohm is None else args.shunt_ohm
+    carrier_hz = default_carrier_hz(fits, shunt_ohm) if args.carrier_hz is None else args.carrier_hz
+    # Amplitude rows without a freq_hz column were measured at the carrier the device will drive at
+    gamma = fit_gamma(measurements, circuit_of(fits), carrier_hz if args.freq_hz is None else args.freq_hz)
     options = BuildOptions(
         label=args.label or out.stem, impedance_files=tuple(Path(path).name for path in args.impedance),
         amplitude_file=Path(args.amplitude).name, template_name=str(args.like), carrier_hz=args.carrier_hz,
