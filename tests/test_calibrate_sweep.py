@@ -15,6 +15,7 @@ import pytest
 from amp_emulator import Emulator
 from cli_run import tpad_rt
 
+from tpad_rt.calibrate import sweep
 from tpad_rt.calibrate.measurements import read_impedance_sweeps
 from tpad_rt.device import Device
 from tpad_rt.physics import electromech
@@ -27,7 +28,9 @@ def test_the_sweep_finds_the_emulated_devices_resonance_within_0_05_percent(tmp_
     device = Device.from_file(DEVICES_DIR / f"{label}.yaml")
     out = tmp_path / "fine.csv"
     with Emulator(tmp_path, "--device", label, "--force-n", str(force_n)) as amp:
-        run = tpad_rt("calibrate", "sweep", f"serial://{amp.port}", "--device", label, "--json", "--out", str(out))
+        # The emulator's STATUS is each carrier's steady state: 20 ms a carrier, whatever the plate's ring-down
+        run = tpad_rt("calibrate", "sweep", f"serial://{amp.port}", "--device", label, "--json", "--out", str(out),
+                      "--dwell-ms", "20")
         amp.finish()
     assert run.returncode == 0, run.stderr
     found = json.loads(run.stdout)
@@ -42,6 +45,16 @@ def test_the_sweep_finds_the_emulated_devices_resonance_within_0_05_percent(tmp_
     assert found["zero_phase_hz"] is None  # C0's current dominates: a TPaD's piezo stays capacitive
     [fine] = read_impedance_sweeps(out)  # what calibrate impedance and build take
     assert len(fine.freq_hz) == 101 and fine.freq_hz[0] < series_hz < fine.freq_hz[-1]
+
+
+@pytest.mark.parametrize("label", ["SLG_0.4", "default"])
+def test_each_carrier_is_held_five_time_constants_of_the_plate_without_contact(label: str) -> None:
+    """A real plate must settle before its STATUS is read: SLG_0.4 (Q about 1080) rings for 15 ms."""
+    device = Device.from_file(DEVICES_DIR / f"{label}.yaml")
+    tau_s = float(device.envelope_time_constant_s(0.0))
+    assert tau_s == max(float(tau) for tau in device.envelope_time_constant_s(device.force_table_n))
+    assert sweep.default_dwell_s(device) == pytest.approx(max(0.02, 5 * tau_s))
+    assert (sweep.default_dwell_s(device) > 0.05) == (label == "SLG_0.4")
 
 
 def test_a_vanished_amplifier_ends_the_sweep_in_one_line(tmp_path: Path) -> None:

@@ -19,7 +19,7 @@ The result is the fitted circuit, its series resonance ``1 / (2 pi sqrt(L C))``,
 loaded resonance (the frequency to drive at, with the shunt and C0: what
 ``Device.motional_resonance_hz`` gives), and where the phase of Z is nearest zero.
 Each carrier is held for ``dwell_s`` (long enough for the plate to settle: a few
-envelope time constants, DEFAULT_DWELL_S) before its STATUS is read.
+envelope time constants, default_dwell_s) before its STATUS is read.
 
 API map
 -------
@@ -44,8 +44,10 @@ from tpad_rt.physics import electromech
 
 #: The drive held while sweeping (V peak), at most 1/8 of the device's max volts.
 DEFAULT_DRIVE_V = 5.0
-#: How long each carrier is held before it is measured (s): 5 envelope time constants of a Q 300 plate at 22 kHz.
-DEFAULT_DWELL_S = 0.02
+#: How long each carrier is held before it is measured: at least MIN_DWELL_S (s), and DWELL_TIME_CONSTANTS of the
+#: device's slowest envelope (default_dwell_s).
+MIN_DWELL_S = 0.02
+DWELL_TIME_CONSTANTS = 5.0
 #: The coarse sweep: this many carriers over +-COARSE_SPAN of the device's carrier.
 COARSE_POINTS = 81
 COARSE_SPAN = 0.04
@@ -56,6 +58,13 @@ FINE_BANDWIDTHS = 5.0
 _CURRENT, _PHASE = 1, 4
 
 Progress = Callable[[int, int], None]
+
+
+def default_dwell_s(device: Device) -> float:
+    """How long (s) to hold each carrier on ``device``: DWELL_TIME_CONSTANTS of its slowest envelope time constant
+    (over its calibrated forces: the plate without contact rings longest), at least MIN_DWELL_S."""
+    slowest_s = float(np.max(device.envelope_time_constant_s(device.force_table_n)))
+    return max(MIN_DWELL_S, DWELL_TIME_CONSTANTS * slowest_s)
 
 
 def sweep(link: AmpLink, freqs_hz: np.ndarray, drive_v: float, dwell_s: float, shunt_ohm: float,

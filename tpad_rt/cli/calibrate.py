@@ -131,8 +131,10 @@ def add_parser(subparsers: Subparsers) -> None:
     sweeper.add_argument("--drive-v", type=number(0, False, MAX_VOLTS, "V"),
                          help=f"drive held while sweeping, V peak (default: {sweep.DEFAULT_DRIVE_V:g} V, or 1/8 of "
                          "the device's max volts if less)")
-    sweeper.add_argument("--dwell-ms", type=number(1, True, 10_000, "ms"), default=sweep.DEFAULT_DWELL_S * 1e3,
-                         help=f"time each carrier is held before it is read (default {sweep.DEFAULT_DWELL_S * 1e3:g})")
+    sweeper.add_argument("--dwell-ms", type=number(1, True, 10_000, "ms"),
+                         help=f"time each carrier is held before it is read (default: "
+                         f"{sweep.DWELL_TIME_CONSTANTS:g} envelope time constants of the device without contact, at "
+                         f"least {sweep.MIN_DWELL_S * 1e3:g})")
     sweeper.add_argument("--out", metavar="SWEEP.csv", help="write the fine sweep (freq_hz, z_real_ohm, z_imag_ohm)")
     sweeper.add_argument("--json", action="store_true", help="print a JSON object")
     sweeper.add_argument("--plot", metavar="FILE.png", help="draw the fine sweep with its fit")
@@ -318,6 +320,7 @@ def run_sweep(args: argparse.Namespace) -> int:
     high = args.to_hz if args.to_hz is not None else device.carrier_hz * (1 + sweep.COARSE_SPAN)
     if not low < high:
         raise ConfigError(f"--from-hz ({low:g}) must be below --to-hz ({high:g})")
+    dwell_s = sweep.default_dwell_s(device) if args.dwell_ms is None else args.dwell_ms * 1e-3
     target = parse_serial_url(args.url)
     link = AmpLink.open(target, carrier_hz=low)
     started = time.monotonic()
@@ -326,7 +329,7 @@ def run_sweep(args: argparse.Namespace) -> int:
         if drive_v > link.info.max_v:
             raise ConfigError(f"--drive-v: must be <= the amplifier's clamp ({link.info.max_v:g} V), got {drive_v:g}")
         with _progress("sweeping the carrier") as advance:
-            found = sweep.find_resonance(link, device, drive_v, args.dwell_ms * 1e-3, low, high, advance)
+            found = sweep.find_resonance(link, device, drive_v, dwell_s, low, high, advance)
     finally:
         link.stop(ramp_ms=5.0)
     seconds = time.monotonic() - started
