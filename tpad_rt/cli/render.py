@@ -96,7 +96,8 @@ def add_drive_arguments(parser: argparse.ArgumentParser) -> None:
                         "input's")
     parser.add_argument("--track", action="store_true",
                         help="follow the plate's resonance as the contact force moves it (the device circuit's loaded "
-                        "resonance at each force; DAC outputs only)")
+                        "resonance at each force; through a serial amplifier that measures phase, locked onto the "
+                        "plate's measured resonance)")
     parser.add_argument("--no-mode-compensation", dest="mode_compensation", action="store_false",
                         help="on a device with a mode shape, command the texture's amplitude at an antinode instead of "
                         "under the finger (the standing wave then shows)")
