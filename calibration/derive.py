@@ -56,8 +56,8 @@ AMPLITUDE_AT_0N_UM = {
     "Gorilla_0.8": 1.8,
     "BoroFloat_0.7": 2.35,
 }
-# Real power (W) at 40 V and 0 N. SLG_0.4 < 0.2 W and Gorilla_0.8 ~1 W, the highest,
-# are measured (Section IV). The others are illustrative, placed in the order the
+# Real power (W) at 40 V and 0 N. SLG_0.4 under 0.2 W and Gorilla_0.8 about 1 W, the highest,
+# are what the paper measured (Section IV; 0.18 is a value under its bound). The others are illustrative, placed in the order the
 # paper measured (Section IV, Figs. 5-6): thinner draws less; SLG below D263 at 0.4 and
 # 0.56 mm; Gorilla_0.56 close to SLG_0.56; BoroFloat_0.7 well above SLG_0.7. SLG_0.56's
 # puts its R without contact below the 1250 ohm the paper fitted with the spring at 2 N
@@ -106,7 +106,8 @@ SOURCE = {
     "lowest 1.8 um), else illustrative (chosen so f*alpha orders the plates as Section IV does); one gamma "
     "at every force",
     "circuit.motional_r_ohm": "derived: R(0 N) solves the exact circuit, on resonance, for the 0 N power at 40 V: "
-    "measured for SLG_0.4 (< 0.2 W: 0.18) and Gorilla_0.8 (~1 W), illustrative for the others, in the paper's "
+    "within what the paper measured for SLG_0.4 (under 0.2 W: 0.18 chosen) and Gorilla_0.8 (about 1 W: 1.0), "
+    "illustrative for the others, in the paper's "
     "measured order (Section IV), SLG_0.56's below the 1250 ohm of the spring at 2 N (Section V); "
     "illustrative: R(F) = R(0)(1 + g F), g so SLG_0.56 reaches 2150 ohm at 2 N (measured, Section V)",
     "circuit.motional_l_h": "derived: L(0 N) = m / gamma^2, m half the plate's mass (the mode's modal mass; "

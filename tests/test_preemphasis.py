@@ -1,7 +1,7 @@
 """Envelope pre-emphasis speeds up the simulated plate (issue 3, item 2).
 
 The plate's amplitude follows the drive envelope with time constant tau = Q / (pi f0)
-(about 2.8 ms on the default device at 0.5 N). With pre-emphasis the shaper drives a
+(1.55 ms on the default device at 0.5 N). With pre-emphasis the shaper drives a
 model of that envelope onto the command's smoothing (0.25 ms by default), as hard as
 the volt and power caps allow, braking in anti-phase when the command falls. Measured
 on the simulated plate (``sim://``, a resonator driven by the DAC samples), in
@@ -131,7 +131,7 @@ def test_the_plate_model_maps_the_preemphasised_envelope_of_a_step_back_to_the_c
     plate_m = device.plate_amplitude_m(drive_v, ENVELOPE_HZ, FORCE_N)
     assert plate_m.max() <= level_m * 1.001  # no overshoot
     assert plate_m[settled] == pytest.approx(np.full(len(drive_v) - settled.start, level_m), rel=1e-3)
-    # it follows the command's one-pole smoothing (1 ms here), not the plate's tau (~2.8 ms)
+    # it follows the command's one-pole smoothing (1 ms here), not the plate's tau (1.55 ms)
     k = np.arange(len(drive_v) - first)
     smoothed_m = level_m * -np.expm1(-(k + 1) / (options.smoothing_ms * 1e-3 * ENVELOPE_HZ))
     assert np.abs(plate_m[first:] - smoothed_m).max() < 0.02 * level_m

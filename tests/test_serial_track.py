@@ -69,7 +69,7 @@ def test_the_amplifier_is_sent_the_resonance_at_the_force_and_needs_fewer_volts_
     # uA and centidegrees let it measure (LOCK_RESOLUTION_HZ).
     assert abs(tracked["lock_offset_hz"]) < LOCK_RESOLUTION_HZ
     np.testing.assert_allclose(_last(tracked_recording, "carrier_hz"), resonance_hz, atol=LOCK_RESOLUTION_HZ)
-    # On the resonance the same plate amplitude takes fewer volts (the DAC path's test: 0.64x on SLG_0.4 at 2 N).
+    # On the resonance the same plate amplitude takes fewer volts (the DAC path's test: 0.62x on SLG_0.4 at 2 N).
     fixed_v, tracked_v = (np.median(np.abs(_last(r, "envelope_v", 0.5))) for r in (fixed_recording, tracked_recording))
     fixed_um, tracked_um = (np.median(_last(r, "plate_amplitude_um", 0.5)) for r in (fixed_recording,
                                                                                        tracked_recording))

@@ -96,8 +96,9 @@ class RenderOptions:
       None: the same as the cap.
     - ``power_window_s``: averaging window (s), rounded to whole control steps.
     - ``control_interval``: samples between control steps (1 to 256). The plate's
-      envelope follows the drive with ``tau = Q / (pi f0)``: about 3 ms (2.3 ms at 2 N)
-      on the default device, a bandwidth near 50-70 Hz; with pre-emphasis the envelope
+      envelope follows the drive with the loaded circuit's ``tau``
+      (``Device.envelope_time_constant_s``): 1.96 ms without contact, 0.97 ms at 2 N on
+      the default device, a bandwidth of 81-164 Hz; with pre-emphasis the envelope
       follows the 0.25 ms smoothing instead, as far as the volt and power limits let it.
       32 samples at 192 kHz is a 6 kHz control rate: over 35x the plate's bandwidth,
       command steps shorter than the smoothing time constant, a texture edge placed
