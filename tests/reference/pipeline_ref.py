@@ -31,10 +31,12 @@ from tpad_rt.pipeline import RenderOptions
 
 #: docs/kernel.md: every limit is kept with this relative margin against rounding.
 SAFETY_MARGIN = 1e-6
+#: docs/kernel.md "Per sample": a plate over the power cap by more than this at a new force is braked.
+MODEL_GUARD_FRACTION = 0.02
 VOLTAGE, POWER, SPEED_FLOOR, WATCHDOG, SHAPER_LIMIT = 1, 2, 4, 8, 32
 STEP_FIELDS = (
     "t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu", "amplitude_um", "command_v", "cap_v",
-    "gate", "flags", "power_w", "peak_v",
+    "gate", "flags", "power_w", "peak_v", "shaper_excess_v",
 )
 
 
@@ -105,6 +107,7 @@ class _Stream:
         self.command_v = 0.0
         self.smoothed_v = 0.0
         self.model_v = 0.0  # the shaper's first-order model of the plate envelope (volts of drive)
+        self.model_gain_m_per_v = 0.0  # the plate amplitude per volt those volts were worth (0: none yet)
         self.ramp = 0
 
     def control_step(self, n: int, fingers: np.ndarray, texture: Any, t0_s: float, run: bool) -> dict[str, float]:
@@ -137,6 +140,14 @@ class _Stream:
         self.cap_v, bound = (voltage_v, VOLTAGE) if voltage_v <= power_v else (power_v, POWER)
         if self.command_v > self.cap_v:
             self.command_v, flags = self.cap_v, flags | bound
+        # A plate holding more than the power cap (plus MODEL_GUARD_FRACTION) allows at its now lower gain is braked:
+        # the model takes the volts that amplitude is worth now
+        gain_m_per_v = float(device.amplitude_m_per_v(force_n))
+        if self.model_gain_m_per_v > gain_m_per_v:
+            held_v = self.model_v * self.model_gain_m_per_v / gain_m_per_v
+            if held_v**2 * self.p1_w > self.cap_w * (1 + MODEL_GUARD_FRACTION):
+                self.model_v = min(held_v, device.max_voltage_v)
+        self.model_gain_m_per_v = gain_m_per_v
         tau_s = float(device.envelope_time_constant_s(force_n))
         self.model_step = 1 - math.exp(-1 / (tau_s * self.fs_hz))
         self.follow_gain = 1 / self.model_step if self.preemphasis else 0.0
@@ -144,6 +155,7 @@ class _Stream:
         self.gate = finger.active and run
         self.energy_v2: list[float] = []
         self.step_flags = flags
+        self.shaper_excess_v = 0.0  # the most a shaper drive asked beyond its limit in this step (V)
         f = self.finger
         return dict(
             t=t_s, x_mm=f.x_mm, y_mm=f.y_mm, speed_mm_s=math.hypot(f.vx_mm_s, f.vy_mm_s), force_n=f.force_n,
@@ -163,6 +175,7 @@ class _Stream:
             envelope_v = min(max(drive_v, self.low_v), self.cap_v)
             if envelope_v != drive_v:
                 self.step_flags |= SHAPER_LIMIT
+                self.shaper_excess_v = max(self.shaper_excess_v, abs(drive_v - envelope_v))
         self.model_v += self.model_step * (envelope_v - self.model_v)
         phase = n * self.carrier
         sine = math.sin(2 * math.pi * float(phase - math.floor(phase)))
@@ -213,5 +226,6 @@ def render_reference(
         envelope[n], value = stream.sample(n)
         samples[n] = np.float32(value)
         steps[-1]["flags"] = stream.step_flags
+        steps[-1]["shaper_excess_v"] = stream.shaper_excess_v
     steps[-1]["power_w"], steps[-1]["peak_v"] = stream.close_step()
     return Reference(samples, envelope, {name: np.array([step[name] for step in steps]) for name in STEP_FIELDS})

@@ -189,6 +189,7 @@ STATE_PHASE_HI = 41
 STATE_PHASE_LO = 42
 STATE_PHASE_INDEX = 43
 STATE_STEP_CARRIER_HZ = 44
+STATE_MODEL_GAIN_M_PER_V = 45  # plate amplitude per volt (m/V) the model's volts were worth at the last step (0: none)
 # Per-sample tables, indexed by j, the sample's offset in its control step:
 MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
 STATE_COS_TABLE = 48          # cos(j w), w the carrier's phase step (rad)

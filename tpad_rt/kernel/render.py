@@ -118,6 +118,7 @@ from tpad_rt.kernel.layout import (
     STATE_FIRST_SEGMENT_V2,
     STATE_FORCE_N,
     STATE_GATE,
+    STATE_MODEL_GAIN_M_PER_V,
     STATE_MODEL_ON_REF,
     STATE_MODEL_STEP,
     STATE_MODEL_V,
@@ -167,6 +168,9 @@ from tpad_rt.physics.friction import amplitude_for_core
 #: and the budgets times ``1 - SAFETY_MARGIN``, so float32 output rounding (2**-24
 #: relative) and sums of rounded powers stay under the true limits.
 SAFETY_MARGIN = 1e-6
+#: A plate whose amplitude, at a new step's force, would dissipate more than the power cap times 1 + this is braked
+#: down to the command (_guard_model).
+MODEL_GUARD_FRACTION = 0.02
 #: Carrier phase resolution: phases are integers in units of 2**-PHASE_BITS cycles.
 PHASE_BITS = 60
 _HALF_BITS = PHASE_BITS // 2
@@ -628,6 +632,33 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     return fault
 
 
+@_inline
+def _guard_model(cfg: np.ndarray, state: np.ndarray, gain_m_per_v: float, p1_w: float) -> None:
+    """Brake a plate that holds more than the power cap allows at the step's gain ``gain_m_per_v`` (m/V) and
+    power bound ``p1_w`` (W/V^2).
+
+    The shaper's model is the plate's envelope in volts of drive (docs/kernel.md "Per
+    sample"). A finger that presses harder lowers the gain and raises the damping: the
+    amplitude the plate already holds is worth ``old gain / new gain`` times the volts it
+    was, and dissipates more. Where that is over the power cap by more than
+    MODEL_GUARD_FRACTION, the model is set to it (held at ``max_voltage_v``) and leaves
+    the command, so the shaper brakes the plate down to the command instead of driving on
+    as if it held what the cap allows. Smaller changes leave the model as it is (the
+    plate settles to them within its time constant; the shaper does not answer every
+    wobble of a finger's force with a full-volt correction). No gain, or one that is not a
+    finite number > 0 (a fresh stream, a fault step), leaves the model as it is.
+    """
+    previous = state[STATE_MODEL_GAIN_M_PER_V]
+    state[STATE_MODEL_GAIN_M_PER_V] = gain_m_per_v
+    if not (previous > gain_m_per_v > 0.0 and previous < math.inf and p1_w > 0.0):
+        return
+    model_v = state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
+    held_v = model_v * (previous / gain_m_per_v)
+    if held_v * held_v * p1_w > cfg[CFG_POWER_CAP_W] * (1.0 + MODEL_GUARD_FRACTION):
+        state[STATE_MODEL_V] = min(held_v, cfg[CFG_MAX_VOLTAGE_V])
+        state[STATE_MODEL_ON_REF] = 0.0
+
+
 @_kernel
 def _note_fault(state: np.ndarray, causes: int, new_step: bool) -> None:
     """Record the faults ``causes`` (FAULT_* bits); a ``new_step`` is counted as a fault step, and as a
@@ -757,6 +788,7 @@ def _control_step(
         _note_fault(state, fault, True)
     else:
         state[STATE_FAULT_PREVIOUS] = 0.0
+    _guard_model(cfg, state, amplitude_m_per_v if fault == 0 else 0.0, p1_w)
     state[STATE_COMMAND_V] = command_v
     state[STATE_CAP_V] = cap_v
     state[STATE_AMPLITUDE_M] = command_v * amplitude_m_per_v if fault == 0 else 0.0
