@@ -115,7 +115,7 @@ def test_build_fits_gamma_at_the_carrier_it_is_given(tmp_path: Path) -> None:
 
 
 def test_convert_turns_a_format_1_file_into_one_that_loads(tmp_path: Path) -> None:
-    old = REPO / "tests" / "bad_files" / "device_format_1.yaml"
+    old = FORMAT_1
     out = tmp_path / "new.yaml"
     run = tpad_rt("calibrate", "convert", str(old), "--out", str(out))
     assert run.returncode == 0, run.stderr
@@ -128,6 +128,50 @@ def test_convert_turns_a_format_1_file_into_one_that_loads(tmp_path: Path) -> No
     assert device.amplitude_m_per_v(0.0) * 1e6 == pytest.approx(0.05, rel=0.5)
     again = tpad_rt("calibrate", "convert", str(out), "--out", str(tmp_path / "again.yaml"))
     again.assert_one_line_error("not a format 1 device file")
+
+
+FORMAT_1 = REPO / "tests" / "bad_files" / "device_format_1.yaml"
+
+
+@pytest.mark.parametrize(("forces", "amplitudes", "expected"), [
+    ("[.nan, 0.5, 1.0, 2.0]", None, "calibration.force_n: every force must be a number in [0, 50] N"),
+    ("[0, 0.5, 1.0, .inf]", None, "calibration.force_n: every force must be a number in [0, 50] N"),
+    ("[-5, 0.5, 1.0, 2.0]", None, "calibration.force_n: every force must be a number in [0, 50] N"),
+    ("[0, 0.5, 1.0, 1.0e+308]", None, "calibration.force_n: every force must be a number in [0, 50] N"),
+    ("[0, 0, 0, 0]", None, "calibration.force_n: forces must increase by at least 0.001 N"),
+    ("[2.0, 0.5, 1.0, 0]", None, "calibration.force_n: forces must increase by at least 0.001 N"),
+    ("['0', '0.5', '1', '2']", None, "calibration.force_n: a format 1 file needs a list of numbers here"),
+    (None, "[true, true, true, true]", "calibration.amplitude_um_per_v: a format 1 file needs a list of numbers here"),
+    (None, "[1.0e-320, 0.04, 0.03, 0.02]", "calibration.amplitude_um_per_v: every amplitude must be a number in"),
+    (None, "[1.0e+308, 0.04, 0.03, 0.02]", "calibration.amplitude_um_per_v: every amplitude must be a number in"),
+    (None, "[0.05, 0.04, 0.03]", "calibration: force_n and amplitude_um_per_v must be lists of the same length"),
+])
+def test_a_bad_format_1_table_is_refused_in_one_line(tmp_path: Path, forces: str | None, amplitudes: str | None,
+                                                      expected: str) -> None:
+    text = FORMAT_1.read_text()
+    if forces is not None:
+        text = text.replace("force_n: [0, 0.5, 1.0, 2.0]", f"force_n: {forces}")
+    if amplitudes is not None:
+        text = text.replace("amplitude_um_per_v: [0.05, 0.04, 0.03, 0.02]", f"amplitude_um_per_v: {amplitudes}")
+    old = tmp_path / "old.yaml"
+    old.write_text(text)
+    tpad_rt("calibrate", "convert", str(old), "--out", str(tmp_path / "new.yaml")).assert_one_line_error(
+        f"old.yaml: {expected}")
+    assert not (tmp_path / "new.yaml").exists()
+
+
+def test_an_output_that_is_an_input_is_refused_and_the_input_kept(tmp_path: Path) -> None:
+    sweeps, amplitudes, old = (tmp_path / "sweeps.csv", tmp_path / "amplitudes.csv", tmp_path / "old.yaml")
+    shutil.copy(EXAMPLE / "sweeps.csv", sweeps)
+    shutil.copy(EXAMPLE / "amplitudes.csv", amplitudes)
+    shutil.copy(FORMAT_1, old)
+    before = {path: path.read_bytes() for path in (sweeps, amplitudes, old)}
+    build = ("calibrate", "build", "--impedance", str(sweeps), "--amplitude", str(amplitudes), "--out")
+    tpad_rt(*build, str(sweeps)).assert_one_line_error(f"{sweeps}: is also a file this command reads")
+    tpad_rt(*build, str(amplitudes)).assert_one_line_error(f"{amplitudes}: is also a file this command reads")
+    tpad_rt("calibrate", "convert", str(old), "--out", str(old)).assert_one_line_error(
+        f"{old}: is also a file this command reads")
+    assert {path: path.read_bytes() for path in before} == before
 
 
 def _fifo(tmp_path: Path) -> str:

@@ -117,7 +117,7 @@ def test_schema_out_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
 def test_schema_out_file_not_writable(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     target = tmp_path / "missing" / "x.json"
     assert main(["schema", "device", "--out", str(target)]) == 1
-    assert capsys.readouterr().err == f"tpad-rt schema: cannot write {target}: No such file or directory\n"
+    assert capsys.readouterr().err == f"tpad-rt schema: {target}: cannot write schemas there: no folder {target.parent}\n"
 
 
 def test_schema_bad_choice() -> None:

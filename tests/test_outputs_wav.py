@@ -52,7 +52,7 @@ def test_errors(tmp_path: Path) -> None:
         open_output("wav://", device=Device.default(), fs_hz=48000)
     with pytest.raises(ConfigError, match=r"unknown option 'rate' \(options: none\)"):
         open_output(f"wav://{tmp_path}/a.wav?rate=1", device=Device.default(), fs_hz=48000)
-    with pytest.raises(BackendError, match=r"wav: cannot write .*/no/such/dir/a\.wav \(No such file or directory\)"):
+    with pytest.raises(ConfigError, match=r"/no/such/dir/a\.wav: cannot write WAV files there: no folder .*/no/such/dir"):
         open_output(f"wav://{tmp_path}/no/such/dir/a.wav", device=Device.default(), fs_hz=48000)
 
 

@@ -105,7 +105,7 @@ def test_bad_input_is_one_line_and_exit_1(
 
 @pytest.mark.parametrize(
     ("out", "message"),
-    [("figure.jpg", "--out: must end in .png, .pdf, .svg"), ("no/such/folder/figure.png", "cannot write the figure")],
+    [("figure.jpg", "--out: must end in .png, .pdf, .svg"), ("no/such/folder/figure.png", "figure.png: cannot write figures there: no folder ")],
 )
 def test_bad_output_path_is_one_line_and_exit_1(
     out: str, message: str, tmp_path: Path, capsys: pytest.CaptureFixture

@@ -5,8 +5,9 @@ is opened with :func:`open_regular`: ``O_NONBLOCK`` (a FIFO would otherwise bloc
 ``open``), then ``fstat`` on the open descriptor, so what is read is what was checked.
 A FIFO, a character or block device, a directory or a socket is refused before a byte
 is read, and so is a file larger than the reader's limit. An output path that exists
-and is not a regular file (``/dev/zero``, a FIFO, a directory) is refused before it is
-opened (:func:`check_writable_target`); a new path is fine.
+and is not a regular file (``/dev/zero``, a FIFO, a directory), lies in no folder, or is
+a file the command reads, is refused before the work that fills it
+(:func:`check_writable_target`); a new path in a folder is fine.
 
 API map
 -------
@@ -16,14 +17,16 @@ read_regular(path, what, limit_bytes, name=None) -> bytes
     the whole file, at most ``limit_bytes``
 ensure_regular(path, what)
     ConfigError unless ``path`` is a readable regular file (for readers that open it themselves)
-check_writable_target(path, what)
-    ConfigError when ``path`` exists and is not a regular file
+check_writable_target(path, what, inputs=())
+    ConfigError when ``path`` exists and is not a regular file, lies in no folder, or is one of ``inputs``
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import stat
+from collections.abc import Sequence
 from typing import BinaryIO
 
 from tpad_rt.errors import ConfigError, printable
@@ -125,11 +128,13 @@ def ensure_regular(path: PathLike, what: str) -> None:
     open_regular(path, what).close()
 
 
-def check_writable_target(path: PathLike, what: str) -> None:
-    """ConfigError when ``path`` holds a NUL byte, or exists and is not a regular file.
+def check_writable_target(path: PathLike, what: str, inputs: Sequence[PathLike] = ()) -> None:
+    """ConfigError when ``path`` holds a NUL byte, lies in no folder, exists and is not a regular file, or is
+    one of ``inputs`` (the files the command reads: writing there would destroy one).
 
-    ``what`` names what is written there (``recordings``). A missing path is fine (it
-    will be created); a symbolic link is judged by what it points to.
+    ``what`` names what is written there (``recordings``). A missing path in a folder is
+    fine (it will be created); a symbolic link is judged by what it points to. Checked
+    before the work that makes what is written, so that a long run is not lost at its end.
     """
     name = _name(path, None)
     try:
@@ -137,10 +142,18 @@ def check_writable_target(path: PathLike, what: str) -> None:
     except ValueError:
         raise ConfigError(f"{name}: the path contains a NUL byte") from None
     except OSError:
+        folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+        if not os.path.isdir(folder):
+            raise ConfigError(f"{name}: cannot write {what} there: no folder {printable(folder)}") from None
         return  # missing (or unreachable): opening it for writing says why
     if not stat.S_ISREG(mode):
         raise ConfigError(f"{name}: exists and is not a regular file ({_kind(mode)}); "
                           f"tpad-rt writes {what} to regular files only")
+    for source in inputs:
+        with contextlib.suppress(OSError, ValueError):
+            if os.path.samefile(path, source):
+                raise ConfigError(f"{name}: is also a file this command reads ({printable(os.fspath(source))}): "
+                                  "write to another file")
 
 
 __all__ = ["check_writable_target", "ensure_regular", "open_regular", "read_regular"]

@@ -33,12 +33,13 @@ import numpy as np
 from tpad_rt.calibrate.amplitude import Circuit, GammaFit
 from tpad_rt.calibrate.impedance import BvdFit
 from tpad_rt.config import DeviceFile
-from tpad_rt.config.device_schema import DEVICE_FORMAT_VERSION
+from tpad_rt.config.device_schema import DEVICE_FORMAT_VERSION, MIN_FORCE_STEP_N
 from tpad_rt.config.loader import validate_device
 from tpad_rt.config.yaml_io import YamlDocument, dump_yaml, load_yaml
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.files import check_writable_target
+from tpad_rt.limits import MAX_FORCE_N
 from tpad_rt.physics import electromech
 
 #: The default power budget: this many times the power at max_voltage_v at the lowest force ...
@@ -192,6 +193,30 @@ class GammaSpread:
     ratio: float
 
 
+def _format1_table(name: str, calibration: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Format 1's ``calibration`` table: ``(force_n, amplitude in m per volt)``. ConfigError unless both are lists
+    of the same length of real numbers (not booleans or text), forces finite in ``[0, MAX_FORCE_N]`` and rising
+    by at least MIN_FORCE_STEP_N, amplitudes in ``[1e-6, 1000]`` um per volt."""
+    lists = {}
+    for key in ("force_n", "amplitude_um_per_v"):
+        values = calibration.get(key) if isinstance(calibration, dict) else None
+        if not (isinstance(values, list) and values and all(
+                isinstance(value, (int, float)) and not isinstance(value, bool) for value in values)):
+            raise ConfigError(f"{name}: calibration.{key}: a format 1 file needs a list of numbers here")
+        lists[key] = np.array(values, dtype=np.float64)
+    forces, amplitudes = lists["force_n"], lists["amplitude_um_per_v"]
+    if forces.shape != amplitudes.shape:
+        raise ConfigError(f"{name}: calibration: force_n and amplitude_um_per_v must be lists of the same length")
+    if not np.all((forces >= 0.0) & (forces <= MAX_FORCE_N)):
+        raise ConfigError(f"{name}: calibration.force_n: every force must be a number in [0, {MAX_FORCE_N:g}] N")
+    if np.any(np.diff(forces) < MIN_FORCE_STEP_N):
+        raise ConfigError(f"{name}: calibration.force_n: forces must increase by at least {MIN_FORCE_STEP_N:g} N")
+    if not np.all((amplitudes >= 1e-6) & (amplitudes <= 1000.0)):
+        raise ConfigError(f"{name}: calibration.amplitude_um_per_v: every amplitude must be a number in [1e-06, 1000] "
+                          "um per volt")
+    return forces + 0.0, amplitudes * 1e-6  # + 0.0: a force of -0.0 is 0
+
+
 def convert_document(path: str | Path) -> tuple[dict[str, Any], GammaSpread]:
     """The format 2 document of the format 1 device file at ``path``, and how far its table was from one gamma.
 
@@ -208,15 +233,7 @@ def convert_document(path: str | Path) -> tuple[dict[str, Any], GammaSpread]:
     if "format_version" in data or "resonance_hz" not in data:
         raise ConfigError(f"{name}: not a format 1 device file (it has format_version, or no resonance_hz): nothing to "
                           "convert")
-    calibration = data.pop("calibration", None)
-    try:
-        forces = np.asarray(calibration["force_n"], dtype=np.float64)
-        amplitudes_m = np.asarray(calibration["amplitude_um_per_v"], dtype=np.float64) * 1e-6
-    except (TypeError, KeyError, ValueError):
-        raise ConfigError(f"{name}: calibration: a format 1 file needs force_n and amplitude_um_per_v lists of "
-                          "numbers") from None
-    if forces.ndim != 1 or forces.shape != amplitudes_m.shape or not forces.size:
-        raise ConfigError(f"{name}: calibration: force_n and amplitude_um_per_v must be lists of the same length")
+    forces, amplitudes_m = _format1_table(name, data.pop("calibration", None))
     document: dict[str, Any] = {"format_version": DEVICE_FORMAT_VERSION}
     for key, value in data.items():
         document["carrier_hz" if key == "resonance_hz" else key] = value
@@ -226,7 +243,7 @@ def convert_document(path: str | Path) -> tuple[dict[str, Any], GammaSpread]:
     circuit["gamma_n_per_v"] = 1.0  # validated below with the rest, then replaced
     source = document.get("source")
     device = Device.from_spec(validate_device(name, YamlDocument(document, original.root)), name)
-    currents = np.abs(device.motional_current_a_per_v(np.clip(forces, 0.0, None)))
+    currents = np.abs(device.motional_current_a_per_v(forces))
     gammas = currents / (2.0 * math.pi * device.carrier_hz * amplitudes_m)
     if not np.all(np.isfinite(gammas) & (gammas > 0.0)):
         raise ConfigError(f"{name}: calibration.amplitude_um_per_v: every amplitude must be a finite number > 0")

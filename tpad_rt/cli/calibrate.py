@@ -267,7 +267,7 @@ def run_build(args: argparse.Namespace) -> int:
     """Fit, build and write the device file; print what it holds. ConfigError for a bad input or a device
     that would not load."""
     out = Path(args.out)
-    check_writable_target(out, "device files")
+    check_writable_target(out, "device files", [*args.impedance, args.amplitude, args.like])
     template = load_device(args.like)
     full_scale_v = template.amplifier.volts_per_full_scale
     if args.max_voltage_v is not None and args.max_voltage_v > full_scale_v:
@@ -310,7 +310,7 @@ def run_sweep(args: argparse.Namespace) -> int:
     plot = None if args.plot is None else figure_target("--plot", args.plot)
     out = None if args.out is None else Path(args.out)
     if out is not None:
-        check_writable_target(out, "impedance sweeps")
+        check_writable_target(out, "impedance sweeps", [] if args.device is None else [args.device])
     device = Device.default() if args.device is None else Device.from_file(args.device)
     drive_v = args.drive_v if args.drive_v is not None else min(sweep.DEFAULT_DRIVE_V, device.max_voltage_v / 8)
     if drive_v > device.max_voltage_v:
@@ -379,7 +379,7 @@ def _progress(what: str) -> Iterator[Callable[[int, int], None]]:
 def run_convert(args: argparse.Namespace) -> int:
     """Convert the format 1 file; say how far its amplitude table was from one gamma."""
     out = Path(args.out)
-    check_writable_target(out, "device files")
+    check_writable_target(out, "device files", [args.old])
     document, spread = convert_document(args.old)
     device = write_device(document, out, _HEADER.format(action="convert"))
     print(_summary(device, out))

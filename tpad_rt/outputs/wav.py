@@ -60,7 +60,7 @@ class WavOutput(Output):
     """Streams blocks into a 32-bit float mono WAV file at ``path``, sample rate ``fs_hz`` (Hz).
 
     Raises ConfigError when ``path`` exists and is not a regular file (a FIFO, a
-    device, a directory), BackendError when it cannot be opened for writing.
+    device, a directory) or lies in no folder, BackendError when it cannot be opened for writing.
     """
 
     def __init__(self, path: str | Path, fs_hz: int):
