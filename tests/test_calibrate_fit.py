@@ -97,6 +97,22 @@ def test_the_reported_uncertainties_match_the_scatter_of_repeated_fits():
     assert 0.6 < ratio < 1.6, ratio
 
 
+@pytest.mark.parametrize(("c0_over_c", "q", "seed"), [(10.0, 1e5, 1), (40.0, 1e5, 1), (3.0, 1e4, 3), (10.0, 1e3, 4)])
+def test_a_parameter_the_sweep_barely_determines_is_reported_so(c0_over_c, q, seed):
+    """C0 large against C and Q high (the motional branch dominates): C0 is poorly determined, and the fit must say
+    so, with an uncertainty that covers its error (a pseudo-inverse's cutoff reported it to 1e-10 %)."""
+    c_f, fs_hz = 24.76e-12, 31363.76
+    r_ohm = 1 / (2 * math.pi * fs_hz * q * c_f)
+    sweep, truth = _sweep(c0_over_c * c_f, fs_hz, q, r_ohm, seed, noise=0.005)
+    fit = fit_sweep(sweep)
+    for key, got, expected in zip(("c0_nf", "motional_l_h", "motional_c_pf", "motional_r_ohm"),
+                                  (fit.c0_f, fit.l_h, fit.c_f, fit.r_ohm), truth):
+        error = abs(got / expected - 1)
+        assert error <= 4 * fit.uncertainty[key], (key, error, fit.uncertainty[key])
+        if error > 0.02:
+            assert any(line.startswith(f"{key} is poorly determined") for line in fit.warnings), fit.warnings
+
+
 def test_a_second_mode_in_the_band_is_refused():
     sweep, _ = _sweep(9.88e-9, 31360.0, 200.0, 1000.0, seed=1, span=25.0, extra=(31360.0 * 1.05, 200.0, 1200.0))
     with pytest.raises(ConfigError, match=r"synthetic.csv, 0 N: the model does not fit: a second mode in the band at "
@@ -218,6 +234,12 @@ def test_polar_and_cartesian_sweeps_read_the_same(tmp_path):
     np.testing.assert_allclose(one.impedance_ohm, other.impedance_ohm, rtol=1e-12)
 
 
+def test_a_negative_zero_force_is_zero(tmp_path):
+    lines = ["freq_hz,z_real_ohm,z_imag_ohm,force_n"] + [f"{30000 + k},1,-500,-0.0" for k in range(20)]
+    [sweep] = read_impedance_sweeps(_write(tmp_path, "\n".join(lines) + "\n"))
+    assert sweep.force_n == 0.0 and math.copysign(1.0, sweep.force_n) == 1.0
+
+
 def test_forces_split_a_file_into_sweeps(tmp_path):
     lines = ["freq_hz,z_real_ohm,z_imag_ohm,force_n"]
     for force in (1.0, 0.0):
@@ -250,6 +272,15 @@ def test_forces_split_a_file_into_sweeps(tmp_path):
     ("freq_hz,z_real_ohm,z_imag_ohm\n1,1\n", "m.csv:2: 2 fields, expected 3 (freq_hz,z_real_ohm,z_imag_ohm)"),
     ("freq_hz,z_real_ohm,z_imag_ohm,force_n\n1,1,1,51\n", "column force_n: must be a finite number in [0, 50] N"),
     ("freq_hz,z_real_ohm,z_imag_ohm\n", "m.csv: no rows after the header"),
+    ("freq_hz,z_real_ohm,z_imag_ohm\n31_000,1,1\n", "m.csv:2: column freq_hz: must be a finite number in [1, 1e+07] "
+                                                    "Hz, got '31_000'"),
+    ("freq_hz,z_real_ohm,z_imag_ohm\n\u0663\u0661\u0660\u0660\u0660,1,1\n", "m.csv:2: column freq_hz: must be a finite number"),
+    ("freq_hz,z_real_ohm,z_imag_ohm\n\uff13\uff11\uff10\uff10\uff10,1,1\n", "m.csv:2: column freq_hz: must be a finite number"),
+    ("freq_hz,z_real_ohm,z_imag_ohm\n1,infinity,1\n", "m.csv:2: column z_real_ohm: must be a finite number"),
+    ("freq_hz,z_abs_ohm,z_phase_deg\n" + "".join(f"{30000 + k},500,{-1.57 + k / 100}\n" for k in range(30)),
+     "m.csv: z_phase_deg: every phase lies within +-pi, as radians would: the column is in degrees"),
+    ("freq_hz,z_real_ohm,z_imag_ohm,force_n\n" + "".join(f"{30000 + k},1,-500,{k % 2 * 1e-320}\n" for k in range(40)),
+     "m.csv: force_n: sweeps at 0 and 9.99989e-321 N are less than 0.001 N apart: one sweep per force"),
 ])
 def test_bad_impedance_files_are_refused_in_one_message(tmp_path, text, message):
     with pytest.raises(ConfigError) as caught:

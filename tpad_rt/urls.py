@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import parse_qsl, unquote
 
+from tpad_rt.decimal_text import parse_decimal
 from tpad_rt.errors import ConfigError, printable
 
 #: Longest URL accepted (characters).
@@ -190,7 +191,7 @@ def number(low: float = -math.inf, *, low_closed: bool = True, high: float = mat
 
     def parse(text: str) -> float:
         try:
-            value = float(text)
+            value = parse_decimal(text, allow_inf)
         except ValueError:
             raise ValueError(f"must be {expected}") from None
         if allow_inf and value == math.inf:
@@ -230,7 +231,7 @@ def point(text: str) -> tuple[float, float]:
     """Parse ``x,y`` (two finite numbers); ValueError otherwise."""
     parts = text.split(",")
     try:
-        values = tuple(float(part) for part in parts)
+        values = tuple(parse_decimal(part) for part in parts)
     except ValueError:
         values = ()
     if len(values) != 2 or not all(math.isfinite(value) for value in values):

@@ -194,8 +194,13 @@ def _start(sweep: ImpedanceSweep) -> _Start:
     motional_b = -reactance / (r_ohm * r_ohm + reactance * reactance)
     c0_f = float(np.median((admittance.imag - motional_b) / omega))
     if not c0_f > 0.0:
-        raise ConfigError(f"{where}: the susceptance Im(1/Z) is not a capacitor's (C0 would be {c0_f:.3g} F): is the "
-                          "phase's sign as the format says (about -90 degrees for a piezo)?")
+        edges = np.concatenate([admittance.imag[:max(2, len(freq) // 20)], admittance.imag[-max(2, len(freq) // 20):]])
+        if np.all(edges < 0.0):
+            raise ConfigError(f"{where}: the susceptance Im(1/Z) is not a capacitor's (C0 would be {c0_f:.3g} F): is "
+                              "the phase's sign as the format says (about -90 degrees for a piezo)?")
+        raise ConfigError(f"{where}: the motional branch outweighs C0 across the whole sweep (its conductance peak "
+                          f"1/R = {height:.3g} S, C0's susceptance too small to start from): widen the sweep to take "
+                          "in the antiresonance above the resonance")
     return _Start(np.log([c0_f, fs, q, r_ohm]), bandwidth, height)
 
 
@@ -215,10 +220,18 @@ def _second_mode(freq_hz: _Array, conductance: _Array, resonance_hz: float, band
 
 
 def _uncertainty(jacobian: _Array, residuals: _Array) -> dict[str, float]:
-    """Relative standard uncertainties by QUANTITIES key, from the Jacobian in log parameters."""
+    """Relative standard uncertainties by QUANTITIES key, from the Jacobian in log parameters.
+
+    The covariance is ``V diag(1 / s^2) V^T`` times the residual variance, from the
+    Jacobian's singular values ``s`` with no cutoff (a pseudo-inverse's would drop a
+    direction the sweep barely determines and report its parameter as certain); a
+    singular value below the Jacobian's rounding counts as that rounding.
+    """
     dof = max(len(residuals) - jacobian.shape[1], 1)
     variance = float(residuals @ residuals) / dof
-    covariance = np.linalg.pinv(jacobian.T @ jacobian) * variance
+    _, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
+    floor = max(float(singular.max(initial=0.0)) * np.finfo(np.float64).eps, np.finfo(np.float64).tiny)
+    covariance = (vt.T / np.maximum(singular, floor) ** 2) @ vt * variance
     # Rows: d log(quantity) / d log(C0, f_s, Q, R).
     transform = np.array([
         [1.0, 0.0, 0.0, 0.0],    # C0

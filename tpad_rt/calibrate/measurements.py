@@ -33,7 +33,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from tpad_rt.config.device_schema import MIN_FORCE_STEP_N
 from tpad_rt.csv_lines import check_header, data_lines
+from tpad_rt.decimal_text import parse_decimal
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.files import open_regular
 from tpad_rt.limits import MAX_FORCE_N, MAX_MEASUREMENT_BYTES, MAX_MEASUREMENT_ROWS
@@ -103,7 +105,7 @@ def _rows(name: str, lines: Iterator[tuple[int, list[str]]], columns: list[str])
         row = []
         for column, text in zip(columns, fields):
             try:
-                value = float(text)
+                value = parse_decimal(text)
             except ValueError:
                 value = math.nan
             bounds = _RANGES[column]
@@ -182,15 +184,23 @@ def read_impedance_sweeps(path: str | Path) -> list[ImpedanceSweep]:
     if "z_real_ohm" in columns:
         impedance = columns["z_real_ohm"] + 1j * columns["z_imag_ohm"]
     else:
-        impedance = columns["z_abs_ohm"] * np.exp(1j * np.radians(columns["z_phase_deg"]))
+        phase_deg = columns["z_phase_deg"]
+        if np.all(np.abs(phase_deg) <= math.pi) and np.max(np.abs(phase_deg)) > 0.1:
+            raise ConfigError(f"{table.name}: z_phase_deg: every phase lies within +-pi, as radians would: the column "
+                              "is in degrees (a piezo's is about -90)")
+        impedance = columns["z_abs_ohm"] * np.exp(1j * np.radians(phase_deg))
     short = np.flatnonzero(np.abs(impedance) < MIN_IMPEDANCE_OHM)
     if short.size:
         raise ConfigError(f"{table.name}:{table.lines[short[0]]}: |Z| is below {MIN_IMPEDANCE_OHM:g} ohm: a short "
                           "circuit, not a sweep")
-    forces = columns.get("force_n", np.zeros(len(impedance)))
+    forces = columns.get("force_n", np.zeros(len(impedance))) + 0.0  # + 0.0: a force of -0.0 is 0
     distinct = np.unique(forces)
     if len(distinct) > MAX_SWEEPS:
         raise ConfigError(f"{table.name}: {len(distinct):,} forces; a file may hold at most {MAX_SWEEPS} sweeps")
+    close = np.flatnonzero(np.diff(distinct) < MIN_FORCE_STEP_N)
+    if close.size:
+        raise ConfigError(f"{table.name}: force_n: sweeps at {distinct[close[0]]:g} and {distinct[close[0] + 1]:g} N "
+                          f"are less than {MIN_FORCE_STEP_N:g} N apart: one sweep per force")
     sweeps = []
     for force in distinct:
         rows = np.flatnonzero(forces == force)
@@ -228,5 +238,5 @@ def read_amplitudes(path: str | Path) -> AmplitudeMeasurements:
     table = _read(path, "amplitude measurements", ("force_n", "voltage_v", "amplitude_um"), ("freq_hz",),
                   _AMPLITUDE_FORM)
     columns = table.columns
-    return AmplitudeMeasurements(table.name, columns["force_n"], columns["voltage_v"], columns["amplitude_um"],
+    return AmplitudeMeasurements(table.name, columns["force_n"] + 0.0, columns["voltage_v"], columns["amplitude_um"],
                                  columns.get("freq_hz"))

@@ -20,6 +20,8 @@ import math
 from collections.abc import Callable
 from typing import TypeAlias
 
+from tpad_rt.decimal_text import parse_decimal
+
 #: argparse names the type ``add_subparsers()`` returns only privately, and documents no public
 #: base for it: this alias is the one place the private name appears.
 Subparsers: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
@@ -46,7 +48,7 @@ def number(low: float, low_closed: bool, high: float = math.inf, what: str = "")
 
     def parse(text: str) -> float:
         try:
-            value = float(text)
+            value = parse_decimal(text)
         except ValueError:
             value = math.nan
         if not (math.isfinite(value) and (value >= low if low_closed else value > low) and value <= high):

@@ -146,7 +146,9 @@ _TABLE_WIDTH = 120
 
 
 def _print(table: Table) -> None:
-    Console(highlight=False, width=max(shutil.get_terminal_size().columns, _TABLE_WIDTH)).print(table)
+    """Print ``table`` whole: as wide as the terminal, or as its widest row if wider (no number cut short)."""
+    natural = Console(width=10_000).measure(table).maximum
+    Console(highlight=False, width=max(shutil.get_terminal_size().columns, _TABLE_WIDTH, natural)).print(table)
 
 
 def _warn(lines: list[str]) -> None:

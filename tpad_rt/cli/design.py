@@ -22,6 +22,7 @@ from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.config.device_schema import DensityGCm3, ModeM, PlateSideMm, ThicknessMm, YoungsModulusGpa
+from tpad_rt.decimal_text import parse_decimal
 from tpad_rt.errors import ConfigError
 from tpad_rt.physics import plate
 from tpad_rt.physics.plate import ACTUATOR, TABLE1_GLASSES, Layer
@@ -109,7 +110,7 @@ def _parse_plate(text: str) -> Layer:
     if len(fields) != 4 or not fields[0].strip():
         raise ConfigError(problem)
     try:
-        numbers = [float(field) for field in fields[1:]]
+        numbers = [parse_decimal(field) for field in fields[1:]]
     except ValueError:
         raise ConfigError(problem) from None
     for value, (name, alias, unit) in zip(numbers, _PLATE_NUMBERS):

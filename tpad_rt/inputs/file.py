@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tpad_rt.csv_lines import check_header, data_lines
+from tpad_rt.decimal_text import parse_decimal
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.files import open_regular
 from tpad_rt.inputs.base import FINGER_DTYPE, Input, position_range
@@ -149,7 +150,7 @@ def _value(where: str, column: str, text: str, ranges: _Ranges) -> float | bool:
             raise ConfigError(f"{where}: column down: must be 0 or 1, got '{printable(text)}'")
         return text == "1"
     try:
-        value = float(text)
+        value = parse_decimal(text)
     except ValueError:
         value = math.nan
     low, high, unit = ranges.bounds[column]
