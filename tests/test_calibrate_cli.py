@@ -174,6 +174,46 @@ def test_an_output_that_is_an_input_is_refused_and_the_input_kept(tmp_path: Path
     assert {path: path.read_bytes() for path in before} == before
 
 
+def _in_khz(tmp_path: Path) -> str:
+    """The worked example's amplitudes with freq_hz written in kHz (a unit mistake)."""
+    lines = []
+    for line in (EXAMPLE / "amplitudes.csv").read_text().splitlines():
+        fields = line.split(",")
+        if line[:1].isdigit():
+            fields[3] = repr(float(fields[3]) / 1000)
+        lines.append(",".join(fields))
+    path = tmp_path / "khz.csv"
+    path.write_text("\n".join(lines) + "\n")
+    return str(path)
+
+
+def test_json_has_no_infinity_where_a_value_is_undetermined(tmp_path: Path) -> None:
+    """One row gives a gamma but no spread: its uncertainty is null in the JSON (JSON has no Infinity)."""
+    rows = (EXAMPLE / "amplitudes.csv").read_text().splitlines()
+    header = next(line for line in rows if line.startswith("force_n"))
+    first = next(line for line in rows if line[:1].isdigit())
+    single = tmp_path / "single.csv"
+    single.write_text(f"{header}\n{first}\n")
+    run = tpad_rt("calibrate", "amplitude", str(single), "--device", "SLG_0.56", "--json")
+    assert run.returncode == 0, run.stderr
+    assert "Infinity" not in run.stdout and json.loads(run.stdout)["uncertainty_percent"] is None
+
+
+def test_many_forces_are_told_apart_by_a_colour_bar_without_warnings(tmp_path: Path) -> None:
+    lines = ["freq_hz,z_real_ohm,z_imag_ohm,force_n"]
+    sweep = (EXAMPLE / "sweep_0n_polar.csv").read_text().splitlines()
+    polar = [line.split(",") for line in sweep if line[:1].isdigit()][::8]
+    for force in np.linspace(0.0, 2.0, 20):
+        for freq, magnitude, phase in polar:
+            z = float(magnitude) * np.exp(1j * np.radians(float(phase)))
+            lines.append(f"{freq},{float(z.real)!r},{float(z.imag)!r},{force:.3f}")
+    many = tmp_path / "many.csv"
+    many.write_text("\n".join(lines) + "\n")
+    run = tpad_rt("calibrate", "impedance", str(many), "--plot", str(tmp_path / "many.png"))
+    assert run.returncode == 0, run.stderr
+    assert run.stderr == "" and (tmp_path / "many.png").stat().st_size > 50_000
+
+
 def _fifo(tmp_path: Path) -> str:
     path = tmp_path / "fifo.csv"
     os.mkfifo(path)
@@ -190,7 +230,19 @@ def _fifo(tmp_path: Path) -> str:
     (("calibrate", "impedance", "{amplitudes}"), "header: unknown column 'voltage_v'"),
     (("calibrate", "amplitude", "{amplitudes}"), "one of the arguments --impedance --device is required"),
     (("calibrate", "amplitude", "{amplitudes}", "--device", "SLG_0.56", "--freq-hz", "nan"),
-     "argument --freq-hz: must be a number in (0, 200000] (Hz), got 'nan'"),
+     "argument --freq-hz: must be a number in [1000, 200000] (Hz), got 'nan'"),
+    (("calibrate", "amplitude", "{amplitudes}", "--device", "SLG_0.56", "--freq-hz", "3_1000"),
+     "argument --freq-hz: must be a number in [1000, 200000] (Hz), got '3_1000'"),
+    (("calibrate", "amplitude", "{khz}", "--device", "SLG_0.56"),
+     "khz.csv: row 1's freq_hz, 31.3586 Hz, is far from the circuit's resonance (31358.6 Hz): amplitudes are "
+     "measured near it (in Hz, not kHz)"),
+    (("calibrate", "build", "--impedance", "{sweeps}", "--amplitude", "{amplitudes}", "--out", "x.yaml",
+      "--like", str(REPO / "textures" / "grating.yaml")),
+     "grating.yaml: a texture file (it has 'kind'), not a device file (which has format_version and a circuit)"),
+    (("calibrate", "build", "--impedance", "{sweeps}", "--amplitude", "{amplitudes}", "--out", "x.yaml",
+      "--label", "two\nlines"), "--label: must be 1 to 200 printable characters, got 'two\\x0alines'"),
+    (("calibrate", "sweep", "serial:///nonexistent", "--drive-v", "1e-320"),
+     "argument --drive-v: must be a number in [0.01, 10000] (V), got '1e-320'"),
     (("calibrate", "build", "--impedance", "{sweeps}", "--amplitude", "{amplitudes}", "--out", "/dev/null"),
      "/dev/null: exists and is not a regular file"),
     (("calibrate", "build", "--impedance", "{sweeps}", "--amplitude", "{amplitudes}", "--out", "x.yaml",
@@ -203,7 +255,7 @@ def _fifo(tmp_path: Path) -> str:
 ])
 def test_every_mistake_is_one_line(tmp_path: Path, args: tuple[str, ...], expected: str) -> None:
     names = {"{sweeps}": str(EXAMPLE / "sweeps.csv"), "{amplitudes}": str(EXAMPLE / "amplitudes.csv"),
-             "{old}": str(REPO / "tests" / "bad_files" / "device_format_1.yaml")}
+             "{old}": str(REPO / "tests" / "bad_files" / "device_format_1.yaml"), "{khz}": _in_khz(tmp_path)}
     filled = [names.get(arg, _fifo(tmp_path) if arg == "{fifo}" else arg) for arg in args]
     cwd = os.getcwd()
     os.chdir(tmp_path)

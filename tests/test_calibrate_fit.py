@@ -272,6 +272,11 @@ def test_forces_split_a_file_into_sweeps(tmp_path):
     ("freq_hz,z_real_ohm,z_imag_ohm\n1,1\n", "m.csv:2: 2 fields, expected 3 (freq_hz,z_real_ohm,z_imag_ohm)"),
     ("freq_hz,z_real_ohm,z_imag_ohm,force_n\n1,1,1,51\n", "column force_n: must be a finite number in [0, 50] N"),
     ("freq_hz,z_real_ohm,z_imag_ohm\n", "m.csv: no rows after the header"),
+    ("freq_hz\tz_real_ohm\tz_imag_ohm\n", "header: unknown column 'freq_hz\\x09z_real_ohm\\x09z_imag_ohm': columns are "
+                                           "separated by commas, not tabs"),
+    ("freq_hz;z_real_ohm;z_imag_ohm\n", "columns are separated by commas, not semicolons"),
+    ("30620.5,1,-500\n30621.5,1,-500\n", "m.csv:1: header: unknown column '30620.5': the file starts with data; its "
+                                        "first line must name the columns"),
     ("freq_hz,z_real_ohm,z_imag_ohm\n31_000,1,1\n", "m.csv:2: column freq_hz: must be a finite number in [1, 1e+07] "
                                                     "Hz, got '31_000'"),
     ("freq_hz,z_real_ohm,z_imag_ohm\n\u0663\u0661\u0660\u0660\u0660,1,1\n", "m.csv:2: column freq_hz: must be a finite number"),

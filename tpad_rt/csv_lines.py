@@ -57,6 +57,17 @@ def _fields(path: str, number: int, line: str) -> list[str]:
         raise ConfigError(f"{path}:{number}: not a CSV line ({error}){hint}") from None
 
 
+_SEPARATOR_NAMES = {"\t": "tabs", ";": "semicolons", " ": "spaces"}
+
+
+def _looks_numeric(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def check_header(
     path: str, line: int, header: list[str], required: Sequence[str], optional: Sequence[str], form: str
 ) -> list[str]:
@@ -66,6 +77,11 @@ def check_header(
     for name in header:
         if name not in known:
             hint = did_you_mean(name, known) or f" (columns: {', '.join(known)})"
+            separator = next((mark for mark in ("\t", ";", " ") if mark in name.strip()), None)
+            if separator is not None and any(part.strip() in known for part in name.split(separator)):
+                hint = f": columns are separated by commas, not {_SEPARATOR_NAMES[separator]}"
+            elif _looks_numeric(name):
+                hint = ": the file starts with data; its first line must name the columns"
             raise ConfigError(f"{path}:{line}: header: unknown column '{printable(name)}'{hint}; expected {form}")
         if header.count(name) > 1:
             raise ConfigError(f"{path}:{line}: header: column '{name}' appears twice; expected {form}")

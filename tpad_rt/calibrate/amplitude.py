@@ -36,6 +36,9 @@ from tpad_rt.errors import ConfigError
 LINEARITY_TOLERANCE = 0.05
 #: A force whose own gamma lies further than this fraction from the one gamma is flagged.
 GAMMA_TOLERANCE = 0.10
+#: A drive frequency more than this factor from the circuit's resonance is a mistake (kHz for Hz, rad/s for Hz):
+#: a plate's amplitude is measured near its resonance.
+FREQUENCY_FACTOR = 2.0
 
 _Array = npt.NDArray[np.float64]
 
@@ -126,8 +129,8 @@ def fit_gamma(measurements: AmplitudeMeasurements, circuit: Circuit, freq_hz: fl
     """The one gamma that explains ``measurements`` through ``circuit`` (module docstring).
 
     Each row's drive frequency is its ``freq_hz`` column, else ``freq_hz`` (Hz), else the
-    circuit's resonance at its lowest force. Raises ConfigError when the file's forces
-    lie outside the circuit's or a row's gamma is not finite.
+    circuit's resonance at its lowest force. Raises ConfigError when a drive frequency
+    lies more than FREQUENCY_FACTOR from that resonance or a row's gamma is not finite.
     """
     rows = len(measurements.force_n)
     if measurements.freq_hz is not None:
@@ -136,6 +139,11 @@ def fit_gamma(measurements: AmplitudeMeasurements, circuit: Circuit, freq_hz: fl
     else:
         used_hz = circuit.resonance_hz if freq_hz is None else freq_hz
         freq = np.full(rows, used_hz)
+    far = np.flatnonzero((freq > FREQUENCY_FACTOR * circuit.resonance_hz) | (freq < circuit.resonance_hz / FREQUENCY_FACTOR))
+    if far.size:
+        given = "the drive frequency" if measurements.freq_hz is None else f"row {far[0] + 1}'s freq_hz"
+        raise ConfigError(f"{measurements.source}: {given}, {freq[far[0]]:g} Hz, is far from the circuit's resonance "
+                          f"({circuit.resonance_hz:.6g} Hz): amplitudes are measured near it (in Hz, not kHz)")
     warnings = []
     low, high = float(circuit.force_n[0]), float(circuit.force_n[-1])
     outside = np.flatnonzero((measurements.force_n < low - 1e-9) | (measurements.force_n > high + 1e-9))

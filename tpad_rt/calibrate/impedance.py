@@ -276,8 +276,9 @@ def fit_sweep(sweep: ImpedanceSweep) -> BvdFit:
         error = (_impedance(freq, log_params) - measured) / scale
         return np.concatenate([error.real, error.imag])
 
-    result = least_squares(residuals, start.log_params, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12,
-                           max_nfev=2000)
+    with np.errstate(all="ignore"):  # trial steps may overflow; a fit that ends there is refused below
+        result = least_squares(residuals, start.log_params, method="lm", x_scale="jac", xtol=1e-12, ftol=1e-12,
+                               max_nfev=2000)
     if not result.success or not np.all(np.isfinite(result.x)):
         raise ConfigError(f"{where}: the least-squares fit did not converge ({result.message})")
     c0_f, fs_hz, q, r_ohm = (float(value) for value in np.exp(result.x))

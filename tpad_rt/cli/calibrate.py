@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import shutil
 import sys
@@ -48,6 +47,7 @@ from tpad_rt.config.device_schema import MAX_CARRIER_HZ, MAX_VOLTS, MIN_CARRIER_
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.files import check_writable_target
+from tpad_rt.json_text import json_text
 from tpad_rt.figures import figure_target, save
 
 _HEADER = "# written by tpad-rt calibrate {action}: its source entries say where each value came from\n"
@@ -80,7 +80,7 @@ def add_parser(subparsers: Subparsers) -> None:
     source = amplitude.add_mutually_exclusive_group(required=True)
     source.add_argument("--impedance", metavar="SWEEP.csv", nargs="+", help="impedance sweeps giving the circuit")
     source.add_argument("--device", metavar="FILE", help="device file giving the circuit")
-    amplitude.add_argument("--freq-hz", type=number(0, False, MAX_CARRIER_HZ, "Hz"),
+    amplitude.add_argument("--freq-hz", type=number(MIN_CARRIER_HZ, True, MAX_CARRIER_HZ, "Hz"),
                            help="drive frequency of rows without freq_hz (default: the circuit's resonance at "
                            "its lowest force)")
     amplitude.add_argument("--json", action="store_true", help="print a JSON object")
@@ -99,7 +99,7 @@ def add_parser(subparsers: Subparsers) -> None:
     build.add_argument("--label", help="the device's label (default: the output file's name)")
     build.add_argument("--carrier-hz", type=number(MIN_CARRIER_HZ, True, MAX_CARRIER_HZ, "Hz"),
                        help="drive frequency (default: the loaded resonance at the lowest force)")
-    build.add_argument("--freq-hz", type=number(0, False, MAX_CARRIER_HZ, "Hz"),
+    build.add_argument("--freq-hz", type=number(MIN_CARRIER_HZ, True, MAX_CARRIER_HZ, "Hz"),
                        help="drive frequency of --amplitude rows without freq_hz (default: the carrier)")
     build.add_argument("--shunt-ohm", type=number(1e-3, True, 1e6, "ohm"), help="shunt resistor (default: --like's)")
     build.add_argument("--max-voltage-v", type=number(0.1, True, MAX_VOLTS, "V"),
@@ -128,7 +128,7 @@ def add_parser(subparsers: Subparsers) -> None:
     sweeper.add_argument("--to-hz", type=number(MIN_CARRIER_HZ, True, MAX_CARRIER_HZ, "Hz"),
                          help=f"highest carrier of the coarse sweep (default: the device's carrier plus "
                          f"{100 * sweep.COARSE_SPAN:g} %%)")
-    sweeper.add_argument("--drive-v", type=number(0, False, MAX_VOLTS, "V"),
+    sweeper.add_argument("--drive-v", type=number(MIN_DRIVE_V, True, MAX_VOLTS, "V"),
                          help=f"drive held while sweeping, V peak (default: {sweep.DEFAULT_DRIVE_V:g} V, or 1/8 of "
                          "the device's max volts if less)")
     sweeper.add_argument("--dwell-ms", type=number(1, True, 10_000, "ms"),
@@ -143,6 +143,12 @@ def add_parser(subparsers: Subparsers) -> None:
 
 #: Columns the fit tables need: wider than a default 80-column terminal, so they are printed at least this wide.
 _TABLE_WIDTH = 120
+
+
+#: The least sweep drive (V peak): the amplifier's STATUS reports whole millivolts.
+MIN_DRIVE_V = 0.01
+#: The longest --label (characters).
+MAX_LABEL_CHARS = 200
 
 
 def _print(table: Table) -> None:
@@ -206,7 +212,7 @@ def run_impedance(args: argparse.Namespace) -> int:
     out = None if args.plot is None else figure_target("--plot", args.plot)
     sweeps, fits = _fits(args.sweeps)
     if args.json:
-        print(json.dumps([fit.as_json() for fit in fits], indent=2))
+        print(json_text([fit.as_json() for fit in fits], indent=2))
     else:
         _print(_impedance_table(fits))
     if out is not None:
@@ -245,7 +251,7 @@ def run_amplitude(args: argparse.Namespace) -> int:
     measurements = read_amplitudes(args.measurements)
     fit = fit_gamma(measurements, circuit, args.freq_hz)
     if args.json:
-        print(json.dumps(fit.as_json(), indent=2))
+        print(json_text(fit.as_json(), indent=2))
     else:
         _print(_gamma_table(fit))
     if out is not None:
@@ -269,6 +275,9 @@ def run_build(args: argparse.Namespace) -> int:
     """Fit, build and write the device file; print what it holds. ConfigError for a bad input or a device
     that would not load."""
     out = Path(args.out)
+    if args.label is not None and not (0 < len(args.label) <= MAX_LABEL_CHARS and args.label.isprintable()):
+        raise ConfigError(f"--label: must be 1 to {MAX_LABEL_CHARS} printable characters, got "
+                          f"'{printable(args.label[:MAX_LABEL_CHARS])}'")
     check_writable_target(out, "device files", [*args.impedance, args.amplitude, args.like])
     template = load_device(args.like)
     full_scale_v = template.amplifier.volts_per_full_scale
@@ -338,7 +347,7 @@ def run_sweep(args: argparse.Namespace) -> int:
     if out is not None:
         _write_sweep(out, found)
     if args.json:
-        print(json.dumps(found.as_json(), indent=2))
+        print(json_text(found.as_json(), indent=2))
     else:
         fit = found.fit
         zero = "none within 5 degrees (the piezo stays capacitive)" if found.zero_phase_hz is None \

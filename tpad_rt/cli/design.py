@@ -10,7 +10,6 @@ or, with ``--json``, as a JSON list.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from typing import Any, cast, get_args
 
@@ -24,6 +23,7 @@ from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.config.device_schema import DensityGCm3, ModeM, PlateSideMm, ThicknessMm, YoungsModulusGpa
 from tpad_rt.decimal_text import parse_decimal
 from tpad_rt.errors import ConfigError
+from tpad_rt.json_text import json_text
 from tpad_rt.physics import plate
 from tpad_rt.physics.plate import ACTUATOR, TABLE1_GLASSES, Layer
 
@@ -230,7 +230,7 @@ def run(args: argparse.Namespace) -> int:
     mode_m = int(_positive_option("--mode", args.mode))
     rows = design_rows(_plates(args.plate), length_m, mode_m, args.reference)
     if args.json:
-        print(json.dumps(rows, indent=2))
+        print(json_text(rows, indent=2))
         return 0
     console = Console()
     console.print(_table(rows, mode_m, args.reference))

@@ -71,6 +71,8 @@ def device_format_problem(data: dict[str, Any], path: PathLike) -> str | None:
     Format 1 (no ``format_version``) is what tpad-rt wrote before the one-gamma circuit model.
     """
     version = data.get("format_version")
+    if version is None and "kind" in data and "circuit" not in data:
+        return "a texture file (it has 'kind'), not a device file (which has format_version and a circuit)"
     if version is None and "resonance_hz" in data:
         return (f"a device file of format 1 (it has no format_version), which tpad-rt no longer reads: its "
                 f"amplitude table and circuit are two models that disagree. Convert it to format "

@@ -15,7 +15,7 @@ TextureLibrary(folders)
     ProtocolError ``texture`` or ``forbidden_path``
 TelemetryFeed(renderer)
     ``pump()`` (drain the renderer's telemetry), ``summary(since_t) -> dict`` (one ``telemetry`` message)
-device_info(renderer) -> dict, json_safe(value) -> value
+device_info(renderer) -> dict
 friction_map_png(texture, device) -> bytes, colorbar_png() -> bytes
     the page's images
 
@@ -38,6 +38,7 @@ from tpad_rt.config import load_texture, parse_texture
 from tpad_rt.config.messages import did_you_mean
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
+from tpad_rt.json_text import json_safe
 from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
 from tpad_rt.physics.friction import relative_friction
 from tpad_rt.serve.protocol import ProtocolError, SetTexture
@@ -228,19 +229,6 @@ def device_info(renderer: Renderer) -> dict[str, Any]:
         "default_force_n": options.default_force_n, "watchdog_ms": options.watchdog_ms,
         "rate_hz": renderer.rate_hz, "block_frames": renderer.block_frames, "output": renderer.output_url,
     }
-
-
-def json_safe(value: Any) -> Any:
-    """``value`` with NaN and infinities as None and numpy scalars as Python numbers, recursively."""
-    if isinstance(value, dict):
-        return {str(key): json_safe(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(item) for item in value]
-    if isinstance(value, (np.integer, np.bool_)):
-        return value.item()
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    return value
 
 
 def friction_map_png(texture: CompiledTexture, device: Device) -> bytes:

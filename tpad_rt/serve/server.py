@@ -22,7 +22,6 @@ from __future__ import annotations
 import asyncio
 import hmac
 import itertools
-import json
 import math
 import sys
 import time
@@ -43,8 +42,9 @@ from websockets.http11 import Response
 from tpad_rt import __version__
 from tpad_rt.errors import SampleError
 from tpad_rt.serve import protocol
+from tpad_rt.json_text import json_safe, json_text
 from tpad_rt.serve.core import (
-    ClockMap, FingerOwner, TelemetryFeed, TextureLibrary, TokenBucket, colorbar_png, device_info, friction_map_png, json_safe,
+    ClockMap, FingerOwner, TelemetryFeed, TextureLibrary, TokenBucket, colorbar_png, device_info, friction_map_png,
 )
 from tpad_rt.serve.osc import OscEndpoint
 from tpad_rt.serve.protocol import ProtocolError, Request, Sample
@@ -519,7 +519,7 @@ class Server:
 
 def _wire(message: dict[str, Any]) -> str:
     """``message`` as the JSON text sent: NaN and infinities as null (JSON has neither; browsers refuse them)."""
-    return json.dumps(json_safe(message), allow_nan=False)
+    return json_text(message)
 
 
 def _echo(request: Request) -> dict[str, Any]:
