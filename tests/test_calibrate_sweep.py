@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import select
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -18,6 +20,7 @@ from cli_run import tpad_rt
 from tpad_rt.calibrate import sweep
 from tpad_rt.calibrate.measurements import read_impedance_sweeps
 from tpad_rt.device import Device
+from tpad_rt.outputs.serial_amp import AmpLink, parse_serial_url
 from tpad_rt.physics import electromech
 from tpad_rt.shipped import DEVICES_DIR
 
@@ -55,6 +58,37 @@ def test_each_carrier_is_held_five_time_constants_of_the_plate_without_contact(l
     assert tau_s == max(float(tau) for tau in device.envelope_time_constant_s(device.force_table_n))
     assert sweep.default_dwell_s(device) == pytest.approx(max(0.02, 5 * tau_s))
     assert (sweep.default_dwell_s(device) > 0.05) == (label == "SLG_0.4")
+
+
+def test_a_tone_the_amplifiers_watchdog_ended_is_started_again(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A host held up for longer than the amplifier's watchdog (a loaded machine: the sweep's tone is kept up by a
+    Python loop) finds the stream ended; tone() STARTs it again where it stopped and measures the tone applied
+    then, not a STATUS from before the watchdog (the amplifier plays the tone again after its trip)."""
+    device = Device.default()
+    with Emulator(tmp_path) as amp:
+        link = AmpLink.open(parse_serial_url(f"serial://{amp.port}"), carrier_hz=device.carrier_hz)
+        try:
+            assert link.info is not None
+            link.tone(5.0, 0.05)
+            write, held = link._write_tone, []
+
+            def held_up(value: int, play_index: int, fill: int) -> None:
+                if not held:  # once: longer than the watchdog, which then ends the stream
+                    held.append(play_index)
+                    time.sleep(3 * link.info.watchdog_ms * 1e-3)  # type: ignore[union-attr]
+                write(value, play_index, fill)
+
+            monkeypatch.setattr(link, "_write_tone", held_up)
+            link.tone(5.0, 0.05)
+            # The next carrier of the sweep: the stream plays on (a tone() that returned a STATUS from before the
+            # watchdog left the amplifier IDLE, and the next tone never plays)
+            carrier_hz = link.set_carrier(device.carrier_hz + 50.0)
+            status = link.tone(5.0, 0.05)
+        finally:
+            link.stop(ramp_ms=5.0)
+        amp.finish()
+    assert held and re.search(r"\bwatchdog_trips=1\b", amp.summary), amp.summary
+    assert status.envelope_v == pytest.approx(5.0, abs=2e-3) and status.carrier_hz == pytest.approx(carrier_hz)
 
 
 def test_a_vanished_amplifier_ends_the_sweep_in_one_line(tmp_path: Path) -> None:

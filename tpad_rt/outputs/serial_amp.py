@@ -170,6 +170,8 @@ class AmpStatus:
 TONE_BUFFER_S = 0.03
 #: How long past its dwell :meth:`AmpLink.tone` waits for a STATUS showing the tone applied on the carrier (s).
 TONE_APPLY_LIMIT_S = 1.0
+#: How many times one :meth:`AmpLink.tone` STARTs the stream again after the amplifier's watchdog ended it.
+MAX_TONE_RESTARTS = 3
 
 
 class AmpLink:
@@ -197,6 +199,7 @@ class AmpLink:
         self.target_fill = 0
         self.realtime = False  # whether the streamer thread got real-time scheduling
         self._tone_index = -1  # the next envelope index tone() writes; -1 before its START
+        self._tone_started = 0.0  # time.monotonic() of the last START tone() sent
 
     # --- opening ----------------------------------------------------------------------
 
@@ -361,19 +364,14 @@ class AmpLink:
         info = self.info
         assert info is not None and self._thread is None
         value = round(max(-1.0, min(1.0, envelope_v / info.full_scale_v)) * 32767)
-        rate = self.target.envelope_hz
-        fill = min(info.buffer_samples - self.frame_samples, max(self.target_fill, round(TONE_BUFFER_S * rate)))
+        fill = min(info.buffer_samples - self.frame_samples, max(self.target_fill, round(TONE_BUFFER_S * self.target.envelope_hz)))
         if self._tone_index < 0:
-            payload = rate.to_bytes(4, "little") + (0).to_bytes(4, "little") + min(fill, info.buffer_samples).to_bytes(
-                2, "little")
-            self._start_sent = True
-            self._command(payload, codec.MSG_START, f"START at {rate} Hz")
-            self._tone_index = 0
-            self._write_tone(value, 0, fill)
+            self._start_tone(value, 0, fill)
         deadline = time.monotonic() + seconds
         give_up = deadline + TONE_APPLY_LIMIT_S
         silent_s = (4 * info.status_period_ms + 100) * 1e-3
         last: AmpStatus | None = None
+        restarts = 0
         while True:
             if time.monotonic() > give_up:
                 raise BackendError(f"serial: the amplifier on {self.target.port} did not apply a {envelope_v:g} V tone "
@@ -384,12 +382,41 @@ class AmpLink:
                 raise BackendError(f"serial: the amplifier on {self.target.port} stopped reporting (no STATUS for "
                                    f"{silent_s * 1e3:.0f} ms)")
             status = self._status(body)
-            self._write_tone(value, int(codec.get_u32(body, codec.PAYLOAD + codec.STATUS_PLAY_INDEX)), fill)
+            play_index = int(codec.get_u32(body, codec.PAYLOAD + codec.STATUS_PLAY_INDEX))
+            idle = int(body[codec.PAYLOAD + codec.STATUS_STATE]) == codec.STATE_IDLE
+            if idle and time.monotonic() - self._tone_started > info.watchdog_ms * 1e-3:
+                # The amplifier's watchdog ended the stream (no earlier than watchdog_ms after a START: an IDLE
+                # STATUS before that was sent before the START): this loop was held up for longer than the
+                # watchdog (a loaded host). START again where it stopped, and measure a whole dwell after that.
+                restarts += 1
+                if restarts > MAX_TONE_RESTARTS:
+                    raise BackendError(f"serial: the amplifier on {self.target.port} ended the tone {restarts} times "
+                                       f"(its {info.watchdog_ms} ms watchdog): this host does not keep its buffer "
+                                       "filled")
+                self._start_tone(value, play_index, fill)
+                deadline = time.monotonic() + seconds
+                give_up = deadline + TONE_APPLY_LIMIT_S
+                last = None
+                continue
+            self._write_tone(value, play_index, fill)
             if status is not None and abs(status.carrier_hz - self.carrier_hz) < 1e-3 and \
                     abs(status.envelope_v * 32767 / info.full_scale_v - value) <= 1.0:
                 last = status
             if time.monotonic() >= deadline and last is not None:
                 return last
+
+    def _start_tone(self, value: int, start_index: int, fill: int) -> None:
+        """START a stream at ``start_index`` primed with ``fill`` samples of the envelope ``value``, and write them."""
+        info = self.info
+        assert info is not None
+        rate = self.target.envelope_hz
+        payload = (rate.to_bytes(4, "little") + (start_index & 0xFFFFFFFF).to_bytes(4, "little")
+                   + min(fill, info.buffer_samples).to_bytes(2, "little"))
+        self._start_sent = True
+        self._command(payload, codec.MSG_START, f"START at {rate} Hz")
+        self._tone_started = time.monotonic()
+        self._tone_index = start_index & 0xFFFFFFFF
+        self._write_tone(value, start_index, fill)
 
     def _status(self, body: np.ndarray) -> AmpStatus | None:
         """The STATUS ``body`` measured, or None while it plays nothing; BackendError for a fault."""
