@@ -33,7 +33,7 @@ import numpy as np
 from tpad_rt.calibrate.amplitude import Circuit, GammaFit
 from tpad_rt.calibrate.impedance import BvdFit
 from tpad_rt.config import DeviceFile
-from tpad_rt.config.device_schema import DEVICE_FORMAT_VERSION, MIN_FORCE_STEP_N
+from tpad_rt.config.device_schema import DEVICE_FORMAT_VERSION, FORCE_SLACK_N, MIN_FORCE_STEP_N
 from tpad_rt.config.loader import validate_device
 from tpad_rt.config.yaml_io import YamlDocument, dump_yaml, load_yaml
 from tpad_rt.device import Device
@@ -203,13 +203,16 @@ def _format1_table(name: str, calibration: Any) -> tuple[np.ndarray, np.ndarray]
         if not (isinstance(values, list) and values and all(
                 isinstance(value, (int, float)) and not isinstance(value, bool) for value in values)):
             raise ConfigError(f"{name}: calibration.{key}: a format 1 file needs a list of numbers here")
-        lists[key] = np.array(values, dtype=np.float64)
+        try:
+            lists[key] = np.array(values, dtype=np.float64)
+        except OverflowError:  # an integer beyond float64
+            raise ConfigError(f"{name}: calibration.{key}: a number here is beyond any force or amplitude") from None
     forces, amplitudes = lists["force_n"], lists["amplitude_um_per_v"]
     if forces.shape != amplitudes.shape:
         raise ConfigError(f"{name}: calibration: force_n and amplitude_um_per_v must be lists of the same length")
     if not np.all((forces >= 0.0) & (forces <= MAX_FORCE_N)):
         raise ConfigError(f"{name}: calibration.force_n: every force must be a number in [0, {MAX_FORCE_N:g}] N")
-    if np.any(np.diff(forces) < MIN_FORCE_STEP_N):
+    if np.any(np.diff(forces) < MIN_FORCE_STEP_N - FORCE_SLACK_N):
         raise ConfigError(f"{name}: calibration.force_n: forces must increase by at least {MIN_FORCE_STEP_N:g} N")
     if not np.all((amplitudes >= 1e-6) & (amplitudes <= 1000.0)):
         raise ConfigError(f"{name}: calibration.amplitude_um_per_v: every amplitude must be a number in [1e-06, 1000] "

@@ -242,7 +242,9 @@ def _uncertainty(jacobian: _Array, residuals: _Array) -> dict[str, float]:
         [0.0, 0.0, 1.0, 0.0],    # Q
     ])
     variances = np.einsum("ij,jk,ik->i", transform, covariance, transform)
-    return {key: float(math.sqrt(max(value, 0.0))) for key, value in zip(QUANTITIES, variances)}
+    # A direction no point determines (an overflowed or NaN variance) is an infinite uncertainty
+    return {key: math.sqrt(max(float(value), 0.0)) if math.isfinite(value) else math.inf
+            for key, value in zip(QUANTITIES, variances)}
 
 
 def fit_sweep(sweep: ImpedanceSweep) -> BvdFit:

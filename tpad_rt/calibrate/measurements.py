@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from tpad_rt.config.device_schema import MIN_FORCE_STEP_N
+from tpad_rt.config.device_schema import FORCE_SLACK_N, MIN_FORCE_STEP_N
 from tpad_rt.csv_lines import check_header, data_lines
 from tpad_rt.decimal_text import parse_decimal
 from tpad_rt.errors import ConfigError, printable
@@ -197,7 +197,7 @@ def read_impedance_sweeps(path: str | Path) -> list[ImpedanceSweep]:
     distinct = np.unique(forces)
     if len(distinct) > MAX_SWEEPS:
         raise ConfigError(f"{table.name}: {len(distinct):,} forces; a file may hold at most {MAX_SWEEPS} sweeps")
-    close = np.flatnonzero(np.diff(distinct) < MIN_FORCE_STEP_N)
+    close = np.flatnonzero(np.diff(distinct) < MIN_FORCE_STEP_N - FORCE_SLACK_N)
     if close.size:
         raise ConfigError(f"{table.name}: force_n: sweeps at {distinct[close[0]]:g} and {distinct[close[0] + 1]:g} N "
                           f"are less than {MIN_FORCE_STEP_N:g} N apart: one sweep per force")

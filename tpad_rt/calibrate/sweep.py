@@ -45,8 +45,9 @@ from tpad_rt.physics import electromech
 #: The drive held while sweeping (V peak), at most 1/8 of the device's max volts.
 DEFAULT_DRIVE_V = 5.0
 #: How long each carrier is held before it is measured: at least MIN_DWELL_S (s), and DWELL_TIME_CONSTANTS of the
-#: device's slowest envelope (default_dwell_s).
+#: device's slowest envelope, at most MAX_DWELL_S (the longest --dwell-ms; default_dwell_s).
 MIN_DWELL_S = 0.02
+MAX_DWELL_S = 10.0
 DWELL_TIME_CONSTANTS = 5.0
 #: The coarse sweep: this many carriers over +-COARSE_SPAN of the device's carrier.
 COARSE_POINTS = 81
@@ -62,9 +63,9 @@ Progress = Callable[[int, int], None]
 
 def default_dwell_s(device: Device) -> float:
     """How long (s) to hold each carrier on ``device``: DWELL_TIME_CONSTANTS of its slowest envelope time constant
-    (over its calibrated forces: the plate without contact rings longest), at least MIN_DWELL_S."""
+    (over its calibrated forces: the plate without contact rings longest), within [MIN_DWELL_S, MAX_DWELL_S]."""
     slowest_s = float(np.max(device.envelope_time_constant_s(device.force_table_n)))
-    return max(MIN_DWELL_S, DWELL_TIME_CONSTANTS * slowest_s)
+    return min(max(MIN_DWELL_S, DWELL_TIME_CONSTANTS * slowest_s), MAX_DWELL_S)
 
 
 def sweep(link: AmpLink, freqs_hz: np.ndarray, drive_v: float, dwell_s: float, shunt_ohm: float,

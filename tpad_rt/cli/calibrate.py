@@ -48,6 +48,7 @@ from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.files import check_writable_target
 from tpad_rt.json_text import json_text
+from tpad_rt.shipped import device_file
 from tpad_rt.figures import figure_target, save
 
 _HEADER = "# written by tpad-rt calibrate {action}: its source entries say where each value came from\n"
@@ -81,8 +82,8 @@ def add_parser(subparsers: Subparsers) -> None:
     source.add_argument("--impedance", metavar="SWEEP.csv", nargs="+", help="impedance sweeps giving the circuit")
     source.add_argument("--device", metavar="FILE", help="device file giving the circuit")
     amplitude.add_argument("--freq-hz", type=number(MIN_CARRIER_HZ, True, MAX_CARRIER_HZ, "Hz"),
-                           help="drive frequency of rows without freq_hz (default: the circuit's resonance at "
-                           "its lowest force)")
+                           help="drive frequency of rows without freq_hz (default: the carrier: --device's, or the "
+                           "sweeps' loaded resonance at their lowest force, as build writes it)")
     amplitude.add_argument("--json", action="store_true", help="print a JSON object")
     amplitude.add_argument("--plot", metavar="FILE.png", help="draw amplitude against volts, and gamma per force")
     amplitude.set_defaults(func=run_amplitude)
@@ -131,10 +132,10 @@ def add_parser(subparsers: Subparsers) -> None:
     sweeper.add_argument("--drive-v", type=number(MIN_DRIVE_V, True, MAX_VOLTS, "V"),
                          help=f"drive held while sweeping, V peak (default: {sweep.DEFAULT_DRIVE_V:g} V, or 1/8 of "
                          "the device's max volts if less)")
-    sweeper.add_argument("--dwell-ms", type=number(1, True, 10_000, "ms"),
+    sweeper.add_argument("--dwell-ms", type=number(1, True, sweep.MAX_DWELL_S * 1e3, "ms"),
                          help=f"time each carrier is held before it is read (default: "
                          f"{sweep.DWELL_TIME_CONSTANTS:g} envelope time constants of the device without contact, at "
-                         f"least {sweep.MIN_DWELL_S * 1e3:g})")
+                         f"least {sweep.MIN_DWELL_S * 1e3:g}, at most {sweep.MAX_DWELL_S * 1e3:g})")
     sweeper.add_argument("--out", metavar="SWEEP.csv", help="write the fine sweep (freq_hz, z_real_ohm, z_imag_ohm)")
     sweeper.add_argument("--json", action="store_true", help="print a JSON object")
     sweeper.add_argument("--plot", metavar="FILE.png", help="draw the fine sweep with its fit")
@@ -224,12 +225,15 @@ def run_impedance(args: argparse.Namespace) -> int:
     return 0
 
 
-def _circuit(args: argparse.Namespace) -> tuple[Circuit, list[str]]:
-    """The circuit the amplitudes are read through, and the impedance fits' warnings."""
+def _circuit(args: argparse.Namespace) -> tuple[Circuit, float, list[str]]:
+    """The circuit the amplitudes are read through, the carrier (Hz) rows without freq_hz were driven at (the
+    device's; for sweeps, the loaded resonance at the lowest force that calibrate build would write with the
+    default device's shunt), and the impedance fits' warnings."""
     if args.impedance:
         sweeps, fits = _fits(args.impedance)
-        return circuit_of(fits), _fit_warnings(sweeps, fits)
-    return Circuit.of_device(Device.from_file(args.device)), []
+        return circuit_of(fits), default_carrier_hz(fits, Device.default().shunt_ohm), _fit_warnings(sweeps, fits)
+    device = Device.from_file(args.device)
+    return Circuit.of_device(device), device.carrier_hz, []
 
 
 def _gamma_table(fit: GammaFit) -> Table:
@@ -247,9 +251,9 @@ def _gamma_table(fit: GammaFit) -> Table:
 def run_amplitude(args: argparse.Namespace) -> int:
     """Fit gamma; print the table or JSON; draw --plot. ConfigError for a bad file."""
     out = None if args.plot is None else figure_target("--plot", args.plot)
-    circuit, warnings = _circuit(args)
+    circuit, carrier_hz, warnings = _circuit(args)
     measurements = read_amplitudes(args.measurements)
-    fit = fit_gamma(measurements, circuit, args.freq_hz)
+    fit = fit_gamma(measurements, circuit, carrier_hz if args.freq_hz is None else args.freq_hz)
     if args.json:
         print(json_text(fit.as_json(), indent=2))
     else:
@@ -278,7 +282,7 @@ def run_build(args: argparse.Namespace) -> int:
     if args.label is not None and not (0 < len(args.label) <= MAX_LABEL_CHARS and args.label.isprintable()):
         raise ConfigError(f"--label: must be 1 to {MAX_LABEL_CHARS} printable characters, got "
                           f"'{printable(args.label[:MAX_LABEL_CHARS])}'")
-    check_writable_target(out, "device files", [*args.impedance, args.amplitude, args.like])
+    check_writable_target(out, "device files", [*args.impedance, args.amplitude, device_file(args.like)])
     template = load_device(args.like)
     full_scale_v = template.amplifier.volts_per_full_scale
     if args.max_voltage_v is not None and args.max_voltage_v > full_scale_v:
@@ -321,7 +325,7 @@ def run_sweep(args: argparse.Namespace) -> int:
     plot = None if args.plot is None else figure_target("--plot", args.plot)
     out = None if args.out is None else Path(args.out)
     if out is not None:
-        check_writable_target(out, "impedance sweeps", [] if args.device is None else [args.device])
+        check_writable_target(out, "impedance sweeps", [device_file("default" if args.device is None else args.device)])
     device = Device.default() if args.device is None else Device.from_file(args.device)
     drive_v = args.drive_v if args.drive_v is not None else min(sweep.DEFAULT_DRIVE_V, device.max_voltage_v / 8)
     if drive_v > device.max_voltage_v:

@@ -24,7 +24,7 @@ from tpad_rt.limits import MAX_FORCE_N
 #: and it keeps the kernel's force grid from collapsing to a zero step.
 MIN_FORCE_STEP_N = 0.001
 #: Slack (N) for decimal forces' rounding: 1.001 - 1.0 is 0.000999999999999889 in binary.
-_FORCE_SLACK_N = 1e-9
+FORCE_SLACK_N = 1e-9
 #: The motional branch's quality factor sqrt(L / C) / R must lie in (MIN_Q, MAX_Q] at every force:
 #: above 0.5 the plate rings (an underdamped resonator, which sim:// models); a MAX_Q plate takes
 #: seconds to ring up, far beyond any TPaD.
@@ -100,7 +100,7 @@ class _ForceTables(StrictModel):
     def _consistent(self) -> _ForceTables:
         for index in range(1, len(self.force_n)):
             previous, force = self.force_n[index - 1], self.force_n[index]
-            if force - previous < MIN_FORCE_STEP_N - _FORCE_SLACK_N:
+            if force - previous < MIN_FORCE_STEP_N - FORCE_SLACK_N:
                 message = (f"must be >= {previous + MIN_FORCE_STEP_N:g} (forces must increase by at least "
                            f"{MIN_FORCE_STEP_N:g} N), got {force:g}")
                 raise rule_error(message, "force_n", index)
