@@ -85,14 +85,12 @@ def test_show_runs_as_a_program_and_prints_one_line(tmp_path: Path) -> None:
         ([str(GOOD / "device.yaml")], "device.yaml"),
         ([str(GOOD / "grating.yaml"), "--device", str(GOOD / "grating.yaml")], "grating.yaml"),
         ([str(GOOD / "grating.yaml"), "--speed-mm-s", "-1"], "--speed-mm-s: must be a finite number >= 0, got -1"),
-        ([str(GOOD / "grating.yaml"), "--force-n", "nan"], "--force-n: must be a finite number >= 0, got nan"),
-        ([str(GOOD / "grating.yaml"), "--direction-deg", "inf"], "--direction-deg: must be a finite number, got inf"),
+        ([str(GOOD / "grating.yaml"), "--force-n", "-0.5"], "--force-n: must be a finite number >= 0, got -0.5"),
         ([str(GOOD / "grating.yaml"), "--t-s", "-0.5"], "--t-s: must be a finite number >= 0, got -0.5"),
         ([str(GOOD / "grating.yaml"), "--resolution-mm", "0"], "--resolution-mm: must be a finite number > 0, got 0"),
         ([str(GOOD / "grating.yaml"), "--resolution-mm", "0.001"], "--resolution-mm: 0.001 gives 130000 x 60000"),
     ],
-    ids=["missing", "device-as-texture", "texture-as-device", "speed", "force", "direction", "time", "resolution",
-         "too-fine"],
+    ids=["missing", "device-as-texture", "texture-as-device", "speed", "force", "time", "resolution", "too-fine"],
 )
 def test_bad_input_is_one_line_and_exit_1(
     arguments: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture
@@ -115,8 +113,10 @@ def test_bad_output_path_is_one_line_and_exit_1(
     assert message in stderr and "Traceback" not in stderr and stderr.count("\n") == 1
 
 
-def test_a_value_that_is_not_a_number_is_a_usage_error(capsys: pytest.CaptureFixture) -> None:
+@pytest.mark.parametrize(("option", "value"), [("--speed-mm-s", "fast"), ("--force-n", "nan"),
+                                               ("--direction-deg", "inf"), ("--t-s", "1_000")])
+def test_a_value_that_is_not_a_number_is_a_usage_error(capsys: pytest.CaptureFixture, option: str, value: str) -> None:
     with pytest.raises(SystemExit) as exit_info:
-        main(["show", str(GOOD / "grating.yaml"), "--speed-mm-s", "fast", "--out", "x.png"])
+        main(["show", str(GOOD / "grating.yaml"), option, value, "--out", "x.png"])
     assert exit_info.value.code == 1
-    assert "argument --speed-mm-s: invalid float value: 'fast'" in capsys.readouterr().err
+    assert f"argument {option}: must be a finite number, got '{value}'" in capsys.readouterr().err

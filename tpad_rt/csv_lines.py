@@ -19,6 +19,7 @@ import csv
 from collections.abc import Iterator, Sequence
 from typing import BinaryIO
 
+from tpad_rt.decimal_text import parse_decimal
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.urls import did_you_mean
 
@@ -62,7 +63,7 @@ _SEPARATOR_NAMES = {"\t": "tabs", ";": "semicolons", " ": "spaces"}
 
 def _looks_numeric(text: str) -> bool:
     try:
-        float(text)
+        parse_decimal(text)
     except ValueError:
         return False
     return True

@@ -20,17 +20,29 @@ import math
 from collections.abc import Callable
 from typing import TypeAlias
 
-from tpad_rt.decimal_text import parse_decimal
+from tpad_rt.decimal_text import parse_decimal, parse_whole
 
 #: argparse names the type ``add_subparsers()`` returns only privately, and documents no public
 #: base for it: this alias is the one place the private name appears.
 Subparsers: TypeAlias = "argparse._SubParsersAction[argparse.ArgumentParser]"
 
+def decimal(text: str) -> float:
+    """An argparse type: a plain decimal number (:func:`tpad_rt.decimal_text.parse_decimal`; NaN, infinities and
+    ``1_000`` refused); ranges are the command's to check."""
+    try:
+        value = parse_decimal(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got '{text}'")
+    return value
+
+
 def whole(high: int, what: str, low: int = 1) -> Callable[[str], int]:
     """An argparse type: a whole number in [``low``, ``high``] (``what`` says what the bound is)."""
     def parse(text: str) -> int:
         try:
-            value = int(text)
+            value = parse_whole(text)
         except ValueError:
             value = low - 1
         if not low <= value <= high:

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from tpad_rt.cli.arguments import Subparsers
+from tpad_rt.cli.arguments import Subparsers, decimal
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.figures import figure_target, pyplot, save
 from tpad_rt.files import ensure_regular
@@ -40,8 +40,8 @@ def add_parser(subparsers: Subparsers) -> None:
     parser.add_argument("--out", metavar="FILE", required=True, help="image to write (.png, .pdf or .svg)")
     parser.add_argument("--along", choices=("time", "x"), default="time",
                         help="horizontal axis: time (default) or the finger's x position")
-    parser.add_argument("--start", metavar="S", type=float, default=-math.inf, help="plot from this time (s)")
-    parser.add_argument("--end", metavar="S", type=float, default=math.inf, help="plot up to this time (s)")
+    parser.add_argument("--start", metavar="S", type=decimal, default=-math.inf, help="plot from this time (s)")
+    parser.add_argument("--end", metavar="S", type=decimal, default=math.inf, help="plot up to this time (s)")
     parser.set_defaults(func=run)
 
 

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 
-from tpad_rt.cli.arguments import Subparsers
+from tpad_rt.cli.arguments import Subparsers, decimal
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.figures import figure_target, pyplot, save
@@ -94,12 +94,12 @@ def add_parser(subparsers: Subparsers) -> None:
     )
     parser.add_argument("texture", metavar="TEXTURE", help="texture file (.yaml)")
     parser.add_argument("--device", metavar="FILE", help="device file, or a shipped device's name such as SLG_0.4 (default: default, SLG_0.56)")
-    parser.add_argument("--speed-mm-s", type=float, default=100.0, help="finger speed, mm/s (default 100)")
-    parser.add_argument("--force-n", type=float, default=0.5, help="contact force, N (default 0.5)")
-    parser.add_argument("--direction-deg", type=float, default=0.0,
+    parser.add_argument("--speed-mm-s", type=decimal, default=100.0, help="finger speed, mm/s (default 100)")
+    parser.add_argument("--force-n", type=decimal, default=0.5, help="contact force, N (default 0.5)")
+    parser.add_argument("--direction-deg", type=decimal, default=0.0,
                         help="direction of finger motion, degrees counter-clockwise from +x on screen (default 0)")
-    parser.add_argument("--t-s", type=float, default=0.0, help="seconds since the texture was set (default 0)")
-    parser.add_argument("--resolution-mm", type=float, default=0.25, help="grid step, mm (default 0.25)")
+    parser.add_argument("--t-s", type=decimal, default=0.0, help="seconds since the texture was set (default 0)")
+    parser.add_argument("--resolution-mm", type=decimal, default=0.25, help="grid step, mm (default 0.25)")
     parser.add_argument("--out", metavar="FILE.png", required=True, help="figure to write (.png, .pdf or .svg)")
     parser.set_defaults(func=run)
 

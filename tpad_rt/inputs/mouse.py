@@ -37,6 +37,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from tpad_rt.decimal_text import parse_whole
 from tpad_rt.errors import BackendError
 from tpad_rt.inputs.base import LiveInput, SampleSink, plate_size_mm, position_range
 from tpad_rt.limits import MAX_FORCE_N
@@ -248,7 +249,7 @@ def _rect(text: str) -> str | tuple[int, int, int, int]:
     if text == "screen":
         return text
     try:
-        values = tuple(int(part) for part in text.split(","))
+        values = tuple(parse_whole(part) for part in text.split(","))
     except ValueError:
         values = ()
     if len(values) != 4 or values[0] < 0 or values[1] < 0 or values[2] <= 0 or values[3] <= 0:
