@@ -54,7 +54,9 @@ def _motional_power_w(texture: Path, cap_w: float, force_n) -> np.ndarray:  # ty
         force = force_n(t_s)
         pipeline.push_finger(t_s, 5.0 + 100.0 * t_s, 30.0, force)
         pipeline.render(block)
-        step, gain, r_ohm = systems.setdefault(force, _held_system(DEVICE, force))
+        if force not in systems:
+            systems[force] = _held_system(DEVICE, force)
+        step, gain, r_ohm = systems[force]
         for volts in block.astype(np.float64) * DEVICE.volts_per_full_scale:
             current.append(state[1])
             state = step @ state + gain * volts

@@ -36,7 +36,7 @@ MODEL_GUARD_FRACTION = 0.02
 VOLTAGE, POWER, SPEED_FLOOR, WATCHDOG, SHAPER_LIMIT = 1, 2, 4, 8, 32
 STEP_FIELDS = (
     "t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu", "amplitude_um", "command_v", "cap_v",
-    "gate", "flags", "power_w", "peak_v", "shaper_excess_v",
+    "gate", "flags", "power_w", "peak_v", "shaper_margin_v",
 )
 
 
@@ -144,7 +144,7 @@ class _Stream:
         # the model takes the volts that amplitude is worth now
         gain_m_per_v = float(device.amplitude_m_per_v(force_n))
         if self.model_gain_m_per_v > gain_m_per_v:
-            held_v = self.model_v * self.model_gain_m_per_v / gain_m_per_v
+            held_v = self.model_v * (self.model_gain_m_per_v / gain_m_per_v)
             if held_v**2 * self.p1_w > self.cap_w * (1 + MODEL_GUARD_FRACTION):
                 self.model_v = min(held_v, device.max_voltage_v)
         self.model_gain_m_per_v = gain_m_per_v
@@ -155,7 +155,7 @@ class _Stream:
         self.gate = finger.active and run
         self.energy_v2: list[float] = []
         self.step_flags = flags
-        self.shaper_excess_v = 0.0  # the most a shaper drive asked beyond its limit in this step (V)
+        self.shaper_margin_v = math.inf  # how near a shaper drive came to a limit, either side, in this step (V)
         f = self.finger
         return dict(
             t=t_s, x_mm=f.x_mm, y_mm=f.y_mm, speed_mm_s=math.hypot(f.vx_mm_s, f.vy_mm_s), force_n=f.force_n,
@@ -175,7 +175,7 @@ class _Stream:
             envelope_v = min(max(drive_v, self.low_v), self.cap_v)
             if envelope_v != drive_v:
                 self.step_flags |= SHAPER_LIMIT
-                self.shaper_excess_v = max(self.shaper_excess_v, abs(drive_v - envelope_v))
+            self.shaper_margin_v = min(self.shaper_margin_v, abs(min(self.cap_v - drive_v, drive_v - self.low_v)))
         self.model_v += self.model_step * (envelope_v - self.model_v)
         phase = n * self.carrier
         sine = math.sin(2 * math.pi * float(phase - math.floor(phase)))
@@ -226,6 +226,6 @@ def render_reference(
         envelope[n], value = stream.sample(n)
         samples[n] = np.float32(value)
         steps[-1]["flags"] = stream.step_flags
-        steps[-1]["shaper_excess_v"] = stream.shaper_excess_v
+        steps[-1]["shaper_margin_v"] = stream.shaper_margin_v
     steps[-1]["power_w"], steps[-1]["peak_v"] = stream.close_step()
     return Reference(samples, envelope, {name: np.array([step[name] for step in steps]) for name in STEP_FIELDS})

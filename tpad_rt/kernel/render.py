@@ -609,7 +609,7 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     """Reset the carried values that are out of their ranges; FAULT_STATE if one was.
 
     The smoothed volts must lie in ``[0, max_voltage_v]``, the plate model's in
-    ``[-max_voltage_v, max_voltage_v]``, the gain ramp position in
+    ``[-max_voltage_v, max_voltage_v]`` and its gain (m/V) a finite number >= 0, the gain ramp position in
     ``[0, ramp samples]`` (both 0 for a fresh stream); a reset one restarts from 0 (no
     ramp can start from a value that is not finite). The per-sample tables are then
     rebuilt, in case they were overwritten too.
@@ -623,6 +623,9 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
         fault = FAULT_STATE
     if not (state[STATE_MODEL_ON_REF] == 0.0 or state[STATE_MODEL_ON_REF] == 1.0):
         state[STATE_MODEL_ON_REF] = 0.0
+        fault = FAULT_STATE
+    if not 0.0 <= state[STATE_MODEL_GAIN_M_PER_V] < math.inf:
+        state[STATE_MODEL_GAIN_M_PER_V] = 0.0
         fault = FAULT_STATE
     if not 0.0 <= state[STATE_RAMP_START] <= max(state[STATE_RAMP_SAMPLES], 0.0):
         state[STATE_RAMP_START] = 0.0
@@ -654,7 +657,7 @@ def _guard_model(cfg: np.ndarray, state: np.ndarray, gain_m_per_v: float, p1_w: 
         return
     model_v = state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
     held_v = model_v * (previous / gain_m_per_v)
-    if held_v * held_v * p1_w > cfg[CFG_POWER_CAP_W] * (1.0 + MODEL_GUARD_FRACTION):
+    if held_v > 0.0 and held_v * held_v * p1_w > cfg[CFG_POWER_CAP_W] * (1.0 + MODEL_GUARD_FRACTION):
         state[STATE_MODEL_V] = min(held_v, cfg[CFG_MAX_VOLTAGE_V])
         state[STATE_MODEL_ON_REF] = 0.0
 
