@@ -930,7 +930,7 @@ def test_recording_keeps_at_most_its_limit(capsys: pytest.CaptureFixture[str], t
     (("emulate", "--fault", "stall:1:x"), "stall FOR_S must be a number"),
     (("emulate", "--fault", "disconnect:1", "--fault", "disconnect:2"), "--fault disconnect given 2 times"),
     (("emulate", "--device", "/nonexistent/device.yaml"), "/nonexistent/device.yaml"),
-    (("emulate", "--record", "/nonexistent/folder/x.npz"), "cannot write the recording there"),
+    (("emulate", "--record", "/nonexistent/folder/x.npz"), "cannot write recordings there: no folder /nonexistent/folder"),
     (("emulate", "--record", "/tmp"), "exists and is not a regular file (a directory)"),
     (("emulate", "--record", "/dev/null"), "exists and is not a regular file (a character device)"),
     (("emulate", "--port", "/nonexistent/tty"), "/nonexistent/tty: cannot open the port"),

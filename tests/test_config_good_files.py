@@ -141,7 +141,8 @@ def test_models_are_frozen() -> None:
 def test_texture_loaded_as_device_is_an_error() -> None:
     with pytest.raises(ConfigError) as caught:
         load_device(GOOD_FILES / "grating.yaml")
-    assert f"{GOOD_FILES / 'grating.yaml'}: label: required key missing (line 1)" in caught.value.errors
+    assert caught.value.errors == [f"{GOOD_FILES / 'grating.yaml'}: a texture file (it has 'kind'), not a device file "
+                                   "(which has format_version and a circuit)"]
 
 
 def test_image_changed_after_loading_is_a_config_error(tmp_path: Path) -> None:

@@ -14,7 +14,7 @@ import pytest
 import tpad_rt
 import tpad_rt.telemetry
 from tpad_rt.engine import Renderer
-from tpad_rt.errors import BackendError, ConfigError, TpadError
+from tpad_rt.errors import ConfigError, TpadError
 from tpad_rt.recording import read_recording
 
 GRATING = Path(__file__).resolve().parents[1] / "textures" / "grating.yaml"
@@ -108,7 +108,7 @@ def test_join_returns_when_another_thread_stops() -> None:
 
 def test_output_that_cannot_open_fails_start(tmp_path: Path) -> None:
     renderer = Renderer(output=f"wav://{tmp_path}/missing/out.wav")
-    with pytest.raises(BackendError, match="cannot write"):
+    with pytest.raises(ConfigError, match="out.wav: cannot write WAV files there: no folder "):
         renderer.start()
     assert not renderer.running
 

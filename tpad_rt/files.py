@@ -142,10 +142,12 @@ def check_writable_target(path: PathLike, what: str, inputs: Sequence[PathLike] 
     except ValueError:
         raise ConfigError(f"{name}: the path contains a NUL byte") from None
     except OSError:
-        folder = os.path.dirname(os.path.abspath(os.fspath(path)))
+        folder = os.path.dirname(os.fspath(path)) or "."  # as written: 'missing/../x' needs 'missing'
         if not os.path.isdir(folder):
             raise ConfigError(f"{name}: cannot write {what} there: no folder {printable(folder)}") from None
-        return  # missing (or unreachable): opening it for writing says why
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise ConfigError(f"{name}: cannot write {what} there: the folder {printable(folder)} is not writable")
+        return  # missing: opening it for writing says what else goes wrong
     if not stat.S_ISREG(mode):
         raise ConfigError(f"{name}: exists and is not a regular file ({_kind(mode)}); "
                           f"tpad-rt writes {what} to regular files only")
