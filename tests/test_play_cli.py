@@ -21,7 +21,6 @@ from jack_server import jack_server, kill_server_under
 from xvfb import display, xvfb_server  # noqa: F401 - fixtures
 
 from tpad_rt.cli.play import AUTO_SWIPE
-from tpad_rt.compiling import NOTICE
 from tpad_rt.recording import read_recording
 
 REPO = Path(__file__).resolve().parents[1]
@@ -63,23 +62,6 @@ def test_blocks_the_plate_cannot_follow_are_counted_as_departures() -> None:
     departed = int(friction[0].split("departures: ")[1].split(" blocks")[0])
     judged = int(friction[0].split(" over ")[1].split(" touching")[0])
     assert departed > 0.2 * judged
-
-
-@pytest.mark.slow
-def test_a_first_run_says_it_compiles_before_anything_else_and_then_plays_its_whole_duration(tmp_path: Path) -> None:
-    """Issue 10: on an empty numba cache the first line is the compile notice (stderr), the kernels all
-    compile before the clock starts (the run plays its 1 s without a stall), and the next run is silent."""
-    env = {**BARE_ENV, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
-    cold = _play("textures/grating.yaml", "--duration", "1", env=env)
-    assert cold.returncode == 0, cold.stderr
-    notice = cold.stderr.splitlines()
-    assert notice[0] == NOTICE
-    assert len(notice) == 2 and notice[1].startswith("tpad-rt: compiled ") and notice[1].endswith(" s")
-    assert int(notice[1].split()[2]) > 10  # functions compiled: the kernels, not a stray one
-    played = cold.stdout.splitlines()[1]
-    assert played.startswith("played ") and " 0 underflows" in played  # nothing compiled while the clock ran
-    warm = _play("textures/grating.yaml", "--duration", "0.2", env=env)
-    assert warm.returncode == 0 and warm.stderr == ""
 
 
 def test_a_finite_input_ends_the_play_and_the_recording_ends_in_silence(tmp_path: Path) -> None:

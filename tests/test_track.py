@@ -5,7 +5,6 @@ simulated plate, which resonates where the circuit does."""
 from __future__ import annotations
 
 import json
-
 import math
 from pathlib import Path
 

@@ -18,6 +18,8 @@ from pathlib import Path
 import pytest
 from conftest import REPO_ROOT, require_system
 
+from tpad_rt.compiling import NOTICE
+
 pytestmark = [pytest.mark.slow, pytest.mark.system]
 
 
@@ -68,12 +70,22 @@ def test_the_wheel_holds_the_package_not_the_repository(installed: tuple[Path, d
 
 
 def test_tpad_rt_play_runs_a_shipped_texture_from_any_folder(installed: tuple[Path, dict[str, str]]) -> None:
+    """The installed package's first run (the first test here to run the kernels, in the venv's empty numba cache):
+    its first line is the compile notice (stderr), the kernels all compile before the clock starts (it plays its
+    1 s without an underflow), and the next run is silent."""
     bin_dir, env = installed
     elsewhere = bin_dir.parent.parent / "elsewhere"
-    played = _run([str(bin_dir / "tpad-rt"), "play", "grating", "--output", "sim://", "--duration", "0.5"],
-                  elsewhere, env)
+    play = [str(bin_dir / "tpad-rt"), "play", "grating", "--output", "sim://", "--duration"]
+    played = _run([*play, "1"], elsewhere, env)
     assert played.returncode == 0, played.stderr
     assert "played " in played.stdout and "drive: peak" in played.stdout, played.stdout
+    notice = played.stderr.splitlines()
+    assert notice[0] == NOTICE
+    assert len(notice) == 2 and notice[1].startswith("tpad-rt: compiled ") and notice[1].endswith(" s")
+    assert int(notice[1].split()[2]) > 10  # functions compiled: the kernels, not a stray one
+    assert " 0 underflows" in next(line for line in played.stdout.splitlines() if line.startswith("played "))
+    warm = _run([*play, "0.2"], elsewhere, env)
+    assert warm.returncode == 0 and warm.stderr == ""
     # a texture with an image asset: the assets are package data too
     path = _run([str(bin_dir / "python"), "-c",
                  "from tpad_rt.texture import load_compiled; print(load_compiled('bitmap_logo').img.size)"],
