@@ -1,8 +1,9 @@
 """JSON that every parser accepts: NaN and infinities written as null.
 
 Python's ``json`` writes ``NaN`` and ``Infinity``, which JSON does not have (browsers,
-Node, ``jq`` and strict parsers refuse or mangle them). Every JSON tpad-rt prints or
-sends goes through :func:`json_text`.
+Node, ``jq`` and strict parsers refuse or mangle them). JSON that may hold an
+undetermined value (``serve``'s messages, ``calibrate`` and ``design``'s ``--json``)
+goes through :func:`json_text`; recordings' metadata refuses non-finite values instead.
 
 API map
 -------

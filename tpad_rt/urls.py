@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import parse_qsl, unquote
 
-from tpad_rt.decimal_text import parse_decimal
+from tpad_rt.decimal_text import parse_decimal, parse_whole
 from tpad_rt.errors import ConfigError, printable
 
 #: Longest URL accepted (characters).
@@ -210,7 +210,7 @@ def count(low: int = 0, high: int | None = None) -> Parser:
 
     def parse(text: str) -> int:
         try:
-            value = int(text)
+            value = parse_whole(text)
         except ValueError:
             raise ValueError(f"must be {expected}") from None
         if value < low or (high is not None and value > high):
