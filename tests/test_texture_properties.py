@@ -13,6 +13,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -190,8 +191,13 @@ def image_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("texture_images")
 
 
+#: Random textures per kind: fewer under NUMBA_DISABLE_JIT (the coverage run: the kernel runs as Python, and
+#: coverage needs its lines reached, not the jitted run's breadth).
+EXAMPLES = 150 if not numba.config.DISABLE_JIT else 40
+
+
 @pytest.mark.parametrize("kind", list(TEXTURES))
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(data=st.data())
 def test_random_texture_kernel_matches_reference(kind: str, image_dir: Path, data: st.DataObject) -> None:
     spec = _materialise({"description": "random", **data.draw(TEXTURES[kind](), label="texture")}, image_dir)
