@@ -90,3 +90,23 @@ def test_url_errors(tmp_path: Path) -> None:
         open_input("file://")
     with pytest.raises(ConfigError, match=r"unknown option 'rate_hz' \(options: none\)"):
         open_input(f"file://{tmp_path}/x.csv?rate_hz=5")
+
+
+def test_too_many_rows_are_counted_before_any_is_parsed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The row limit is judged by a pass over the lines (comments, blank lines and the header not counted) before
+    the rows are parsed: a file one row over it names the line of that row, even when a row before it is bad."""
+    import tpad_rt.inputs.file as file_module
+
+    monkeypatch.setattr(file_module, "MAX_TRAJECTORY_ROWS", 4)
+    rows = ["0,10,30", "# a comment", "", "0.001,10,30", "0.002,nan,30", "0.003,10,30"]
+    at_limit = tmp_path / "four.csv"
+    at_limit.write_text("# header next\nt,x_mm,y_mm\n" + "\n".join(rows) + "\n")
+    with pytest.raises(ConfigError, match=r"four\.csv:7: column x_mm: must be a finite number"):
+        open_input(f"file://{at_limit}")  # four rows: parsed, and the bad one found
+    over = tmp_path / "five.csv"
+    over.write_text("t,x_mm,y_mm\n" + "\n".join(rows) + "\n0.004,10,30\n")
+    with pytest.raises(ConfigError, match=r"five\.csv:8: more than 4 samples, the most a trajectory may hold"):
+        open_input(f"file://{over}")
+    good = tmp_path / "good.csv"
+    good.write_text("t,x_mm,y_mm\n# c\n\n0,10,30\n0.001,10,30\n# c\n0.002,10,30\n0.003,10,30\n\n# end\n")
+    assert len(open_input(f"file://{good}").samples) == 4

@@ -20,6 +20,7 @@ of samples are held, about twice that while the chunks are joined, never the who
 from __future__ import annotations
 
 import math
+from typing import BinaryIO
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -87,7 +88,27 @@ def load_trajectory(path: str | Path, device: Device | None = None) -> FileInput
     """
     name = printable(str(path))
     with open_regular(path, "trajectories", MAX_TRAJECTORY_BYTES) as stream:
+        _refuse_too_many_rows(name, stream)
         return FileInput(_parse(name, data_lines(name, stream), _Ranges.of(device)))
+
+
+def _refuse_too_many_rows(path: str, stream: BinaryIO) -> None:
+    """ConfigError ``path:line: more than MAX_TRAJECTORY_ROWS samples`` for a file with more data rows than that,
+    before any row is parsed (a file of millions of rows is refused in a second, not after parsing them all);
+    the stream is left at its start. Only a file with more lines than that is looked at line by line."""
+    if stream.read().count(b"\n") + 1 <= MAX_TRAJECTORY_ROWS + 1:  # rows + the header, at most
+        stream.seek(0)
+        return
+    stream.seek(0)
+    rows = -1  # the header is the first line that is neither blank nor a comment
+    for number, raw in enumerate(stream, start=1):
+        stripped = raw.strip()
+        if stripped and not stripped.startswith(b"#"):
+            rows += 1
+            if rows > MAX_TRAJECTORY_ROWS:
+                raise ConfigError(f"{path}:{number}: more than {MAX_TRAJECTORY_ROWS:,} samples, the most a "
+                                  "trajectory may hold")
+    stream.seek(0)
 
 
 class _Ranges:
