@@ -358,13 +358,16 @@ class AmpLink:
         has not TONE_APPLY_LIMIT_S after the dwell).
 
         The first call STARTs a stream; this loop (Python, not the streamer) keeps TONE_BUFFER_S of envelope
-        buffered from the play index each STATUS reports. :meth:`stop` ends it as it ends a stream.
+        buffered from the play index each STATUS reports, and STARTs it again (at most MAX_TONE_RESTARTS times)
+        where the amplifier's watchdog ended it, held up longer than that. :meth:`stop` ends it as it ends a
+        stream.
         BackendError for a fault, a lost port, an amplifier that stops reporting, or one that refuses START.
         """
         info = self.info
         assert info is not None and self._thread is None
         value = round(max(-1.0, min(1.0, envelope_v / info.full_scale_v)) * 32767)
-        fill = min(info.buffer_samples - self.frame_samples, max(self.target_fill, round(TONE_BUFFER_S * self.target.envelope_hz)))
+        fill = min(info.buffer_samples - self.frame_samples,
+                   max(self.target_fill, round(TONE_BUFFER_S * self.target.envelope_hz)))
         if self._tone_index < 0:
             self._start_tone(value, 0, fill)
         deadline = time.monotonic() + seconds
