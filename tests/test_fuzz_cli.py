@@ -355,19 +355,9 @@ def render_case(draw: st.DrawFn) -> tuple[str, Callable[[Path], tuple[list[str],
                                 "n" * 300 + ".npz"])) if part == "out" else "x.npz"
 
     def make(folder: Path) -> tuple[list[str], list[str]]:
-        files = []
-        texture_path = texture(folder) if texture else GRATING
-        files.append(texture_path)
-        argv = ["render", texture_path, "--input", source, "--output", output.replace("/tmp", str(folder))]
-        if device:
-            files.append(device(folder))
-            argv += ["--device", files[-1]]
-        if "--duration" not in extra:
-            argv += ["--duration", "0.05"]
-        (folder / "d.npz").mkdir()
-        os.mkfifo(folder / "f.npz")
-        (folder / "z.npz").symlink_to("/dev/zero")
-        return [*argv, *extra, "--out", str(folder / out) if out else ""], files
+        argv, files = command_argv(folder, ["render", "--input", source], texture, device, output, extra, None,
+                                   duration="0.05")
+        return [*argv, "--out", str(folder / out) if out else ""], files
 
     return part, make
 
@@ -396,19 +386,19 @@ def only_refused_duration(extra: list[str]) -> None:
         extra[extra.index("--duration") + 1] = "1e308"
 
 
-def realtime_argv(folder: Path, command: list[str], texture: Callable[[Path], str] | None,
-                  device: Callable[[Path], str] | None, output: str, extra: list[str],
-                  record: str | None) -> tuple[list[str], list[str]]:
-    """``(argv, files)`` of a play or serve in ``folder``: ``command`` (its name and own arguments), the texture
-    (a bad one, or the grating), ``--output``, a bad ``--device``, ``--duration 0.2`` unless fuzzed, and
-    ``--record`` to ``record`` among a folder, a FIFO and /dev/zero made there; then ``extra``."""
+def command_argv(folder: Path, command: list[str], texture: Callable[[Path], str] | None,
+                 device: Callable[[Path], str] | None, output: str, extra: list[str],
+                 record: str | None, duration: str = "0.2") -> tuple[list[str], list[str]]:
+    """``(argv, files)`` of a render, play or serve in ``folder``: ``command`` (its name and own arguments), the
+    texture (a bad one, or the grating), ``--output``, a bad ``--device``, ``--duration DURATION`` unless fuzzed,
+    and ``--record`` to ``record`` (None: none) among a folder, a FIFO and /dev/zero made there; then ``extra``."""
     files = [texture(folder) if texture else GRATING]
     argv = [command[0], files[0], *command[1:], "--output", output.replace("/tmp", str(folder))]
     if device:
         files.append(device(folder))
         argv += ["--device", files[-1]]
     if "--duration" not in extra:
-        argv += ["--duration", "0.2"]
+        argv += ["--duration", duration]
     (folder / "d.npz").mkdir()
     os.mkfifo(folder / "f.npz")
     (folder / "z.npz").symlink_to("/dev/zero")
@@ -434,7 +424,7 @@ def play_case(draw: st.DrawFn) -> Callable[[Path], tuple[list[str], list[str]]]:
         if part == "record" else None
 
     def make(folder: Path) -> tuple[list[str], list[str]]:
-        return realtime_argv(folder, ["play", "--input", source], texture, device, output, extra, record)
+        return command_argv(folder, ["play", "--input", source], texture, device, output, extra, record)
 
     return make
 
@@ -482,7 +472,7 @@ def serve_case(draw: st.DrawFn) -> Callable[[Path], tuple[list[str], list[str]]]
     ports = ([] if "--port" in extra else ["--port", "0"]) + ([] if "--osc-port" in extra else ["--no-osc"])
 
     def make(folder: Path) -> tuple[list[str], list[str]]:
-        return realtime_argv(folder, ["serve", *ports], texture, device, output, extra, record)
+        return command_argv(folder, ["serve", *ports], texture, device, output, extra, record)
 
     return make
 
