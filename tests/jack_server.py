@@ -26,7 +26,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from conftest import require_program, require_system
-from jackd import RunningServer, dummy_server
+from jackd import START_TIMEOUT_S, RunningServer, dummy_server, program
 from tpad_rt.outputs import audio
 
 
@@ -59,8 +59,8 @@ def jack_server(rate_hz: int = 192000, period_frames: int = 64, *, sync: bool = 
         with dummy_server(rate_hz, period_frames, sync=sync) as server:
             name = server.name
             os.environ["JACK_DEFAULT_SERVER"] = name
+            _attach_portaudio(server)
             try:
-                audio.rescan_devices()
                 yield name
             finally:
                 # PortAudio's JACK host API must let go of the server while it still runs.
@@ -71,6 +71,31 @@ def jack_server(rate_hz: int = 192000, period_frames: int = 64, *, sync: bool = 
         else:
             os.environ["JACK_DEFAULT_SERVER"] = previous
         sounddevice._initialize()
+
+
+#: Tries at initialising PortAudio onto a server that has just come up.
+ATTACH_TRIES = 3
+
+
+def _attach_portaudio(server: RunningServer) -> None:
+    """Re-initialise PortAudio so that its JACK host API opens on ``server``. A JACK client opened just after
+    ``jack_wait`` saw the server up has failed to attach its shared memory while the server ran (a CI run:
+    "JackShmReadWritePtr::~JackShmReadWritePtr - Init not done for -1"): up to ATTACH_TRIES tries, each again
+    after ``jack_wait`` finds the server up. Raises PortAudioError after the last (PortAudio uninitialised)."""
+    import sounddevice
+
+    for attempt in range(1, ATTACH_TRIES + 1):
+        try:
+            if attempt == 1:
+                audio.rescan_devices()  # terminates PortAudio, then initialises it
+            else:
+                sounddevice._initialize()  # the failed try left it uninitialised
+            return
+        except sounddevice.PortAudioError:
+            if attempt == ATTACH_TRIES or server.process.poll() is not None:
+                raise
+            subprocess.run([program("jack_wait"), "-s", server.name, "-w", "-t", str(START_TIMEOUT_S)],
+                           capture_output=True, timeout=START_TIMEOUT_S + 5)
 
 
 def kill_server_under(command: list[str], **popen: Any) -> subprocess.CompletedProcess[str]:

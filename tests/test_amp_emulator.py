@@ -51,6 +51,8 @@ DEVICE = Device.default()
 FORCE_N = 0.5
 #: Safety net for every wait (s); never reached when the emulator works.
 WAIT_S = 20.0
+#: The emulator's note that the machine held it up (it says so, at most once a second, and goes on): not an error.
+LATE_NOTE = re.compile(r"tpad-rt amp emulate: the emulator ran \d+ ms late \(a busy machine\?\)[^\n]*\n")
 
 # --- the test's own codec, from docs/amp-protocol.md ------------------------------------------------------------
 
@@ -410,12 +412,12 @@ class Amp:
 
     def finish(self, signum: int | None = signal.SIGTERM) -> dict[str, np.ndarray]:
         """Stop the emulator with ``signum`` (None: it ends by itself); exit status 0, one summary line, no
-        error output, no broken frame sent; the recording."""
+        error output (but its notes that the machine held it up), no broken frame sent; the recording."""
         if signum is not None:
             self.process.send_signal(signum)
         out, err = self.process.communicate(timeout=60)
         assert self.process.returncode == 0, (out, err)
-        assert err == "", err
+        assert LATE_NOTE.sub("", err) == "", err
         self.summary = out
         assert re.fullmatch(r"amplifier emulator [^\n]+: frames_ok=\d+ [^\n]+\n", out), out
         if self.fd >= 0:

@@ -49,6 +49,12 @@ RUN_S = 1.5
 #: comes (full CI runs saw 7 against a baseline of 1, and 21 against 8, on a cold cache); a starved
 #: callback shows hundreds to thousands.
 UNDERFLOW_MARGIN = 10
+#: How far below the empty callback's share of the cycles its stream clock counts (the least of the runs before
+#: and after, itself at most 0.9) a native callback's share may fall. The server's xruns on a loaded machine skip
+#: cycles for every client (CI runs: 4.5 %, 3.5 %, and 16 % in a burst of the machine's other work; 35 % for
+#: either with two busy processes on the two cores), in bursts that the baseline runs may miss; a callback
+#: starved by the GIL collapses far below (the Python control: 519 of 4372, 12 %).
+CALLBACKS_MARGIN = 0.1
 
 
 def underflows_allowed(baseline: int) -> int:
@@ -57,11 +63,19 @@ def underflows_allowed(baseline: int) -> int:
     return 2 * baseline + UNDERFLOW_MARGIN
 
 
-def empty_callback_underflows() -> int:
-    """Underflows of the empty native callback over RUN_S (the baseline; run before and after what it judges,
-    since the machine's bursts of other work may fall on either side)."""
-    counted, _ = run_native(cb.silence_callback, RUN_S)
-    return int(counted[tab.STAT_UNDERFLOWS])
+def empty_callback_baseline() -> tuple[int, float]:
+    """(underflows, callbacks per cycle its stream clock counts) of the empty native callback over RUN_S: the
+    baseline, run before and after what it judges, since the machine's bursts of other work may fall on either
+    side."""
+    counted, expected = run_native(cb.silence_callback, RUN_S)
+    return int(counted[tab.STAT_UNDERFLOWS]), float(counted[tab.STAT_CALLBACKS]) / expected
+
+
+def baselines(before: tuple[int, float], after: tuple[int, float]) -> tuple[int, float]:
+    """(the underflows a native callback may show, the least share of its stream clock's cycles it must be called
+    for) next to the empty callback's runs ``before`` and ``after`` (UNDERFLOW_MARGIN, CALLBACKS_MARGIN)."""
+    return (underflows_allowed(max(before[0], after[0])),
+            min(0.9, before[1], after[1]) - CALLBACKS_MARGIN)
 
 
 @pytest.fixture(scope="module")
@@ -87,6 +101,15 @@ def swipe(renderer: Renderer, x0_mm: float, speed_mm_s: float, duration_s: float
         t_s = min(k * SWIPE_STEP_S, duration_s)
         renderer.push_finger(x0_mm + speed_mm_s * t_s, 20.0, 0.5, t=start_s + k * SWIPE_STEP_S)
     return start_s, start_s + duration_s
+
+
+def wait_for_stream(renderer: Renderer, t_s: float) -> None:
+    """Return once the renderer's stream clock (``now_s``) has reached ``t_s`` (s). A loaded machine's server
+    skips cycles (xruns), so its clock runs behind the wall clock (a CI run: 0.2 s behind in 1 s): what is
+    scheduled on it is waited for on it. Re-raises the renderer's error, if its output failed meanwhile."""
+    while renderer.now_s() < t_s:
+        renderer.check()
+        time.sleep(0.002)
 
 
 def live_swipe(renderer: Renderer, x0_mm: float, speed_mm_s: float, duration_s: float) -> None:
@@ -143,27 +166,38 @@ def run_native(callback: object, seconds: float) -> tuple[np.ndarray, float]:
     return counted, (end_s - begin_s) * RATE_HZ / BLOCK
 
 
+def clock_and_callbacks(renderer: Renderer) -> tuple[float, int]:
+    """(the stream clock (s), the callbacks so far) of a running renderer, read back to back: ``stats()`` drains
+    the telemetry before it counts, which a loaded machine stretched to 130 ms of callbacks (a CI run)."""
+    table = renderer.callback_table
+    assert table is not None
+    return renderer.stream_time_s(), int(table.stats[tab.STAT_CALLBACKS])
+
+
 def renderer_run(renderer: Renderer, seconds: float, activity: Callable[[], None] | None = None) -> tuple[dict, float]:
     """Let a started renderer run ``seconds`` (doing ``activity`` meanwhile, which must last that long, or
-    sleeping); (its stats, callbacks its stream clock expects)."""
-    begin_s, begin = renderer.stream_time_s(), renderer.stats()["callbacks"]
+    sleeping); (its stats, with the callbacks of the run as ``callbacks_in_run``; the callbacks its stream
+    clock expects)."""
+    begin_s, begin = clock_and_callbacks(renderer)
     (activity or (lambda: time.sleep(seconds)))()
-    end_s, stats = renderer.stream_time_s(), renderer.stats()
-    stats["callbacks_in_run"] = stats["callbacks"] - begin
+    end_s, end = clock_and_callbacks(renderer)
+    stats = renderer.stats()
+    stats["callbacks_in_run"] = end - begin
     return stats, (end_s - begin_s) * RATE_HZ / BLOCK
 
 
 def test_renderer_keeps_the_stream_clock(jack: str) -> None:
-    before = empty_callback_underflows()
+    before = empty_callback_baseline()
     with Renderer(output="audio://", texture=GRATING) as renderer:
         stats, expected = renderer_run(renderer, RUN_S, lambda: live_swipe(renderer, 10.0, 50.0, RUN_S))
-    baseline = max(before, empty_callback_underflows())
-    print(stats, f"baseline underflows {baseline}")
+    after = empty_callback_baseline()
+    underflows_max, kept_min = baselines(before, after)
+    print(stats, f"empty callback (underflows, callbacks per cycle) before {before}, after {after}")
     # Every cycle the server ran called the callback; a loaded machine's xruns skip cycles for every client
-    # (CI: 4059 of 4250, 4.5 %), so the count is bounded, not matched (the GIL test below likewise).
-    assert 0.9 * expected <= stats["callbacks_in_run"] <= 1.03 * expected
+    # (CALLBACKS_MARGIN), so the count is bounded, not matched (the GIL test below likewise).
+    assert kept_min * expected <= stats["callbacks_in_run"] <= 1.03 * expected
     assert stats["frames"] == stats["callbacks"] * BLOCK
-    assert stats["underflows"] <= underflows_allowed(baseline)
+    assert stats["underflows"] <= underflows_max
     assert stats["compute_us_p50"] > 0 and stats["compute_us_max"] >= stats["compute_us_p99"]
     assert 0 < stats["callback_load_p99"] < 1
     assert stats["blocks"] > 0 and stats["power_peak_w"] <= stats["power_budget_w"]
@@ -201,22 +235,23 @@ def run_python_callback(seconds: float) -> tuple[int, int, float]:
 
 
 def test_gil_load_does_not_starve_the_native_callback(jack: str) -> None:
-    before = empty_callback_underflows()
+    before = empty_callback_baseline()
     with GilHog(), Renderer(output="audio://", texture=GRATING) as renderer:
         swipe(renderer, 10.0, 50.0, RUN_S, 0.3)
         stats, expected = renderer_run(renderer, RUN_S)
-    baseline = max(before, empty_callback_underflows())
+    after = empty_callback_baseline()
+    underflows_max, kept_min = baselines(before, after)
     python_callbacks, python_underflows, python_expected = run_python_callback(RUN_S)
-    print(f"baseline underflows {baseline}; native under GIL load: "
-          f"{stats['callbacks_in_run']} of {expected:.0f} callbacks, {stats['underflows']} underflows; "
+    print(f"empty callback (underflows, callbacks per cycle) before {before}, after {after}; native under GIL "
+          f"load: {stats['callbacks_in_run']} of {expected:.0f} callbacks, {stats['underflows']} underflows; "
           f"Python callback under GIL load: {python_callbacks} of {python_expected:.0f}, "
           f"{python_underflows} underflows")
-    # The server's own xruns on a loaded machine drop cycles for every client (CI: 4352 of 4511, 3.5 %, with
-    # underflows under the baseline); the Python control collapses to a small fraction (CI: 519 of 4372).
-    assert 0.9 * expected <= stats["callbacks_in_run"] <= 1.03 * expected
-    assert stats["underflows"] <= underflows_allowed(baseline)
+    # The server's own xruns on a loaded machine drop cycles for every client (CALLBACKS_MARGIN, with underflows
+    # under the baseline); the Python control collapses to a small fraction (CI: 519 of 4372).
+    assert kept_min * expected <= stats["callbacks_in_run"] <= 1.03 * expected
+    assert stats["underflows"] <= underflows_max
     collapsed = (python_callbacks < 0.5 * python_expected
-                 or python_underflows > baseline + 5 * UNDERFLOW_MARGIN)
+                 or python_underflows > underflows_max + 4 * UNDERFLOW_MARGIN)
     assert collapsed, (python_callbacks, python_expected, python_underflows)
 
 
@@ -235,8 +270,8 @@ def test_capture_carrier_envelope_and_stop_ramp(jack: str, tmp_path: Path) -> No
     renderer.record(tmp_path / "stop.npz")
     with renderer:
         capture = Capture(DRIVE_PORT, tmp_path / "capture.npy", 1.5)
-        swipe(renderer, 10.0, speed_mm_s, 0.8, hold_s=0.35)
-        time.sleep(1.0)  # the swipe, then part of the hold (finger still, drive steady)
+        _, end_s = swipe(renderer, 10.0, speed_mm_s, 0.8, hold_s=0.5)
+        wait_for_stream(renderer, end_s + 0.2)  # the swipe, then part of the hold (finger still, drive steady)
         renderer.stop()
     samples = capture.result()
     envelope = np.abs(carrier_baseband(samples, device.carrier_hz, window))
@@ -276,9 +311,9 @@ def test_set_texture_keeps_the_carrier_phase(jack: str, tmp_path: Path) -> None:
         start_s = renderer.now_s() + 0.02
         for k in range(400):  # finger still at x = 12 mm for 0.8 s
             renderer.push_finger(12.0, 20.0, 0.5, t=start_s + k * SWIPE_STEP_S)
-        time.sleep(0.35)
+        wait_for_stream(renderer, start_s + 0.35)
         renderer.set_texture(SQUARE)
-        time.sleep(0.35)
+        wait_for_stream(renderer, start_s + 0.7)
         telemetry = renderer.telemetry()
     recording = read_recording(path)
     blocks = recording.blocks
@@ -307,13 +342,14 @@ def test_watchdog_ramps_to_zero_without_finger_samples(jack: str, tmp_path: Path
     renderer.record(path)
     with renderer:
         _, end_s = swipe(renderer, 10.0, 50.0, 0.3, hold_s=0.0)
-        time.sleep(0.5)
+        options = renderer.options
+        silent_from_s = (end_s + (options.watchdog_ms + options.ramp_ms) * 1e-3
+                         + (options.control_interval + BLOCK) / RATE_HZ)
+        wait_for_stream(renderer, silent_from_s + 0.15)
     recording = read_recording(path)
-    options = renderer.options
-    silent_from_s = (end_s + (options.watchdog_ms + options.ramp_ms) * 1e-3
-                     + (options.control_interval + BLOCK) / RATE_HZ)
     t_s = recording.blocks["t"]
     assert np.any(recording.blocks["voltage_v"][t_s < end_s] > 1.0)
+    assert np.count_nonzero(t_s > silent_from_s) * BLOCK >= 0.1 * RATE_HZ  # the silence was recorded
     assert np.all(recording.blocks["voltage_v"][t_s > silent_from_s] == 0.0)
     first_sample = round(t_s[0] * RATE_HZ)
     drive_t_s = (first_sample + np.arange(len(recording.drive))) / RATE_HZ

@@ -23,7 +23,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from jack_server import jack_server
-from test_audio_engine import DRIVE_PORT, RATE_HZ, Capture, carrier_baseband, swipe
+from test_audio_engine import DRIVE_PORT, RATE_HZ, Capture, carrier_baseband, swipe, wait_for_stream
 
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
@@ -181,9 +181,9 @@ def test_nan_through_a_jack_server_leaves_the_output_finite_and_the_next_swipe_d
         for bad in ((end_s + 0.004, math.nan, 20.0, 0.5, 1.0), (end_s + 0.006, 1e308, 20.0, 0.5, 1.0),
                     (end_s + 0.008, 30.0, math.inf, -1.0, 1.0)):
             _unchecked_row(renderer, bad)  # ...and the kernel survives it when it gets past
-        time.sleep(max(0.0, end_s + 0.05 - renderer.now_s()))
+        wait_for_stream(renderer, end_s + 0.05)
         second_s, _ = swipe(renderer, 10.0, 50.0, 0.4, hold_s=0.0, lead_s=0.25)
-        time.sleep(max(0.0, second_s + 0.45 - renderer.now_s()))
+        wait_for_stream(renderer, second_s + 0.45)
         stats = renderer.stats()
         telemetry = renderer.telemetry()
     samples = capture.result()

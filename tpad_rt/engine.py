@@ -221,23 +221,32 @@ class Renderer:
     def stop(self) -> None:
         """Ramp the drive down to 0, then stop and close the output; again: nothing.
 
-        Waits (bounded) until the callback has rendered the samples of the ramp, one
-        control interval and one block past the stop: the kernel's gain is 0 from
-        there on. A lost or stalled stream is abandoned instead (returns promptly:
-        within ``stall_timeout_s`` plus a second of a stall). Re-raises an error the
-        output or the engine's threads met, and writes the recording :meth:`record`
-        asked for.
+        Waits (bounded) until the kernel's gain has reached 0 (the ramp rendered, from
+        the control step after the stop) and one block more has been rendered past
+        that (the block holding the ramp's end handed to the output). The gain is
+        read, not inferred from the stream's index: a serial stream held up skips its
+        index ahead, past samples it never rendered. A lost or stalled stream is
+        abandoned instead (returns promptly: within ``stall_timeout_s`` plus a second
+        of a stall). Re-raises an error the output or the engine's threads met, and
+        writes the recording :meth:`record` asked for.
         """
         table = self._table
         if table is None:
             self.check()
             return
         self._pipeline.stop()
+        state = table.arrays.state
         ramp_samples = max(1, round(self.options.ramp_ms * 1e-3 * self.rate_hz))
         target = table.next_sample + self.options.control_interval + ramp_samples + self.block_frames
         deadline = (time.monotonic() + STOP_TIMEOUT_FACTOR * (target - table.next_sample) / self.rate_hz + 1.0
                     + self._driver.stall_limit_s())  # a stall that begins now is reported (the watcher) before that
-        while table.next_sample < target and not self._ended.is_set() and time.monotonic() < deadline:
+        silent_from: int | None = None  # the index at which the gain was first seen at 0
+        while not self._ended.is_set() and time.monotonic() < deadline:
+            index = table.next_sample
+            if silent_from is None and not (state[STATE_GATE] or state[STATE_RAMP_START]):
+                silent_from = index
+            if silent_from is not None and index >= max(silent_from + self.block_frames, target):
+                break
             time.sleep(0.001)
         self._halt.set()
         if self._watcher is not None:
