@@ -87,7 +87,8 @@ def test_a_tone_the_amplifiers_watchdog_ended_is_started_again(tmp_path: Path, m
         finally:
             link.stop(ramp_ms=5.0)
         amp.finish()
-    assert held and re.search(r"\bwatchdog_trips=1\b", amp.summary), amp.summary
+    trips = re.search(r"\bwatchdog_trips=(\d+)\b", amp.summary)
+    assert held and trips and int(trips[1]) >= 1, amp.summary  # the hold's (and any a busy machine added)
     assert status.envelope_v == pytest.approx(5.0, abs=2e-3) and status.carrier_hz == pytest.approx(carrier_hz)
 
 

@@ -72,7 +72,7 @@ def test_the_wheel_holds_the_package_not_the_repository(installed: tuple[Path, d
 def test_tpad_rt_play_runs_a_shipped_texture_from_any_folder(installed: tuple[Path, dict[str, str]]) -> None:
     """The installed package's first run (the first test here to run the kernels, in the venv's empty numba cache):
     its first line is the compile notice (stderr), the kernels all compile before the clock starts (it plays its
-    1 s without an underflow), and the next run is silent."""
+    1 s: no block skipped for a compile), and the next run is silent."""
     bin_dir, env = installed
     elsewhere = bin_dir.parent.parent / "elsewhere"
     play = [str(bin_dir / "tpad-rt"), "play", "grating", "--output", "sim://", "--duration"]
@@ -83,7 +83,10 @@ def test_tpad_rt_play_runs_a_shipped_texture_from_any_folder(installed: tuple[Pa
     assert notice[0] == NOTICE
     assert len(notice) == 2 and notice[1].startswith("tpad-rt: compiled ") and notice[1].endswith(" s")
     assert int(notice[1].split()[2]) > 10  # functions compiled: the kernels, not a stray one
-    assert " 0 underflows" in next(line for line in played.stdout.splitlines() if line.startswith("played "))
+    # It played its second: a kernel compiled while the clock runs would stall the output for seconds, which
+    # skips the blocks due meanwhile (a busy machine's hiccups cost a few).
+    summary = next(line for line in played.stdout.splitlines() if line.startswith("played "))
+    assert int(summary.split(": ")[1].split(" callbacks")[0]) >= 0.8 * 192000 / 64, summary
     warm = _run([*play, "0.2"], elsewhere, env)
     assert warm.returncode == 0 and warm.stderr == ""
     # a texture with an image asset: the assets are package data too
