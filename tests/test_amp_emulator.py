@@ -564,8 +564,10 @@ def test_start_priming_running_and_the_window(amp: Amp) -> None:
     amp.send(ENVELOPE, envelope(first + info.buffer_samples - 16, samples))  # the window's last 16: accepted
     status = amp.status(lambda status: status.frames_ok == 5)  # HELLO, SET_CARRIER, START and two ENVELOPE
     assert (status.state, status.buffer_fill, status.frames_rejected) == (PRIMING, 16, 10)
+    prefilled = amp.mark()  # RUNNING lasts until the watchdog trips: a test held up past that finds it in the past
     amp.send(ENVELOPE, envelope(first + 16, samples))  # 32 samples from first: prefill reached
-    amp.status(lambda status: status.state == RUNNING and status.play_index != first, what="RUNNING")
+    amp.status(lambda status: status.state == RUNNING and status.play_index != first, after=prefilled,
+               what="RUNNING")
     assert amp.command(STOP, struct.pack("<H", 5)) == (amp.seq - 1, STOP, OK, 0)
     amp.status(lambda status: status.state == IDLE, what="IDLE after STOP")
     assert not {ack.acked_seq for ack in amp.acks(after)} & set(refused)  # ENVELOPE refusals are not answered
@@ -844,9 +846,10 @@ def test_delay_holds_every_byte_back(amps: Callable[..., Amp]) -> None:
     """delay:MS: the first sample cannot play before MS after the frame that completed the prefill was sent."""
     amp = amps("--fault", "delay:30")
     amp.begin(16000, 0, 16)
+    after = amp.mark()  # RUNNING lasts until the watchdog trips: a test held up past that finds it in the past
     sent_s = amp.write(frame(ENVELOPE, amp.seq, envelope(0, np.full(16, level(1.0), dtype=np.int16))))
     amp.seq += 1
-    amp.status(lambda status: status.state == RUNNING, what="RUNNING")
+    amp.status(lambda status: status.state == RUNNING, after=after, what="RUNNING")
     assert amp.command(STOP, struct.pack("<H", 0)).code == OK
     recording = amp.finish()
     assert recording["t_s"][played(recording)[0]] >= sent_s + 0.030
