@@ -614,21 +614,33 @@ def test_envelope_plays_at_its_index(amps: Callable[..., Amp]) -> None:
     """A3: every sample sent plays once, at its index, in order, at its due time; then STOP's ramp."""
     amp = amps()
     first = 2**32 - 4000
-    amp.begin(16000, first, 256)
+    info = amp.begin(16000, first, 256)
     t = np.arange(8000) / 16000
     samples = np.round(32767 * (0.35 - 0.25 * np.cos(2 * np.pi * 20 * t))).astype(np.int16)  # 5 V (a slew step)..30 V
     amp.stream(samples, first)
     assert amp.command(STOP, struct.pack("<H", 5)).code == OK
     amp.status(lambda status: status.state == IDLE, what="IDLE after STOP")
     recording = amp.finish()
-    assert recording["underruns"] == 0 and recording["frames_bad"] == 0 and recording["frames_rejected"] == 0
+    # A frame this test's host sent late (held up past the 56 ms it keeps buffered: a busy machine) is refused as
+    # out of window and its 64 samples underrun: whole frames, counted apart (as in the test below).
+    late = int(recording["frames_rejected"])
+    assert recording["frames_bad"] == 0 and late <= 3 and recording["underruns"] == 64 * late
     assert recording["envelope_hz"] == 16000
     at = played(recording)
-    count = len(at)
-    assert count > len(samples) - 1024  # STOP cut the last buffered samples
-    assert (recording["index"][at] == (first + np.arange(count)) % 2**32).all()
-    assert np.allclose(recording["envelope_v"][at], volts(samples[:count]), rtol=1e-12, atol=1e-12)
-    assert np.allclose(np.diff(recording["t_s"][at]), 1 / 16000, rtol=0, atol=1e-9)
+    offset = (recording["index"][at].astype(np.int64) - first) % 2**32  # from the first index, across the wrap
+    assert offset[0] == 0 and np.all(np.diff(offset) > 0)
+    assert offset[-1] + 1 > len(samples) - 1024  # STOP cut the last buffered samples
+    absent = np.setdiff1d(np.arange(offset[-1] + 1), offset)
+    assert len(absent) == 64 * late and len(np.unique(absent // 64)) == late
+    # Each at its value, but where a missing frame played 0: the output slews back from there (A2).
+    settled = np.ones(len(at), dtype=bool)
+    slewing = math.ceil(info.max_mv / (info.slew_mv_per_ms / 16))  # samples from 0 to the clamp at 16 kHz
+    for resumed in np.flatnonzero(np.diff(offset) > 1) + 1:
+        settled[resumed:resumed + slewing] = False
+    assert np.allclose(recording["envelope_v"][at][settled], volts(samples[offset][settled]), rtol=1e-12, atol=1e-12)
+    # each at its due time: one sample period apart from the first, whatever was missing between
+    due = recording["t_s"][at] - offset / 16000
+    assert np.allclose(due, due[0], rtol=0, atol=1e-9)
     assert (recording["carrier_hz"][at] == RESONANCE_MHZ / 1000).all()
     assert (recording["state"][at] == RUNNING).all()
     # STOP: from the present value linearly to 0 over 5 ms (80 samples), then IDLE.
