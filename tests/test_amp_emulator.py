@@ -712,13 +712,16 @@ def test_clamp_slew_measurements_and_the_ramp_at_sigterm(amps: Callable[..., Amp
     assert plateau.current_ua_rms == pytest.approx(info.max_mv / math.sqrt(2) / abs(z) * 1000, rel=1e-3)
     assert plateau.phase_cdeg == pytest.approx(-math.degrees(math.atan2(z.imag, z.real)) * 100, abs=1)
     recording = amp.finish()  # with hundreds of samples still buffered
-    assert recording["underruns"] == 0
+    # Whole frames this test's host sent late (a busy machine: a CI run had one) are refused and play as 0.
+    late = int(recording["frames_rejected"])
+    assert recording["frames_bad"] == 0 and late <= 3 and recording["underruns"] == 64 * late
     envelope_v = recording["envelope_v"]
     max_v, step_v = info.max_mv / 1000, info.slew_mv_per_ms / 16000
     assert np.abs(envelope_v).max() == max_v  # A1: reached, never passed
-    assert np.abs(np.diff(envelope_v)).max() <= step_v * (1 + 1e-12)  # A2, ramps included
+    assert np.abs(np.diff(envelope_v)).max() <= step_v * (1 + 1e-12)  # A2, ramps included, late frames' 0 too
     top, bottom = np.flatnonzero(envelope_v == max_v), np.flatnonzero(envelope_v == -max_v)
-    assert bottom[0] - top[-1] == math.ceil(2 * max_v / step_v)  # the swing takes the slew's time
+    if (recording["index"][top[-1]:bottom[0] + 1] >= 0).all():  # no late frame's 0 within the swing
+        assert bottom[0] - top[-1] == math.ceil(2 * max_v / step_v)  # the swing takes the slew's time
     at = played(recording)
     end = zero_from(recording)
     assert (recording["index"][at[-1] + 1:] == -1).all()
