@@ -39,7 +39,7 @@ from crc import Calculator, Crc16
 
 from cli_run import tpad_rt
 from tpad_rt.amp.emulator import (
-    RECORDED_COLUMNS, Amplifier, Circuit, Plate, Recorder, amplifier_info, sim_rate_hz, write_recording,
+    LATE_TICK_S, RECORDED_COLUMNS, Amplifier, Circuit, Plate, Recorder, amplifier_info, sim_rate_hz, write_recording,
 )
 from tpad_rt.cli.amp import REALTIME_PRIORITY
 from tpad_rt.device import Device
@@ -738,10 +738,13 @@ def test_watchdog_zeroes_the_output_within_watchdog_ms(amps: Callable[..., Amp])
     last_frame_s = amp.last_sent_s
     amp.status(lambda status: status.watchdog_trips == 1 and status.state == IDLE, what="the watchdog trip")
     recording = amp.finish()
-    assert recording["watchdog_trips"] == 1 and recording["underruns"] == 0
+    late = int(recording["frames_rejected"])  # whole frames the host sent late, as in the tests above
+    assert recording["watchdog_trips"] == 1 and late <= 3 and recording["underruns"] == 64 * late
     t_s, envelope_v = recording["t_s"], recording["envelope_v"]
     assert (envelope_v[t_s > last_frame_s] != 0).any()  # samples were still playing after the last frame
-    assert t_s[zero_from(recording)] - last_frame_s <= info.watchdog_ms / 1000
+    # From the frame's arrival, which the emulator reads within a tick (it says so on stderr when a tick comes
+    # more than LATE_TICK_S late: a busy machine); a watchdog that did not trip plays out the 120 ms buffered.
+    assert t_s[zero_from(recording)] - last_frame_s <= info.watchdog_ms / 1000 + LATE_TICK_S
     at = played(recording)
     assert recording["index"][at[-1]] < len(samples) - 100  # the buffer was emptied, not played out
 
