@@ -48,8 +48,8 @@ RUN_S = 1.5
 UNDERFLOW_MARGIN = 10
 #: The least share of the control client's callbacks over the same run that a native callback must have (and
 #: the most, its inverse). Both are called in the server's cycles, so cycles a loaded machine's server skips (CI
-#: runs: 3.5 to 16 %, once 48 %) are missing from both; its stream clock is no measure of them (CI runs: it ran
-#: 13 % ahead of the cycles, and 30 % behind). The two counts are read a pipe's round trip apart. A callback
+#: runs: 3.5 to 16 %, once 48 %) are missing from both; its stream clock is no measure of them (a CI run: the
+#: cycles were 1.13 and 0.77 times what it counted). The two counts are read a pipe's round trip apart. A callback
 #: starved by the GIL collapses far below (the Python control: 519 of 4372, 12 %).
 CALLBACKS_KEPT = 0.9
 
