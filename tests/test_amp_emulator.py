@@ -863,11 +863,17 @@ def test_stall_trips_the_watchdog_and_status_goes_on(amps: Callable[..., Amp]) -
 def test_delay_holds_every_byte_back(amps: Callable[..., Amp]) -> None:
     """delay:MS: the first sample cannot play before MS after the frame that completed the prefill was sent."""
     amp = amps("--fault", "delay:30")
-    amp.begin(16000, 0, 16)
-    after = amp.mark()  # RUNNING lasts until the watchdog trips: a test held up past that finds it in the past
+    amp.hello()
+    assert amp.command(SET_CARRIER, u32(RESONANCE_MHZ)).code == OK
+    after = amp.mark()
+    # START and the frame that completes its prefill, back to back: both held 30 ms, they arrive together. (A frame
+    # sent after START's ACK arrives 30 ms after the test got the ACK, which races the watchdog PRIMING arms at
+    # START's arrival: a test held up 8 ms found the amplifier IDLE, never RUNNING: CI runs.)
+    start_seq = amp.send(START, start(16000, 0, 16))
     sent_s = amp.write(frame(ENVELOPE, amp.seq, envelope(0, np.full(16, level(1.0), dtype=np.int16))))
     amp.seq += 1
     amp.status(lambda status: status.state == RUNNING, after=after, what="RUNNING")
+    assert [(ack.code, ack.value) for ack in amp.acks(after) if ack.acked_seq == start_seq] == [(OK, 0)]
     assert amp.command(STOP, struct.pack("<H", 0)).code == OK
     recording = amp.finish()
     assert recording["t_s"][played(recording)[0]] >= sent_s + 0.030
