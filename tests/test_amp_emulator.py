@@ -840,9 +840,10 @@ def test_corrupted_bytes_are_never_applied(amps: Callable[..., Amp]) -> None:
     assert recording["frames_bad"] > 0
     at = played(recording)
     assert (recording["envelope_v"][at] == volts(samples[:1])[0]).all()
-    between = np.arange(at[0], at[-1] + 1)
-    missing = between[recording["index"][between] == -1]  # the bad frames' samples: played as 0, no index
-    assert len(missing) > 0 and (recording["envelope_v"][missing] == 0).all()
+    # The bad frames' samples: played as 0 while RUNNING, with no index (and any the buffer ran out of after the
+    # last frame, if this test's host was held up before it stopped the emulator: a CI run, 32 of them).
+    missing = np.flatnonzero((recording["state"] == RUNNING) & (recording["index"] == -1))
+    assert np.count_nonzero(missing < at[-1]) > 0 and (recording["envelope_v"][missing] == 0).all()
     assert recording["underruns"] == len(missing)
 
 
