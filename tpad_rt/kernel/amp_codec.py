@@ -205,7 +205,7 @@ def cobs_decode(encoded: np.ndarray, length: int, body: np.ndarray) -> int:
     i = 0
     n = 0
     while i < length:
-        code = encoded[i]
+        code = int(encoded[i])  # not uint8: i + code must not wrap (NumPy 2 keeps uint8 when the kernel runs as Python)
         if code == 0 or i + code > length:  # a block is its code byte and code - 1 data bytes
             return -1
         i += 1
