@@ -7,7 +7,8 @@ process under test). Registers one input port, connects the first output port wh
 name matches the regular expression SOURCE_PATTERN (ports in number order: PortAudio
 numbers a stream's ports on from the previous stream's) to it, prints
 ``ready`` on stdout, records SECONDS of float32 samples, then writes them to OUT.npy
-and prints ``done FRAMES XRUNS``.
+and prints ``done FRAMES XRUNS``. If the server stops calling it (it shut the client down,
+or SECONDS + PATIENCE_S pass), it writes what it has, says so and exits 1.
 """
 
 from __future__ import annotations
@@ -18,6 +19,9 @@ import threading
 
 import jack
 import numpy as np
+
+#: How long (s) past SECONDS the capture waits for its samples before it gives up.
+PATIENCE_S = 10.0
 
 
 def main(source: str, out_path: str, seconds: float) -> None:
@@ -41,15 +45,25 @@ def main(source: str, out_path: str, seconds: float) -> None:
     def xrun(delay_us: float) -> None:
         xruns[0] += 1
 
+    shut_down: list[str] = []
+
+    @client.set_shutdown_callback
+    def shutdown(status: jack.Status, reason: str) -> None:
+        shut_down.append(reason)
+        full.set()
+
     with client:
         sources = client.get_ports(source, is_output=True, is_audio=True)
         if not sources:
             raise SystemExit(f"no output port matches {source!r}")
         client.connect(min(sources, key=lambda found: [int(part) for part in re.findall(r"\d+", found.name)]), port)
         print("ready", flush=True)
-        full.wait()
+        full.wait(seconds + PATIENCE_S)
     np.save(out_path, buffer[:written[0]])
     print(f"done {written[0]} {xruns[0]}", flush=True)
+    if written[0] < len(buffer):
+        raise SystemExit(f"the server stopped calling the capture client after {written[0]} of {len(buffer)} samples"
+                         + (f" (it shut the client down: {shut_down[0]})" if shut_down else ""))
 
 
 if __name__ == "__main__":

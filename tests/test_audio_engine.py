@@ -109,13 +109,16 @@ class Capture:
     def __init__(self, source: str, path: Path, seconds: float):
         self.path = path
         self.process = subprocess.Popen([sys.executable, str(CAPTURE), source, str(path), str(seconds)],
-                                        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, text=True)
+                                        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                        text=True)
         assert self.process.stdout is not None
+        self.seconds = seconds
         assert self.process.stdout.readline().strip() == "ready"
 
     def result(self) -> np.ndarray:
-        out, _ = self.process.communicate(timeout=30)
-        assert self.process.returncode == 0, out
+        """The samples, once all were recorded; AssertionError if the server stopped calling the client."""
+        out, err = self.process.communicate(timeout=self.seconds + 60)  # it gives up itself after PATIENCE_S
+        assert self.process.returncode == 0, (out, err)
         return np.load(self.path)
 
 
