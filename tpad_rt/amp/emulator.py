@@ -311,6 +311,8 @@ class Amplifier:
         self.state = State.IDLE
         self.faults = 0
         self.counters = Counters()
+        #: When (s, the clock of ``t_s``) each of ``counters.watchdog_trips`` came.
+        self.watchdog_trip_t_s: list[float] = []
         self.last_seq: int | None = None
         self.tx_seq = 0
         self.carrier_mhz = 0
@@ -380,6 +382,7 @@ class Amplifier:
         if self.state in (State.PRIMING, State.RUNNING) and t_s >= self.last_valid_s + self._trip_s:
             # A4: no valid frame for watchdog_ms - R: count a trip, ramp to 0 over R, empty the buffer, IDLE.
             self.counters.watchdog_trips += 1
+            self.watchdog_trip_t_s.append(t_s)
             self.buffer.clear()
             self._begin_ramp(RAMP_MS, State.RAMPING, State.IDLE)
         index = -1
@@ -533,6 +536,7 @@ class Amplifier:
         self._begin_ramp(RAMP_MS, State.RAMPING, State.IDLE)  # A4's ramp, then IDLE
         self.faults = 0
         self.counters = Counters()
+        self.watchdog_trip_t_s.clear()
         self.tx_seq = 0
         self.out.clear()
         if self.on_hello is not None:
@@ -658,8 +662,9 @@ def check_record_path(path: str) -> None:
     os.unlink(probe)
 
 
-def write_recording(path: str, recorder: Recorder, scalars: dict[str, float | int]) -> None:
-    """Write the recorded columns and ``scalars`` to ``path`` (.npz) through a temporary file in its folder.
+def write_recording(path: str, recorder: Recorder, scalars: dict[str, float | int | list[float]]) -> None:
+    """Write the recorded columns and ``scalars`` (numbers, or lists written as float64 arrays) to ``path`` (.npz)
+    through a temporary file in its folder.
 
     The archive is np.savez's (one ``NAME.npy`` per entry), written a column at a time so
     that a full recording is not copied whole. Raises BackendError (nothing written at
@@ -673,7 +678,8 @@ def write_recording(path: str, recorder: Recorder, scalars: dict[str, float | in
     try:
         with os.fdopen(handle, "wb") as file, zipfile.ZipFile(file, "w", allowZip64=True) as archive:
             for name in (*RECORDED_COLUMNS, *scalars):
-                array = recorder.column(name) if name in RECORDED_COLUMNS else np.array(scalars[name])
+                array = recorder.column(name) if name in RECORDED_COLUMNS else np.array(
+                    scalars[name], dtype=np.float64 if isinstance(scalars[name], list) else None)
                 with archive.open(f"{name}.npy", "w", force_zip64=True) as member:
                     np.lib.format.write_array(member, array, allow_pickle=False)
         os.replace(temporary, path)
@@ -819,7 +825,7 @@ class Emulator:
 
         Returns why it ended: ``"stopped"``, ``"duration"`` or ``"disconnected"``.
         """
-        previous_s = noted_s = time.monotonic()
+        previous_s, noted_s = time.monotonic(), -math.inf
         while True:
             now = time.monotonic()
             reason = ("stopped" if stop_requested() else "duration" if now >= self.end_s

@@ -29,8 +29,9 @@ entry per applied envelope sample: ``t_s`` (time.monotonic() when applied), ``en
 none: a held or ramped sample, or a missing one played as 0), ``plate_amplitude_um`` (the plate's mean vibration
 amplitude over the sample), ``state`` (STATUS's codes, after the sample); and the scalars
 ``frames_ok``, ``frames_bad``, ``frames_rejected``, ``sequence_gaps``, ``underruns``,
-``watchdog_trips``, ``faults`` (the counters since the last HELLO), ``envelope_hz`` (the
-last START's, 0 if none), ``full_scale_mv``, ``max_mv``, ``slew_mv_per_ms``, ``truncated``.
+``watchdog_trips``, ``faults`` (the counters since the last HELLO), ``watchdog_trip_t_s``
+(time.monotonic() of each of those trips), ``envelope_hz`` (the last START's, 0 if none),
+``full_scale_mv``, ``max_mv``, ``slew_mv_per_ms``, ``truncated``.
 It keeps at most 10 minutes at 16 kHz (a note on stderr says when it stops keeping).
 
 ``--fault SPEC`` (repeatable) injects faults, listed in ``--help``; ``--seed`` makes the
@@ -224,6 +225,7 @@ def run(args: argparse.Namespace) -> int:
             write_recording(args.record, recorder, {
                 **counters, "envelope_hz": amplifier.envelope_hz, "full_scale_mv": info.full_scale_mv,
                 "max_mv": info.max_mv, "slew_mv_per_ms": info.slew_mv_per_ms, "truncated": recorder.truncated,
+                "watchdog_trip_t_s": amplifier.watchdog_trip_t_s,
             })
         summary = " ".join(f"{name}={value}" for name, value in counters.items())
         if emulator.dropped_out_bytes:
