@@ -113,11 +113,19 @@ class Capture:
                                         text=True)
         assert self.process.stdout is not None
         self.seconds = seconds
-        assert self.process.stdout.readline().strip() == "ready"
+        first = self.process.stdout.readline()
+        if first != "ready\n":
+            out, err = self.process.communicate(timeout=60)
+            raise AssertionError(f"the capture client did not start: {first + out!r} {err!r}")
 
     def result(self) -> np.ndarray:
         """The samples, once all were recorded; AssertionError if the server stopped calling the client."""
-        out, err = self.process.communicate(timeout=self.seconds + 60)  # it gives up itself after PATIENCE_S
+        try:
+            out, err = self.process.communicate(timeout=self.seconds + 60)  # it gives up itself after PATIENCE_S
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.communicate()
+            raise
         assert self.process.returncode == 0, (out, err)
         return np.load(self.path)
 
