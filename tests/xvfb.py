@@ -18,6 +18,7 @@ from pathlib import Path
 
 import pytest
 from conftest import require_program
+from jackd import die_with_parent
 
 SCREEN_PX = (1280, 800)
 #: Display numbers tried (high enough to miss a desktop's own), from one that depends on the
@@ -63,7 +64,7 @@ def _start(program: str, number: int) -> subprocess.Popen[bytes] | None:
     # tests), and a client connecting meanwhile is reset too.
     server = subprocess.Popen([program, f":{number}", "-screen", "0", f"{width}x{height}x24", "-nolisten", "tcp",
                                "-noreset"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, preexec_fn=die_with_parent)
     for _ in range(_ATTEMPTS):
         if server.poll() is not None:
             if _in_use(number):
