@@ -28,6 +28,7 @@ from cli_run import tpad_rt
 from cobs import cobs
 from crc import Calculator, Crc16
 
+from tpad_rt.amp.emulator import RECORDED_COLUMNS
 from tpad_rt.cli.play import AUTO_SWIPE
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
@@ -96,7 +97,7 @@ def test_play_through_serial_renders_the_grating_on_the_emulated_plate(tmp_path:
     # The default input swipes back and forth at 100 mm/s under 0.5 N; the middle 80 % of the run.
     playing = np.flatnonzero(recording["index"] >= 0)
     middle = playing[len(playing) // 10: -len(playing) // 10]
-    friction = achieved_friction({k: v[middle] for k, v in recording.items() if np.ndim(v)}, 100.0, 0.5)
+    friction = achieved_friction({name: recording[name][middle] for name in RECORDED_COLUMNS}, 100.0, 0.5)
     assert np.percentile(friction, 1) == pytest.approx(levels["low"], rel=0.02)
     assert np.percentile(friction, 99) == pytest.approx(levels["high"], rel=0.02)
     # The envelope the amplifier applied, mapped back through the calibration (the whole recording: the model
