@@ -792,7 +792,8 @@ def test_clamp_slew_measurements_and_the_ramp_at_sigterm(amps: Amps) -> None:
     amp.stream(samples, 0)
     recording = amp.finish()  # with hundreds of samples still buffered
     assert_fed(amp, recording)
-    plateau = next(status for status in amp.statuses(after) if status.envelope_mv == info.max_mv)
+    plateau = next((status for status in amp.statuses(after) if status.envelope_mv == info.max_mv), None)
+    assert plateau is not None, "no STATUS at the clamp"
     z = impedance(plateau.carrier_mhz / 1000)
     assert plateau.voltage_mv_rms == round(info.max_mv / math.sqrt(2))
     assert plateau.current_ua_rms == pytest.approx(info.max_mv / math.sqrt(2) / abs(z) * 1000, rel=1e-3)
