@@ -94,7 +94,7 @@ _PR_SET_PDEATHSIG = 1
 def die_with_parent() -> None:
     """In a child, before exec (``preexec_fn``): SIGTERM when the test thread that started it ends, so a test
     process that crashes (a segfault skips every teardown) leaves no server running behind it (two jackd left
-    so took a fifth of the machine's CPU from a later run)."""
+    behind so took a fifth of the machine's CPU from a later run)."""
     ctypes.CDLL(None).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
 
 

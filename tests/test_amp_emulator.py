@@ -680,12 +680,12 @@ def test_garbage_and_floods_leave_it_working(amp: Amp) -> None:
 
 # --- what plays: the recordings ---------------------------------------------------------------------------------
 
-def late_frames(recording: dict[str, np.ndarray]) -> int:
+def late_frames(recording: dict[str, np.ndarray], *, bad: int = 0, refused: int = 0, unplayed: int = 0) -> int:
     """Whole frames this test's host sent late (held up past what it keeps buffered: a busy machine), which the
-    emulator refused and played as 64 underruns each; AssertionError for more than 3, bad frames or other
-    underruns."""
-    late = int(recording["frames_rejected"])
-    assert recording["frames_bad"] == 0 and late <= 3 and recording["underruns"] == 64 * late, (
+    emulator refused and played as 64 underruns each, beside the test's own ``bad`` frames, ``refused`` frames and
+    ``unplayed`` samples; AssertionError for more than 3, or other bad frames or underruns."""
+    late = int(recording["frames_rejected"]) - refused
+    assert recording["frames_bad"] == bad and 0 <= late <= 3 and recording["underruns"] == unplayed + 64 * late, (
         {name: recording[name] for name in ("frames_bad", "frames_rejected", "underruns")})
     return late
 
@@ -764,9 +764,7 @@ def test_gaps_and_bad_frames_play_as_zero(amps: Amps) -> None:
     # The two bad frames and the other version's (rejected) leave samples 1600-1727 unplayed. A frame this test's
     # host sent late (a busy machine: a CI run had one) is rejected as out of window and its 64 samples underrun
     # too: such frames are counted apart, and must be whole frames the host sent.
-    late = int(recording["frames_rejected"]) - 1
-    assert 0 <= late <= 3
-    assert (recording["frames_bad"], recording["underruns"]) == (2, 128 + 64 * late)
+    late = late_frames(recording, bad=2, refused=1, unplayed=128)
     assert recording["sequence_gaps"] == 1  # the valid frame after the two bad ones
     at = played(recording)
     index = recording["index"][at]
