@@ -74,6 +74,30 @@ def test_errors_name_the_file_and_line(tmp_path: Path, text: str, expected: str)
     assert str(caught.value).startswith(f"{tmp_path}/{expected}")
 
 
+HINT = "it holds a carriage return (CR): lines must end in LF or CR LF, not CR alone (old Mac line ends)"
+
+
+@pytest.mark.parametrize("rows", [2, 400])
+def test_old_mac_line_ends_get_the_line_end_hint_short_or_long(tmp_path: Path, rows: int) -> None:
+    """Lines ending in CR alone read as one line: under 4 KiB the csv module refuses it, over 4 KiB its length
+    does; both messages say why."""
+    text = "t,x_mm,y_mm\r" + "".join(f"{0.001 * row:.3f},10,10\r" for row in range(rows))
+    assert (len(text) > 4096) == (rows == 400)
+    path = _write(tmp_path, text)
+    with pytest.raises(ConfigError) as caught:
+        open_input(f"file://{path}")
+    assert str(caught.value).startswith(f"{path}:1: ") and str(caught.value).endswith(f"; {HINT}")
+    assert ("line longer than 4,096 bytes" in str(caught.value)) == (rows == 400)
+
+
+@pytest.mark.parametrize("end", ["\n", "\r\n"])
+def test_a_long_line_ending_in_lf_or_cr_lf_gets_no_line_end_hint(tmp_path: Path, end: str) -> None:
+    path = _write(tmp_path, "t,x_mm,y_mm" + end + "0,10," + "1" * 5000 + end)
+    with pytest.raises(ConfigError) as caught:
+        open_input(f"file://{path}")
+    assert str(caught.value) == f"{path}:2: line longer than 4,096 bytes"
+
+
 def test_unreadable_files(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"missing\.csv: cannot read: no such file or directory"):
         open_input(f"file://{tmp_path}/missing.csv")

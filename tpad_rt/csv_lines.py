@@ -25,18 +25,23 @@ from tpad_rt.urls import did_you_mean
 
 #: Longest line (bytes, with its newline): a row is a few short numbers; this bounds one line's fields.
 MAX_LINE_BYTES = 4096
+#: Added to the message about a line that holds a carriage return before its end.
+LINE_END_HINT = "; it holds a carriage return (CR): lines must end in LF or CR LF, not CR alone (old Mac line ends)"
 
 
 def data_lines(path: str, stream: BinaryIO) -> Iterator[tuple[int, list[str]]]:
     """``(line number, fields)`` of every line that is neither blank nor a comment, as read.
 
     ``path`` names the file in messages. Raises ConfigError for a line longer than
-    MAX_LINE_BYTES, not UTF-8, or that the csv module refuses, and for a read error.
+    MAX_LINE_BYTES, not UTF-8, or that the csv module refuses, and for a read error. A
+    line holding a carriage return gets LINE_END_HINT: a file whose lines end in CR alone
+    reads as one line, refused as too long or as not a CSV line by its size.
     """
     try:
         for number, raw in enumerate(iter(lambda: stream.readline(MAX_LINE_BYTES + 1), b""), start=1):
             if len(raw) > MAX_LINE_BYTES:
-                raise ConfigError(f"{path}:{number}: line longer than {MAX_LINE_BYTES:,} bytes")
+                hint = LINE_END_HINT if b"\r" in raw.rstrip(b"\r\n") else ""
+                raise ConfigError(f"{path}:{number}: line longer than {MAX_LINE_BYTES:,} bytes{hint}")
             try:
                 line = raw.decode("utf-8-sig" if number == 1 else "utf-8")
             except UnicodeDecodeError:
@@ -56,7 +61,7 @@ def _fields(path: str, number: int, line: str) -> list[str]:
     try:
         return [field.strip() for field in next(csv.reader([line]), [])]
     except csv.Error as error:
-        hint = "; lines must end in LF or CR LF" if "\r" in line else ""
+        hint = LINE_END_HINT if "\r" in line else ""
         raise ConfigError(f"{path}:{number}: not a CSV line ({error}){hint}") from None
 
 
