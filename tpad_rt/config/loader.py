@@ -10,7 +10,7 @@ from pydantic import TypeAdapter, ValidationError
 
 from tpad_rt.config.breadcrumb import breadcrumb
 from tpad_rt.config.device_schema import DEVICE_FORMAT_VERSION, DeviceFile
-from tpad_rt.config.messages import explain
+from tpad_rt.config.messages import MAX_LISTED_ERRORS, explain, listed
 from tpad_rt.config.texture_schema import BASE_DIR, IMAGE_DIRS, IMAGE_PIXELS, TextureFile
 from tpad_rt.config.yaml_io import YamlDocument, load_yaml, parse_yaml
 from tpad_rt.errors import ConfigError, printable
@@ -112,7 +112,8 @@ def check_file(path: PathLike) -> list[str]:
 def _validate(root: Any, path: PathLike, document: YamlDocument, base_dir: Path | None = None,
               image_dirs: list[Path] | None = None) -> Any:
     """``document`` validated as ``root`` (relative image paths from ``base_dir``, default the file's folder;
-    images only within ``image_dirs`` when given); raises ConfigError with one line per problem."""
+    images only within ``image_dirs`` when given); raises ConfigError with one line per problem (the first
+    MAX_LISTED_ERRORS, then how many more)."""
     try:
         context: dict[str, Any] = {BASE_DIR: Path(path).parent if base_dir is None else base_dir, IMAGE_PIXELS: [0]}
         if image_dirs is not None:
@@ -120,7 +121,7 @@ def _validate(root: Any, path: PathLike, document: YamlDocument, base_dir: Path 
         return _ADAPTERS[root].validate_python(document.data, context=context)
     except ValidationError as err:
         lines = []
-        for error in err.errors(include_url=False):
+        for error in err.errors(include_url=False)[:MAX_LISTED_ERRORS]:
             loc, message = explain(error, root)
             lines.append(breadcrumb(str(path), loc, message, document.line_at(loc)))
-        raise ConfigError(lines) from None
+        raise ConfigError(listed(lines, str(path), err.error_count())) from None

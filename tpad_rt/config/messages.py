@@ -9,11 +9,25 @@ from typing import Any
 
 from pydantic_core import ErrorDetails
 
-from tpad_rt.config.breadcrumb import Location, show_value
+from tpad_rt.config.breadcrumb import Location, breadcrumb, show_value
 from tpad_rt.config.fields import RULE_ERROR
 from tpad_rt.config.locate import Spot, locate
 
 _Explain = Callable[[ErrorDetails, Spot, list[Spot]], str]
+
+#: Most problems one ConfigError lists; the rest are counted in a last line (a file of 50,000 unknown keys
+#: gets a message of a few KB, not of MBs).
+MAX_LISTED_ERRORS = 100
+
+
+def listed(lines: list[str], source: str, total: int | None = None) -> list[str]:
+    """The first MAX_LISTED_ERRORS of ``lines`` (breadcrumbs of ``source``'s problems; ``total`` of them, default
+    as many as given), and ``and N more problems`` when there are more."""
+    total = len(lines) if total is None else total
+    if total <= MAX_LISTED_ERRORS:
+        return lines
+    return [*lines[:MAX_LISTED_ERRORS], breadcrumb(source, (), f"and {total - MAX_LISTED_ERRORS:,} more problems "
+                                                   f"(the first {MAX_LISTED_ERRORS} are listed)")]
 
 
 def explain(error: ErrorDetails, root: Any) -> tuple[Location, str]:

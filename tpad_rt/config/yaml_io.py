@@ -10,7 +10,7 @@ duplicate keys can be found, and every value keeps its line number.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +19,7 @@ from yaml.events import AliasEvent, MappingStartEvent, SequenceStartEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from tpad_rt.config.breadcrumb import Location, breadcrumb, show_value
+from tpad_rt.config.messages import listed
 from tpad_rt.errors import ConfigError
 from tpad_rt.files import read_regular
 
@@ -40,17 +41,35 @@ class YamlDocument:
 
     data: dict[Any, Any]
     root: MappingNode
+    #: Each looked-up mapping's keys (``id(node)`` -> ``{key: (line, value node)}``), built on its first lookup,
+    #: so that locating every error of a file is linear in the file, not in errors x keys.
+    _keys: dict[int, dict[str, tuple[int, Node]]] = field(default_factory=dict, init=False, repr=False,
+                                                          compare=False)
 
     def line_at(self, loc: Sequence[str | int]) -> int:
         """1-based line of the value at ``loc``, or of the nearest enclosing value present."""
         node: Node = self.root
         line = node.start_mark.line + 1
         for elem in loc:
-            found = _child(node, elem)
+            found = self._child(node, elem)
             if found is None:
                 break
             line, node = found
         return line
+
+    def _child(self, node: Node, elem: str | int) -> tuple[int, Node] | None:
+        """``(line, child)`` for a key of a mapping (the key's line; the last of a repeated key) or an index
+        of a list."""
+        if isinstance(node, MappingNode):
+            keys = self._keys.get(id(node))
+            if keys is None:
+                keys = self._keys[id(node)] = {key.value: (key.start_mark.line + 1, value)
+                                               for key, value in node.value if isinstance(key, ScalarNode)}
+            return keys.get(str(elem))
+        if isinstance(node, SequenceNode) and isinstance(elem, int) and 0 <= elem < len(node.value):
+            item = node.value[elem]
+            return item.start_mark.line + 1, item
+        return None
 
 
 def load_yaml(path: Path, source: str) -> YamlDocument:
@@ -97,7 +116,7 @@ def _compose_and_construct(text: bytes, source: str) -> YamlDocument:
             raise ConfigError(breadcrumb(source, (), message))
         problems = _check_nodes(root, (), source, set())
         if problems:
-            raise ConfigError(problems)
+            raise ConfigError(listed(problems, source))
         return YamlDocument(loader.construct_document(root), root)
     finally:
         loader.dispose()
@@ -215,17 +234,6 @@ def _check_nodes(node: Node, loc: Location, source: str, seen: set[int]) -> list
             problems += _check_nodes(value, (*loc, label), source, seen)
     return problems
 
-
-def _child(node: Node, elem: str | int) -> tuple[int, Node] | None:
-    """``(line, child)`` for a key of a mapping (the key's line) or an index of a list."""
-    if isinstance(node, MappingNode):
-        for key, value in reversed(node.value):
-            if isinstance(key, ScalarNode) and key.value == str(elem):
-                return key.start_mark.line + 1, value
-    elif isinstance(node, SequenceNode) and isinstance(elem, int) and 0 <= elem < len(node.value):
-        item = node.value[elem]
-        return item.start_mark.line + 1, item
-    return None
 
 
 def _present(node: Node | None, mark: yaml.Mark) -> Node:
