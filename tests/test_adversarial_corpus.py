@@ -358,7 +358,7 @@ CASES: list[tuple[str, Build, str]] = [
     ("path-longer-than-path-max-check", lambda t: ["check", str(t / ("a" * 5000 + ".yaml"))],
      "cannot read: file name too long"),
     ("path-longer-than-path-max-out", lambda t: render(t, out="b" * 5000 + ".npz"),
-     "cannot write the recording (File name too long)"),
+     "cannot write recordings and WAV files there: file name too long"),
     ("bad-texture-named-with-newline",
      lambda t: render(t, texture_path=texture(t, "kind: grating\nperiod_mm: -2\nfriction: {low: 0.5, high: 1}\n",
                                               name="bad\nname.yaml")),

@@ -9,7 +9,7 @@ figure_target(option, text) -> Path
 pyplot() -> matplotlib.pyplot
     pyplot on the Agg backend (no display needed), imported on first use
 save(figure, out)
-    write ``figure`` to ``out`` at 150 dpi; BackendError when it cannot be written
+    write ``figure`` to ``out`` at 150 dpi, through tpad_rt.files.NewFile; BackendError when it cannot be written
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from tpad_rt.errors import BackendError, ConfigError, printable
-from tpad_rt.files import check_writable_target
+from tpad_rt.errors import ConfigError, printable
+from tpad_rt.files import NewFile, check_writable_target
 
 FORMATS = (".png", ".pdf", ".svg")
 
@@ -46,10 +46,11 @@ def pyplot() -> ModuleType:
 
 
 def save(figure: Any, out: Path) -> None:
-    """Write ``figure`` to ``out`` (150 dpi) and close it; BackendError when the file cannot be written."""
+    """Write ``figure`` to ``out`` (150 dpi, in the format its suffix names), complete or not at all
+    (:class:`tpad_rt.files.NewFile`), and close it; ConfigError when ``out`` is no place to write,
+    BackendError when the file cannot be written."""
     try:
-        figure.savefig(out, dpi=150)
-    except OSError as error:
-        raise BackendError(f"{printable(str(out))}: cannot write the figure ({error.strerror or error})") from None
+        with NewFile(out, "figures") as new:
+            figure.savefig(new.file, dpi=150, format=out.suffix[1:].lower())
     finally:
         pyplot().close(figure)

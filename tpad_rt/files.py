@@ -9,6 +9,16 @@ and is not a regular file (``/dev/zero``, a FIFO, a directory), lies in no folde
 a file the command reads, is refused before the work that fills it
 (:func:`check_writable_target`); a new path in a folder is fine.
 
+Every file tpad-rt writes at a path the user names (device files, recordings, WAV files,
+figures, schemas, sweeps) is written through :class:`NewFile`: a temporary file created
+exclusively beside the target (``tempfile.mkstemp``: ``O_CREAT | O_EXCL | O_NOFOLLOW``,
+a random name), so a link planted at any name in the folder is never followed, then
+flushed, fsync'ed and renamed onto the target with ``os.replace`` only once complete. A
+failure or an interruption removes the temporary file and leaves whatever was at the
+target as it was; no reader ever sees part of a file. A symbolic link at the target
+(to a regular file: one to anything else is refused) is replaced itself by the new
+file; the file it pointed to is never written.
+
 API map
 -------
 open_regular(path, what, limit_bytes=None, name=None) -> BinaryIO
@@ -19,17 +29,23 @@ ensure_regular(path, what)
     ConfigError unless ``path`` is a readable regular file (for readers that open it themselves)
 check_writable_target(path, what, inputs=())
     ConfigError when ``path`` exists and is not a regular file, lies in no folder, or is one of ``inputs``
+NewFile(path, what) -> NewFile
+    a temporary file beside ``path`` (``.file``) that ``commit()`` moves there, ``discard()`` removes;
+    as a context manager, committed when the block ends, discarded when it raises
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import stat
+import tempfile
 from collections.abc import Sequence
+from types import TracebackType
 from typing import BinaryIO
 
-from tpad_rt.errors import ConfigError, printable
+from tpad_rt.errors import BackendError, ConfigError, printable
 
 PathLike = str | os.PathLike[str]
 
@@ -133,15 +149,19 @@ def check_writable_target(path: PathLike, what: str, inputs: Sequence[PathLike] 
     one of ``inputs`` (the files the command reads: writing there would destroy one).
 
     ``what`` names what is written there (``recordings``). A missing path in a folder is
-    fine (it will be created); a symbolic link is judged by what it points to. Checked
+    fine (it will be created); a symbolic link is judged by what it points to (one to a
+    regular file is then replaced by :class:`NewFile`, not written through). Checked
     before the work that makes what is written, so that a long run is not lost at its end.
+    A name too long for the file system is refused here too.
     """
     name = _name(path, None)
     try:
         mode = os.stat(path).st_mode
     except ValueError:
         raise ConfigError(f"{name}: the path contains a NUL byte") from None
-    except OSError:
+    except OSError as error:
+        if error.errno == errno.ENAMETOOLONG:
+            raise ConfigError(f"{name}: cannot write {what} there: {_reason(error)}") from None
         folder = os.path.dirname(os.fspath(path)) or "."  # as written: 'missing/../x' needs 'missing'
         if not os.path.isdir(folder):
             raise ConfigError(f"{name}: cannot write {what} there: no folder {printable(folder)}") from None
@@ -158,4 +178,117 @@ def check_writable_target(path: PathLike, what: str, inputs: Sequence[PathLike] 
                                   "write to another file")
 
 
-__all__ = ["check_writable_target", "ensure_regular", "open_regular", "read_regular"]
+#: Characters of the target's name kept in its temporary file's name (``.NAME.XXXXXXXX.tmp``): a name near
+#: the file system's limit (255 bytes) must still leave room for the rest.
+_TEMPORARY_NAME_CHARS = 64
+
+
+class NewFile:
+    """The file at ``path``, written in a temporary file beside it and moved there only once complete.
+
+    ``what`` names what is written (``device files``, ``recordings``) in messages. The
+    temporary file (``.file``, binary, read-write, at ``.temporary``) is created
+    exclusively in the target's folder with a random name, so no link planted there is
+    followed. :meth:`commit` flushes and fsyncs it, gives it the permissions a plain
+    ``open(path, "w")`` would (those of the regular file it replaces, else 0o666 less the
+    umask; its owner is the writer), and renames it onto ``path``; :meth:`discard`
+    removes it. As a context manager (``with NewFile(...) as new: new.file.write(...)``)
+    it commits when the block ends and discards when the block raises.
+
+    Raises ConfigError, creating nothing, when ``path`` is refused by
+    :func:`check_writable_target` or the temporary file cannot be created in its folder
+    (read-only, full). Writing or committing that fails (a full disk, a file-size limit)
+    raises BackendError from :meth:`failed` or :meth:`commit`, with the temporary file
+    removed and ``path`` as it was; an OSError raised in the ``with`` block becomes that
+    BackendError.
+    """
+
+    def __init__(self, path: PathLike, what: str) -> None:
+        check_writable_target(path, what)
+        self.path = os.fspath(path)
+        self.what = what
+        self.name = _name(path, None)
+        self._folder = os.path.dirname(self.path) or "."
+        prefix = f".{os.path.basename(self.path)[:_TEMPORARY_NAME_CHARS]}."
+        try:
+            handle, self.temporary = tempfile.mkstemp(suffix=".tmp", prefix=prefix, dir=self._folder)
+        except OSError as error:
+            raise ConfigError(f"{self.name}: cannot write {what} there: {_reason(error)}") from None
+        self.file: BinaryIO = os.fdopen(handle, "w+b")
+        self.committed = False
+
+    @property
+    def closed(self) -> bool:
+        """True once committed or discarded."""
+        return self.file.closed
+
+    def commit(self) -> None:
+        """Flush, fsync and set the permissions of the temporary file, and rename it onto ``path``; BackendError
+        (the temporary file removed, ``path`` as it was) when that fails. Nothing once committed or discarded."""
+        if self.closed:
+            return
+        try:
+            self.file.flush()
+            os.fchmod(self.file.fileno(), self._mode())
+            os.fsync(self.file.fileno())
+            self.file.close()
+            os.replace(self.temporary, self.path)
+        except OSError as error:
+            raise self.failed(error) from None
+        self.committed = True
+        with contextlib.suppress(OSError):  # the rename itself made durable, where the folder can be opened
+            folder = os.open(self._folder, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+            try:
+                os.fsync(folder)
+            finally:
+                os.close(folder)
+
+    def discard(self) -> None:
+        """Close and remove the temporary file, leaving ``path`` as it was. Nothing once committed."""
+        if self.committed:
+            return
+        with contextlib.suppress(OSError):
+            self.file.close()
+        with contextlib.suppress(OSError):
+            os.unlink(self.temporary)
+
+    def failed(self, error: OSError) -> BackendError:
+        """The error to raise for ``error``, met while writing: ``NAME: cannot write WHAT there: REASON``. The
+        temporary file is discarded."""
+        self.discard()
+        return BackendError(f"{self.name}: cannot write {self.what} there: {_reason(error)}")
+
+    def _mode(self) -> int:
+        """The permission bits of the regular file at ``path``, else 0o666 less the umask."""
+        with contextlib.suppress(OSError):
+            status = os.lstat(self.path)
+            if stat.S_ISREG(status.st_mode):
+                return stat.S_IMODE(status.st_mode) & 0o777
+        return 0o666 & ~_umask()
+
+    def __enter__(self) -> NewFile:
+        return self
+
+    def __exit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, trace: TracebackType | None
+    ) -> None:
+        if error is None:
+            self.commit()
+        elif isinstance(error, OSError):
+            raise self.failed(error) from None
+        else:
+            self.discard()
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it (from /proc where it shows; else set and restored)."""
+    with contextlib.suppress(OSError, ValueError, IndexError), open("/proc/self/status", encoding="ascii") as status:
+        for line in status:
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+__all__ = ["NewFile", "check_writable_target", "ensure_regular", "open_regular", "read_regular"]

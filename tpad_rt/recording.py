@@ -34,6 +34,7 @@ import numpy.typing as npt
 
 from tpad_rt.drive_guard import bad_sample_message, first_bad_sample
 from tpad_rt.errors import BackendError, ConfigError
+from tpad_rt.files import NewFile
 from tpad_rt.kernel.layout import TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_RENDER_BLOCKS
 
@@ -78,11 +79,13 @@ class Recording:
 
 
 def write_recording(path: str | Path, recording: Recording) -> None:
-    """Write ``recording`` to ``path`` (exactly that name); BackendError when it cannot be written.
+    """Write ``recording`` to ``path`` (exactly that name), complete or not at all (:class:`tpad_rt.files.NewFile`).
 
     Raises BackendError, writing nothing, when a drive sample is not finite or beyond full
     scale (a bug in tpad-rt: the message names the first such sample), and ConfigError when
-    ``recording`` otherwise breaks the format (see :func:`read_recording`).
+    ``recording`` otherwise breaks the format (see :func:`read_recording`). ``path`` that
+    is no place to write (no folder, a directory, a FIFO) is a ConfigError, a write that
+    fails (a full disk) a BackendError, as NewFile has them.
     """
     path = Path(path)
     drive = np.asarray(recording.drive)
@@ -98,11 +101,8 @@ def write_recording(path: str | Path, recording: Recording) -> None:
         **recording.blocks,
     }
     _check(str(path), entries)
-    try:
-        with open(path, "wb") as file:
-            np.savez(file, allow_pickle=False, **entries)
-    except OSError as error:
-        raise BackendError(f"{path}: cannot write the recording ({error.strerror})") from None
+    with NewFile(path, "recordings") as new:
+        np.savez(new.file, allow_pickle=False, **entries)
 
 
 def read_recording(path: str | Path) -> Recording:

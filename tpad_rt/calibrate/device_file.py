@@ -4,7 +4,8 @@ Both write a format 2 device file (docs/formats.md "Device files") whose ``sourc
 entries say, key by key, where each value came from: the measurement files and the
 date, the template device the geometry was taken from, or a default. A file is written
 only once it loads as a :class:`~tpad_rt.device.Device` (what ``tpad-rt check`` and
-``play`` do), through a temporary file beside it replaced atomically.
+``play`` do), through a temporary file created exclusively beside it and renamed onto it
+(:class:`tpad_rt.files.NewFile`).
 
 API map
 -------
@@ -22,7 +23,6 @@ from __future__ import annotations
 
 import datetime
 import math
-import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,7 +38,7 @@ from tpad_rt.config.loader import validate_device
 from tpad_rt.config.yaml_io import YamlDocument, dump_yaml, load_yaml
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, printable
-from tpad_rt.files import check_writable_target
+from tpad_rt.files import NewFile
 from tpad_rt.limits import MAX_FORCE_N
 from tpad_rt.physics import electromech
 
@@ -269,25 +269,20 @@ def convert_document(path: str | Path) -> tuple[dict[str, Any], GammaSpread]:
 def write_device(document: dict[str, Any], out: str | Path, header: str = "") -> Device:
     """Write ``document`` as YAML to ``out`` once it loads as a Device; the Device.
 
-    Raises ConfigError, writing nothing, when ``out`` exists and is not a regular file, the
-    document is not a valid device (its problems, as ``tpad-rt check`` gives them), or the
-    file cannot be written.
+    Written through :class:`tpad_rt.files.NewFile` (a temporary file created exclusively
+    beside ``out``, loaded, then renamed onto it). Raises ConfigError, writing nothing, when
+    ``out`` is no place to write (no folder, a directory, a FIFO) or the document is not a
+    valid device (its problems, as ``tpad-rt check`` gives them); BackendError, writing
+    nothing, when the file cannot be written (a full disk).
     """
-    target = Path(out)
     shown = printable(str(out))
-    check_writable_target(target, "device files")
-    temporary = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    try:
-        temporary.write_text(dump_yaml(document, header), encoding="utf-8")
+    with NewFile(out, "device files") as new:
+        new.file.write(dump_yaml(document, header).encode("utf-8"))
+        new.file.flush()
         try:
-            device = Device.from_file(temporary)
+            device = Device.from_file(new.temporary)
         except ConfigError as error:
             # The lines name the temporary file and its line numbers: the user sees neither.
-            raise ConfigError([re.sub(r" \(line \d+\)$", "", line.replace(str(temporary), f"{shown} (not written)"))
+            raise ConfigError([re.sub(r" \(line \d+\)$", "", line.replace(new.temporary, f"{shown} (not written)"))
                                for line in error.errors]) from None
-        os.replace(temporary, target)
-    except OSError as error:
-        raise ConfigError(f"{shown}: cannot write: {error.strerror or error}") from None
-    finally:
-        temporary.unlink(missing_ok=True)
     return device

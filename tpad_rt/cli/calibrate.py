@@ -46,7 +46,7 @@ from tpad_rt.config import load_device
 from tpad_rt.config.device_schema import MAX_CARRIER_HZ, MAX_VOLTS, MIN_CARRIER_HZ
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, printable
-from tpad_rt.files import check_writable_target
+from tpad_rt.files import NewFile, check_writable_target
 from tpad_rt.json_text import json_text
 from tpad_rt.shipped import device_file
 from tpad_rt.figures import figure_target, save
@@ -307,14 +307,13 @@ def run_build(args: argparse.Namespace) -> int:
 
 
 def _write_sweep(out: Path, found: sweep.SweepResult) -> None:
-    """The fine sweep as an impedance CSV (docs/calibration.md "CSV formats")."""
+    """Write the fine sweep to ``out`` as an impedance CSV (docs/calibration.md "CSV formats"), through
+    :class:`tpad_rt.files.NewFile` (its errors)."""
     fine = found.fine
     lines = [f"# tpad-rt calibrate sweep: {fine.source}, the device's shunt taken off", "freq_hz,z_real_ohm,z_imag_ohm"]
     lines += [f"{freq!r},{z.real!r},{z.imag!r}" for freq, z in zip(fine.freq_hz.tolist(), fine.impedance_ohm.tolist())]
-    try:
-        out.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    except OSError as error:
-        raise ConfigError(f"{printable(str(out))}: cannot write: {error.strerror or error}") from None
+    with NewFile(out, "impedance sweeps") as new:
+        new.file.write(("\n".join(lines) + "\n").encode("utf-8"))
 
 
 def run_sweep(args: argparse.Namespace) -> int:

@@ -5,12 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 from tpad_rt.cli.arguments import Subparsers
 from tpad_rt.config.json_schema import SCHEMA_KINDS, schema_json
-from tpad_rt.errors import TpadError
-from tpad_rt.files import check_writable_target
+from tpad_rt.files import NewFile
 
 
 def add_parser(subparsers: Subparsers) -> None:
@@ -26,16 +24,13 @@ def add_parser(subparsers: Subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print or write the schema; raises TpadError if FILE cannot be written, or exists and is not a regular
-    file (a FIFO would block the write until something read it)."""
+    """Print or write the schema (through :class:`tpad_rt.files.NewFile`); raises TpadError if FILE cannot be
+    written, or exists and is not a regular file (a FIFO would block the write until something read it)."""
     text = json.dumps(schema_json(args.kind), indent=2) + "\n"
     if args.out is None:
         sys.stdout.write(text)
         return 0
-    check_writable_target(args.out, "schemas")
-    try:
-        Path(args.out).write_text(text, encoding="utf-8")
-    except OSError as err:
-        raise TpadError(f"cannot write {args.out}: {err.strerror or err}") from None
+    with NewFile(args.out, "schemas") as new:
+        new.file.write(text.encode("utf-8"))
     print(f"wrote the JSON Schema of {args.kind} files to {args.out} ({len(text.encode())} bytes)")
     return 0

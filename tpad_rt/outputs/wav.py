@@ -6,17 +6,24 @@ chunk of format 3 (IEEE float), a ``fact`` chunk (required for non-PCM formats) 
 the ``data`` chunk; the sizes are filled in on :meth:`WavOutput.close`. Samples are
 the DAC values as they are (full scale 1.0 = ``volts_per_full_scale``).
 
+The file is written through :class:`tpad_rt.files.NewFile`: a temporary file created
+exclusively beside the path, renamed onto it when the output closes with its header
+complete. Until then whatever was at the path stays as it was; a write that fails (a
+full disk) or a run that ends in an error (the output left by an exception) removes the
+temporary file and leaves nothing new at the path.
+
 A block holding a sample that is not finite or beyond full scale (a bug in tpad-rt) is
 refused: the file is closed at once, its header counting the samples before that
-block, so it stays a valid WAV of the drive up to the fault, and the error says so.
+block, so it is a valid WAV of the drive up to the fault, and the error says so.
 """
 
 from __future__ import annotations
 
 import struct
 from collections.abc import Mapping
-from typing import Any
 from pathlib import Path
+from types import TracebackType
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -24,7 +31,7 @@ import numpy.typing as npt
 from tpad_rt.device import Device
 from tpad_rt.drive_guard import bad_sample_message, first_bad_sample
 from tpad_rt.errors import BackendError
-from tpad_rt.files import check_writable_target
+from tpad_rt.files import NewFile
 from tpad_rt.outputs.base import Consumes, Output, OutputKind, Runs
 from tpad_rt.urls import Url, UrlForm
 
@@ -57,22 +64,24 @@ def _header(fs_hz: int, data_bytes: int) -> bytes:
 
 
 class WavOutput(Output):
-    """Streams blocks into a 32-bit float mono WAV file at ``path``, sample rate ``fs_hz`` (Hz).
+    """Streams blocks into a 32-bit float mono WAV file at ``path``, sample rate ``fs_hz`` (Hz), which appears
+    there on :meth:`close` (module docstring).
 
     Raises ConfigError when ``path`` exists and is not a regular file (a FIFO, a
-    device, a directory) or lies in no folder, BackendError when it cannot be opened for writing.
+    device, a directory), lies in no folder or its folder cannot be written,
+    BackendError when the header cannot be written.
     """
 
     def __init__(self, path: str | Path, fs_hz: int):
         super().__init__(fs_hz)
         self.path = Path(path)
         self.data_bytes = 0
-        check_writable_target(self.path, "WAV files")
+        self._new = NewFile(self.path, "WAV files")
+        self._file = self._new.file
         try:
-            self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
             self._file.write(_header(fs_hz, 0))
         except OSError as error:
-            raise BackendError(f"wav: cannot write {self.path} ({error.strerror})") from None
+            raise self._new.failed(error) from None
 
     def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
                      blocks: Mapping[str, npt.NDArray[Any]]) -> None:
@@ -99,28 +108,31 @@ class WavOutput(Output):
         try:
             self._file.write(data)
         except OSError as error:
-            raise BackendError(f"wav: cannot write {self.path} ({error.strerror})") from None
+            raise self._new.failed(error) from None
         self.data_bytes += len(data)
 
     def close(self) -> None:
-        """Fill in the header's sizes and close the file (again: nothing); BackendError when that fails (a full
-        disk, a file-size limit): the file is closed all the same."""
+        """Fill in the header's sizes and move the file to its path (again: nothing); BackendError when that
+        fails (a full disk, a file-size limit): nothing is then written at the path."""
         if self._file.closed:
             return
-        problem: OSError | None = None
         try:
             header = _header(self.fs_hz, self.data_bytes)
             for offset in (_RIFF_SIZE_AT, _FACT_FRAMES_AT, _DATA_SIZE_AT):
                 self._file.seek(offset)
                 self._file.write(header[offset:offset + 4])
         except OSError as error:
-            problem = error
-        try:
-            self._file.close()  # flushes what is buffered: a full disk may show only here
-        except OSError as error:
-            problem = problem or error
-        if problem is not None:
-            raise BackendError(f"wav: cannot finish {self.path} ({problem.strerror})")
+            raise self._new.failed(error) from None
+        self._new.commit()  # flushes what is buffered: a full disk may show only here
+
+    def __exit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, trace: TracebackType | None
+    ) -> None:
+        """Close the file when the block ends normally; discard it when the block raises (no partial WAV)."""
+        if error is None:
+            self.close()
+        else:
+            self._new.discard()
 
 
 def open_url(url: Url, *, device: Device, fs_hz: int) -> WavOutput:
