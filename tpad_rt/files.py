@@ -145,32 +145,34 @@ def ensure_regular(path: PathLike, what: str) -> None:
 
 
 def check_writable_target(path: PathLike, what: str, inputs: Sequence[PathLike] = ()) -> None:
-    """ConfigError when ``path`` holds a NUL byte, lies in no folder, exists and is not a regular file, or is
-    one of ``inputs`` (the files the command reads: writing there would destroy one).
+    """ConfigError when ``path`` holds a NUL byte, lies in no folder, exists and is not a regular file, lies in a
+    folder that cannot be written, or is one of ``inputs`` (the files the command reads: writing there would
+    destroy one).
 
     ``what`` names what is written there (``recordings``). A missing path in a folder is
     fine (it will be created); a symbolic link is judged by what it points to (one to a
-    regular file is then replaced by :class:`NewFile`, not written through). Checked
-    before the work that makes what is written, so that a long run is not lost at its end.
-    A name too long for the file system is refused here too.
+    regular file is then replaced by :class:`NewFile`, not written through). The folder
+    must be writable even when the file exists: NewFile creates its new version beside it.
+    Checked before the work that makes what is written, so that a long run is not lost
+    at its end. A name too long for the file system is refused here too.
     """
     name = _name(path, None)
+    folder = os.path.dirname(os.fspath(path)) or "."  # as written: 'missing/../x' needs 'missing'
     try:
-        mode = os.stat(path).st_mode
+        mode: int | None = os.stat(path).st_mode
     except ValueError:
         raise ConfigError(f"{name}: the path contains a NUL byte") from None
     except OSError as error:
         if error.errno == errno.ENAMETOOLONG:
             raise ConfigError(f"{name}: cannot write {what} there: {_reason(error)}") from None
-        folder = os.path.dirname(os.fspath(path)) or "."  # as written: 'missing/../x' needs 'missing'
-        if not os.path.isdir(folder):
-            raise ConfigError(f"{name}: cannot write {what} there: no folder {printable(folder)}") from None
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise ConfigError(f"{name}: cannot write {what} there: the folder {printable(folder)} is not writable")
-        return  # missing: opening it for writing says what else goes wrong
-    if not stat.S_ISREG(mode):
+        mode = None  # missing: creating it says what else goes wrong
+    if mode is None and not os.path.isdir(folder):
+        raise ConfigError(f"{name}: cannot write {what} there: no folder {printable(folder)}")
+    if mode is not None and not stat.S_ISREG(mode):
         raise ConfigError(f"{name}: exists and is not a regular file ({_kind(mode)}); "
                           f"tpad-rt writes {what} to regular files only")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ConfigError(f"{name}: cannot write {what} there: the folder {printable(folder)} is not writable")
     for source in inputs:
         with contextlib.suppress(OSError, ValueError):
             if os.path.samefile(path, source):
@@ -213,7 +215,9 @@ class NewFile:
         try:
             handle, self.temporary = tempfile.mkstemp(suffix=".tmp", prefix=prefix, dir=self._folder)
         except OSError as error:
-            raise ConfigError(f"{self.name}: cannot write {what} there: {_reason(error)}") from None
+            shown = f"the folder {printable(self._folder)} is not writable ({_reason(error)})" \
+                if error.errno in (errno.EACCES, errno.EPERM, errno.EROFS) else _reason(error)
+            raise ConfigError(f"{self.name}: cannot write {what} there: {shown}") from None
         self.file: BinaryIO = os.fdopen(handle, "w+b")
         self.committed = False
 
