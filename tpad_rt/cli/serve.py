@@ -236,10 +236,14 @@ def _summary(server: Server, renderer: Renderer, stopped_by: str) -> list[str]:
     """The end-of-serve summary: what the clients did and what the drive did."""
     counts, stats = server.counters, renderer.stats()
     errors = sum(value for key, value in counts.items() if key.startswith("error_"))
+    refused = {key.removeprefix("refused_"): value for key, value in sorted(counts.items())
+               if key.startswith("refused_") and value}
     lines = [
         f"served until {stopped_by}: {counts['connections']} WebSocket connections, {counts['messages']} messages, "
         f"{counts['osc_messages']} OSC messages; {counts['samples']} finger samples, {counts['textures_set']} "
         f"textures set; {errors} refused with an error, {counts['rate_limited']} dropped by the rate limits",
+        f"HTTP: {counts['http_requests']} requests, {sum(refused.values())} refused"
+        + (" (" + ", ".join(f"{count} {why}" for why, count in refused.items()) + ")" if refused else ""),
         f"played {stats['played_s']:.2f} s of drive: {stats['underflows']} underflows; push-to-output latency p50 "
         f"{stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms",
         f"power: mean {stats['power_mean_w']:.3f} W, peak {stats['power_peak_w']:.3f} W (cap "

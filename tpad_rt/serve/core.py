@@ -70,6 +70,7 @@ class ClockMap:
     def update(self, newest_t: float, now_s: float) -> float:
         """The offset (s) to add to the client's times, after a message whose newest sample is at
         ``newest_t`` (client clock) arrived at stream time ``now_s``."""
+        now_s, newest_t = float(now_s), float(newest_t)  # Python floats: the renderer's clock is a numpy one
         arrival_offset_s = now_s - newest_t
         if self.offset_s is None or newest_t + self.offset_s < now_s - RESYNC_S:
             self.offset_s = arrival_offset_s

@@ -46,6 +46,9 @@ MAX_ID_CHARS = 64
 #: Fastest telemetry subscription (Hz) and the slowest (a rate of 0 ends one).
 MAX_SUBSCRIBE_HZ = 100.0
 MIN_SUBSCRIBE_HZ = 0.1
+#: Largest client time (s, either sign): 317 years, beyond any clock's seconds (the Unix epoch's included), so
+#: mapping one onto the stream clock cannot overflow.
+MAX_CLIENT_T_S = 1e10
 #: Longest texture reference (a name or path), characters.
 MAX_PATH_CHARS = 4096
 
@@ -54,6 +57,7 @@ ERROR_CODES = ("bad_json", "bad_message", "unknown_type", "too_large", "rate_lim
                "bad_sample", "texture", "forbidden_path", "internal")
 
 Number = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+ClientTime = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=-MAX_CLIENT_T_S, le=MAX_CLIENT_T_S)]
 RequestId = Union[Annotated[int, Field(strict=True, ge=-(2**53), le=2**53)],
                   Annotated[str, Field(strict=True, max_length=MAX_ID_CHARS)]]
 
@@ -73,7 +77,7 @@ class Sample(BaseModel):
     x_mm: Number
     y_mm: Number
     force_n: Number | None = None
-    t: Number | None = None
+    t: ClientTime | None = None
 
 
 class Finger(_Message, Sample):
@@ -93,7 +97,7 @@ class Lift(_Message):
     """``lift``: the finger leaves the plate (at the client's time ``t``; None: when it arrives)."""
 
     type: Literal["lift"]
-    t: Number | None = None
+    t: ClientTime | None = None
 
 
 class SetTexture(_Message):

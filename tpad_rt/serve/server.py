@@ -11,8 +11,10 @@ Server(renderer, settings, texture_label)
 
 docs/serve.md is the contract. One loop thread runs everything: a message is read,
 checked (:mod:`tpad_rt.serve.protocol`), limited (:class:`~tpad_rt.serve.core.TokenBucket`)
-and acted on before the next; the renderer's own threads render. Loading a texture runs
-in a worker thread (an image can take a while), one at a time. Errors go back as
+and acted on before the next; the renderer's own threads render. Loading a texture (parsing,
+compiling, drawing its map: 1 MiB of YAML takes seconds) runs in a worker thread, up to
+MAX_TEXTURE_LOADS at once, and only the swap into the renderer holds the texture lock, so
+one client's texture holds up nobody else's messages; the one requested last wins. Errors go back as
 ``error`` messages and the connection stays open; only a message past MAX_FRAME_BYTES
 (the WebSocket layer closes with 1009) or a failed handshake ends one.
 """
@@ -40,7 +42,7 @@ from websockets.http11 import Request as HttpRequest
 from websockets.http11 import Response
 
 from tpad_rt import __version__
-from tpad_rt.errors import SampleError
+from tpad_rt.errors import SampleError, printable
 from tpad_rt.serve import protocol
 from tpad_rt.json_text import json_safe, json_text
 from tpad_rt.serve.core import (
@@ -52,6 +54,7 @@ from tpad_rt.shipped import texture_names
 
 if TYPE_CHECKING:
     from tpad_rt.engine import Renderer
+    from tpad_rt.texture import CompiledTexture
 
 #: A client's sustained and burst messages per second; finger samples per second; bytes per second.
 MESSAGES_PER_S, MESSAGES_BURST = 1000.0, 200.0
@@ -79,6 +82,11 @@ PUMP_S = 0.02
 CHECK_S = 0.1
 #: Most OSC senders whose limits are kept (the oldest forgotten first).
 MAX_OSC_SENDERS = 64
+#: Headers a request may carry at most once (one Origin names one page; which of two Hosts or tokens counts
+#: cannot be told).
+SINGLE_HEADERS = ("Origin", "Host", "Authorization", "Sec-WebSocket-Key", "Sec-WebSocket-Version")
+#: Most characters of a client's header value quoted back in a refusal.
+MAX_SHOWN_CHARS = 100
 #: The page's files (package data) and their content types.
 STATIC_FILES = {"/": ("index.html", "text/html; charset=utf-8"),
                 "/index.html": ("index.html", "text/html; charset=utf-8"),
@@ -138,6 +146,7 @@ class Server:
         self._texture_lock = asyncio.Lock()
         self._texture_serial = 0
         self._texture_loads = 0
+        self._texture_requests = self._texture_ticket = 0  # requests numbered in arrival order; the newest set
         self._texture_label = texture_label or ("none" if renderer.texture.kind == "none" else "the command line")
         self._map_png = friction_map_png(renderer.texture, renderer.device)
         self._colorbar_png = colorbar_png()
@@ -151,12 +160,14 @@ class Server:
         (its error re-raised); ``ready`` is set once listening (``port``/``osc_port`` then bound)."""
         loop = asyncio.get_running_loop()
         async with serve(self._connected, self.settings.host, self.settings.port, process_request=self._http,
+                         process_response=self._handshake_done,
                          max_size=protocol.MAX_FRAME_BYTES, max_queue=16, compression=None,
                          close_timeout=CLOSE_TIMEOUT_S, server_header=f"tpad-rt/{__version__}") as server:
             self.port = next(iter(server.sockets)).getsockname()[1]
             osc = None
             if self.settings.osc_port is not None:
-                osc = await OscEndpoint.open(loop, "127.0.0.1", self.settings.osc_port, self._osc_message)
+                osc = await OscEndpoint.open(loop, "127.0.0.1", self.settings.osc_port, self._osc_message,
+                                           self.counters)
                 self.osc_port = osc.port
             tasks = [asyncio.create_task(self._pump()), asyncio.create_task(self._watch(stop))]
             if ready is not None:
@@ -196,9 +207,27 @@ class Server:
 
     def _http(self, connection: ServerConnection, request: HttpRequest) -> Response | None:
         """The page's files, the friction map, or (for ``/ws``) None to go on with the handshake once the
-        origin and the token pass."""
-        path, _, query = request.path.partition("?")
+        request is well-formed and the origin and the token pass; any other request gets its 4xx, counted."""
         self.counters["http_requests"] += 1
+        try:
+            return self._route(connection, request)
+        except Exception as error:  # noqa: BLE001 - a bug: one counted line on stderr, a 500, keep serving
+            self.counters["refused_internal"] += 1
+            print(f"tpad-rt serve: internal error handling an HTTP request: {error!r} (please report it)",
+                  file=sys.stderr, flush=True)
+            return connection.respond(HTTPStatus.INTERNAL_SERVER_ERROR, "the server failed on this request; it "
+                                      "keeps serving\n")
+
+    def _route(self, connection: ServerConnection, request: HttpRequest) -> Response | None:
+        path, _, query = request.path.partition("?")
+        repeated = next((name for name in SINGLE_HEADERS if len(request.headers.get_all(name)) > 1), None)
+        if repeated == "Origin":  # which page sent it cannot be told: not an allowed one
+            self.counters["refused_origin"] += 1
+            return connection.respond(HTTPStatus.FORBIDDEN, "a request with more than one Origin header comes from "
+                                      "no page that may open this WebSocket\n")
+        if repeated is not None:
+            self.counters["refused_malformed"] += 1
+            return connection.respond(HTTPStatus.BAD_REQUEST, f"a request has at most one {repeated} header\n")
         if path == "/ws":
             if len(self._clients) >= MAX_CLIENTS:
                 self.counters["refused_full"] += 1
@@ -207,12 +236,17 @@ class Server:
             origin = request.headers.get("Origin")
             if origin is not None and origin not in self._origins(request):
                 self.counters["refused_origin"] += 1
-                return connection.respond(HTTPStatus.FORBIDDEN, f"origin {origin} may not open this WebSocket "
-                                          "(tpad-rt serve --allow-origin adds one)\n")
-            if self.settings.token is not None and not self._token_ok(request, query):
-                self.counters["refused_token"] += 1
-                return connection.respond(HTTPStatus.UNAUTHORIZED, "a token is needed: ws://HOST:PORT/ws?token=... "
-                                          "(the one tpad-rt serve printed)\n")
+                return connection.respond(HTTPStatus.FORBIDDEN, f"origin {_shown(origin)} may not open this "
+                                          "WebSocket (tpad-rt serve --allow-origin adds one)\n")
+            if self.settings.token is not None:
+                tokens = parse_qs(query).get("token", [])
+                if len(tokens) > 1:
+                    self.counters["refused_malformed"] += 1
+                    return connection.respond(HTTPStatus.BAD_REQUEST, "a request shows at most one token\n")
+                if not self._token_ok(tokens[0] if tokens else "", request.headers.get("Authorization", "")):
+                    self.counters["refused_token"] += 1
+                    return connection.respond(HTTPStatus.UNAUTHORIZED, "a token is needed: ws://HOST:PORT/ws?token="
+                                              "... (the one tpad-rt serve printed)\n")
             return None
         if path == "/map.png":
             return self._response(self._map_png, "image/png")
@@ -221,6 +255,12 @@ class Server:
         if path in self._static:
             return self._response(*self._static[path])
         return connection.respond(HTTPStatus.NOT_FOUND, "not found: this server has /, /map.png, /colorbar.png and /ws\n")
+
+    def _handshake_done(self, connection: ServerConnection, request: HttpRequest, response: Response) -> None:
+        """Count a handshake the WebSocket layer itself refused (a bad or repeated Sec-WebSocket-Key, Upgrade,
+        version): it answered 4xx, and says nothing on stderr."""
+        if connection.protocol.handshake_exc is not None:
+            self.counters["refused_malformed"] += 1
 
     def _response(self, body: bytes, kind: str) -> Response:
         headers = Headers([("Content-Type", kind), ("Content-Length", str(len(body))), *_SECURITY_HEADERS])
@@ -233,13 +273,13 @@ class Server:
         own = {f"http://{name}:{port}" for name in ("127.0.0.1", "localhost", "[::1]", self.settings.host)}
         return own | set(self.settings.allowed_origins)
 
-    def _token_ok(self, request: HttpRequest, query: str) -> bool:
+    def _token_ok(self, shown: str, authorization: str) -> bool:
+        """Whether the URL's ``token`` or the ``Authorization`` header's bearer is this server's token (header
+        bytes beyond ASCII are compared as they came)."""
         token = self.settings.token
         assert token is not None
-        shown = parse_qs(query).get("token", [""])[0]
-        bearer = request.headers.get("Authorization", "")
-        return hmac.compare_digest(shown.encode(), token.encode()) or \
-            hmac.compare_digest(bearer.encode(), f"Bearer {token}".encode())
+        return hmac.compare_digest(shown.encode("utf-8", "surrogateescape"), token.encode()) or \
+            hmac.compare_digest(authorization.encode("utf-8", "surrogateescape"), f"Bearer {token}".encode())
 
     # --- WebSocket -----------------------------------------------------------------------------
 
@@ -435,28 +475,36 @@ class Server:
 
     async def set_texture(self, request: protocol.SetTexture, client: Client | None = None) -> None:
         """Load, compile and render ``request``'s texture, then tell every client (the requester's copy
-        carries its ``id``); ProtocolError ``texture``/``forbidden_path``."""
+        carries its ``id``); ProtocolError ``texture``/``forbidden_path``, or ``texture`` when a texture
+        requested after it was set first (the later request wins)."""
         if self._texture_loads >= MAX_TEXTURE_LOADS:
             raise ProtocolError("rate_limited", f"{self._texture_loads} textures are loading already; send this one "
                                 "once one is set", request.id, "texture")
         self._texture_loads += 1
+        self._texture_requests += 1
+        ticket = self._texture_requests
         try:
-            await self._load_texture(request)
+            compiled, label, png = await asyncio.to_thread(self._prepare_texture, request)
         finally:
             self._texture_loads -= 1
+        async with self._texture_lock:  # held only to swap: the work above runs in parallel, off the loop
+            if ticket < self._texture_ticket:
+                raise ProtocolError("texture", "a texture requested after this one was set first; this one is not",
+                                    request.id, "texture")
+            self._texture_ticket = ticket
+            self.renderer.set_texture(compiled)
+            self._texture_serial += 1
+            self._texture_label, self._map_png = label, png
         message = self._texture_message()
         self.counters["textures_set"] += 1
         for other in list(self._clients):
             self._push(other, {**message, **_echo(request)} if other is client else message)
 
-    async def _load_texture(self, request: protocol.SetTexture) -> None:
-        """Load and compile (in a worker thread, one at a time), then render ``request``'s texture."""
-        async with self._texture_lock:
-            compiled, label = await asyncio.to_thread(self.library.load, request)
-            png = await asyncio.to_thread(friction_map_png, compiled, self.renderer.device)
-            self.renderer.set_texture(compiled)
-            self._texture_serial += 1
-            self._texture_label, self._map_png = label, png
+    def _prepare_texture(self, request: protocol.SetTexture) -> tuple[CompiledTexture, str, bytes]:
+        """``(compiled texture, its label, its friction map as PNG)`` of ``request`` (run in a worker thread:
+        parsing 1 MiB of YAML takes seconds)."""
+        compiled, label = self.library.load(request)
+        return compiled, label, friction_map_png(compiled, self.renderer.device)
 
     def _texture_message(self) -> dict[str, Any]:
         texture = self.renderer.texture
@@ -520,6 +568,12 @@ class Server:
 def _wire(message: dict[str, Any]) -> str:
     """``message`` as the JSON text sent: NaN and infinities as null (JSON has neither; browsers refuse them)."""
     return json_text(message)
+
+
+def _shown(value: str) -> str:
+    """A header value as quoted back: printable ASCII (other bytes escaped), at most MAX_SHOWN_CHARS."""
+    text = printable(value.encode("utf-8", "surrogateescape").decode("ascii", "backslashreplace"))
+    return text if len(text) <= MAX_SHOWN_CHARS else text[:MAX_SHOWN_CHARS - 3] + "..."
 
 
 def _echo(request: Request) -> dict[str, Any]:
