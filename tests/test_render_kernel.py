@@ -190,7 +190,8 @@ def assert_steps_match(telemetry: dict[str, np.ndarray], steps: dict[str, np.nda
     for name in ("t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu"):
         np.testing.assert_allclose(telemetry[name], steps[name], rtol=1e-9, atol=1e-9, err_msg=name)
     limited = [("amplitude_um", steps["amplitude_um"])]
-    limited += [("voltage_v", steps["peak_v"]), ("power_w", steps["power_w"])] if whole_steps else []
+    limited += [("voltage_v", steps["peak_v"]), ("power_w", steps["power_w"]), ("plate_w", steps["plate_w"])] \
+        if whole_steps else []
     for name, expected in limited:
         np.testing.assert_allclose(telemetry[name], expected, rtol=0, atol=1e-6 * expected.max(), err_msg=name)
 

@@ -305,6 +305,13 @@ def device_tables(device: Device, track: bool = False, band_hz: float = 0.0) -> 
     return dev, start_n, step_n
 
 
+def gain_span(dev: np.ndarray) -> float:
+    """The largest over the smallest plate amplitude per volt in ``dev`` (>= 1): how many times its volts at
+    the lightest-loaded force the amplitude a plate holds is worth at the heaviest (the plate model's bound)."""
+    gains = dev[layout.DEV_AMP_M_PER_V]
+    return float(gains.max() / gains.min())
+
+
 def mode_step_mm(device: Device, dev: np.ndarray) -> float:
     """The x step (mm) of ``dev[DEV_MODE_GAIN]``'s grid: the plate's length over the table's intervals."""
     return device.plate.length_m * 1e3 / (dev.shape[1] - 1)
@@ -370,7 +377,7 @@ class Pipeline:
         self.position_range_mm = position_range_mm(device.plate.length_m * 1e3, device.plate.width_m * 1e3)
         window_steps = max(1, round(options.power_window_s * fs_hz / options.control_interval))
         self._arrays = KernelArrays(
-            cfg=self._config(start_n, step_n, window_steps, mode_step_mm(device, dev)),
+            cfg=self._config(start_n, step_n, window_steps, mode_step_mm(device, dev), gain_span(dev)),
             dev=dev,
             state=np.zeros(layout.STATE_SIZE),
             power_ring=np.zeros(window_steps),
@@ -385,8 +392,10 @@ class Pipeline:
         )
         self.set_texture(texture, 0.0)
 
-    def _config(self, grid_start_n: float, grid_step_n: float, window_steps: int, gain_step_mm: float) -> np.ndarray:
-        """The ``cfg`` array (layout.CFG_*), RUN off; ``gain_step_mm`` the x step of the mode gain table."""
+    def _config(self, grid_start_n: float, grid_step_n: float, window_steps: int, gain_step_mm: float,
+                span: float) -> np.ndarray:
+        """The ``cfg`` array (layout.CFG_*), RUN off; ``gain_step_mm`` the x step of the mode gain table, ``span``
+        the dev tables' :func:`gain_span`."""
         device, options = self.device, self.options
         cap_w = device.power_budget_w if options.power_budget_w is None else options.power_budget_w
         preemphasis = device.preemphasis if options.preemphasis is None else options.preemphasis
@@ -421,6 +430,7 @@ class Pipeline:
                                       else 0.0),
             layout.CFG_C0_F: device.c0_f,
             layout.CFG_SHUNT_OHM: device.shunt_ohm,
+            layout.CFG_GAIN_SPAN: span,
         }.items():
             cfg[index] = value
         return cfg

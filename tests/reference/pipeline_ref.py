@@ -27,7 +27,7 @@ from reference.texture_ref import reference_friction
 
 from tpad_rt.device import Device
 from tpad_rt.physics.friction import amplitude_for
-from tpad_rt.pipeline import RenderOptions
+from tpad_rt.pipeline import RenderOptions, force_grid
 
 #: docs/kernel.md: every limit is kept with this relative margin against rounding.
 SAFETY_MARGIN = 1e-6
@@ -36,7 +36,7 @@ MODEL_GUARD_FRACTION = 0.02
 VOLTAGE, POWER, SPEED_FLOOR, WATCHDOG, SHAPER_LIMIT = 1, 2, 4, 8, 32
 STEP_FIELDS = (
     "t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu", "amplitude_um", "command_v", "cap_v",
-    "gate", "flags", "power_w", "peak_v", "shaper_margin_v",
+    "gate", "flags", "power_w", "peak_v", "shaper_margin_v", "plate_w",
 )
 
 
@@ -108,6 +108,9 @@ class _Stream:
         self.smoothed_v = 0.0
         self.model_v = 0.0  # the shaper's first-order model of the plate envelope (volts of drive)
         self.model_gain_m_per_v = 0.0  # the plate amplitude per volt those volts were worth (0: none yet)
+        start_n, step_n, intervals = force_grid(device)
+        gains = device.amplitude_m_per_v(start_n + step_n * np.arange(intervals + 1))
+        self.model_bound_v = device.max_voltage_v * float(gains.max() / gains.min())  # the most a press makes it
         self.ramp = 0
 
     def control_step(self, n: int, fingers: np.ndarray, texture: Any, t0_s: float, run: bool) -> dict[str, float]:
@@ -146,12 +149,15 @@ class _Stream:
         if self.model_gain_m_per_v > gain_m_per_v:
             held_v = self.model_v * (self.model_gain_m_per_v / gain_m_per_v)
             if held_v**2 * self.p1_w > self.cap_w * (1 + MODEL_GUARD_FRACTION):
-                self.model_v = min(held_v, device.max_voltage_v)
+                self.model_v = min(held_v, self.model_bound_v)
         self.model_gain_m_per_v = gain_m_per_v
+        self.plate_w = self.p1_w * self.model_v**2 if self.preemphasis else 0.0  # the plate's power, as modelled
         tau_s = float(device.envelope_time_constant_s(force_n))
         self.model_step = 1 - math.exp(-1 / (tau_s * self.fs_hz))
         self.follow_gain = 1 / self.model_step if self.preemphasis else 0.0
-        self.low_v = -self.cap_v if options.braking and self.preemphasis else 0.0
+        # braking: to -cap, or to the full volts while the plate holds more than the cap
+        brake_v = device.max_voltage_v * keep if self.plate_w > self.cap_w else self.cap_v
+        self.low_v = -brake_v if options.braking and self.preemphasis else 0.0
         self.gate = finger.active and run
         self.energy_v2: list[float] = []
         self.step_flags = flags
@@ -161,7 +167,7 @@ class _Stream:
             t=t_s, x_mm=f.x_mm, y_mm=f.y_mm, speed_mm_s=math.hypot(f.vx_mm_s, f.vy_mm_s), force_n=f.force_n,
             target_mu=self.target_mu,
             amplitude_um=self.command_v * float(device.amplitude_m_per_v(force_n)) * 1e6,
-            command_v=self.command_v, cap_v=self.cap_v, gate=float(self.gate), flags=flags,
+            command_v=self.command_v, cap_v=self.cap_v, gate=float(self.gate), flags=flags, plate_w=self.plate_w,
         )
 
     def sample(self, n: int) -> tuple[float, float]:
@@ -183,10 +189,11 @@ class _Stream:
         return envelope_v, envelope_v / self.device.volts_per_full_scale * sine
 
     def close_step(self) -> tuple[float, float]:
-        """The finished step's power ``p1 * mean(e^2)`` (W), remembered for the window, and its peak (V)."""
-        power_w = self.p1_w * sum(self.energy_v2) / len(self.energy_v2)
-        self.step_powers.append(power_w)
-        return power_w, math.sqrt(max(self.energy_v2))
+        """The finished step's power ``p1 * mean(e^2)`` (W), at most the cap (braking a pressed plate at the full
+        volts counts as the cap), remembered for the window, and its peak (V)."""
+        drive_w = min(self.p1_w * sum(self.energy_v2) / len(self.energy_v2), self.cap_w)
+        self.step_powers.append(drive_w)
+        return drive_w, math.sqrt(max(self.energy_v2))
 
 
 def _in_effect(schedule: Sequence[tuple[Any, ...]], n: int) -> tuple[Any, ...]:

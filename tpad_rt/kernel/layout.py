@@ -36,7 +36,8 @@ CFG_TRACK = 26                # 1.0: each control step drives at dev[DEV_CARRIER
 CFG_MODE_STEP_MM = 27         # > 0: x step (mm) of dev[DEV_MODE_GAIN]'s grid from x = 0, and the command compensates it
 CFG_C0_F = 28                 # the device's static capacitance (a serial amplifier's lock)
 CFG_SHUNT_OHM = 29            # the device's series shunt
-CFG_SIZE = 30
+CFG_GAIN_SPAN = 30            # largest / smallest dev[DEV_AMP_M_PER_V] (>= 1): bounds the plate model after a press
+CFG_SIZE = 31
 
 # --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
 DEV_AMP_M_PER_V = 0           # plate amplitude (m) per peak drive volt
@@ -65,11 +66,12 @@ TEL_FORCE_N = 4
 TEL_TARGET_MU = 5
 TEL_AMPLITUDE_UM = 6          # commanded plate amplitude after the limits
 TEL_VOLTAGE_V = 7             # peak drive envelope in the block
-TEL_POWER_W = 8               # mean estimated power in the block
+TEL_POWER_W = 8               # mean estimated power of the drive in the block (braking at the full volts: the cap)
 TEL_FLAGS = 9                 # OR of the FLAG_* bits over the block
-TEL_COLS = 10
+TEL_PLATE_W = 10              # the most power the plate held in the block as the model has it (a press: over the cap)
+TEL_COLS = 11
 TEL_NAMES = ("t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu",
-             "amplitude_um", "voltage_v", "power_w", "saturated")
+             "amplitude_um", "voltage_v", "power_w", "saturated", "plate_w")
 
 # --- flags -------------------------------------------------------------------
 FLAG_VOLTAGE = 1              # drive limited by max_voltage_v
@@ -190,6 +192,8 @@ STATE_PHASE_LO = 42
 STATE_PHASE_INDEX = 43
 STATE_STEP_CARRIER_HZ = 44
 STATE_MODEL_GAIN_M_PER_V = 45  # plate amplitude per volt (m/V) the model's volts were worth at the last step (0: none)
+STATE_PLATE_W = 46            # the plate's power as the model has it at the open step's start, p1 * model^2 (W)
+STATE_OVER_CAP_BLOCKS = 47    # rendered blocks whose plate power (TEL_PLATE_W) exceeded CFG_POWER_CAP_W
 # Per-sample tables, indexed by j, the sample's offset in its control step:
 MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
 STATE_COS_TABLE = 48          # cos(j w), w the carrier's phase step (rad)

@@ -53,6 +53,7 @@ from tpad_rt.kernel.layout import (
     CFG_FORCE_GRID_START_N,
     CFG_FORCE_GRID_STEP_N,
     CFG_FS_HZ,
+    CFG_GAIN_SPAN,
     CFG_HORIZON_S,
     CFG_MAX_VOLTAGE_V,
     CFG_MODE_STEP_MM,
@@ -124,9 +125,11 @@ from tpad_rt.kernel.layout import (
     STATE_MODEL_V,
     STATE_NEXT_INDEX,
     STATE_NEXT_PHASE,
+    STATE_OVER_CAP_BLOCKS,
     STATE_PHASE_HI,
     STATE_PHASE_INDEX,
     STATE_PHASE_LO,
+    STATE_PLATE_W,
     STATE_POWER_PER_V2,
     STATE_FOLLOW_GAIN,
     STATE_RING_SLOT,
@@ -152,6 +155,7 @@ from tpad_rt.kernel.layout import (
     TEL_AMPLITUDE_UM,
     TEL_FLAGS,
     TEL_FORCE_N,
+    TEL_PLATE_W,
     TEL_POWER_W,
     TEL_SPEED_MM_S,
     TEL_T_S,
@@ -376,8 +380,9 @@ def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> N
     step, else the same sum recomputed), whatever the blocks were. The ring's
     running sum is recomputed from scratch each time the last slot is written, so its
     rounding error never accumulates beyond one window. A step whose power is not a
-    number in ``[0, power_cap_w]`` (the limits keep every step's power in it; only a
-    corrupt ``p1`` or envelope gets out) is entered as ``power_cap_w``.
+    number in ``[0, power_cap_w]`` is entered as ``power_cap_w``: a step that braked a pressed
+    plate at more than the cap's volts (the limits keep every other step's power in it), or a
+    corrupt ``p1`` or envelope.
     """
     if state[STATE_STEP_OPEN] == 0.0 or not 0.0 < state[STATE_STEP_SAMPLES] <= MAX_CONTROL_INTERVAL:
         return
@@ -608,8 +613,8 @@ def _cap_volts(
 def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     """Reset the carried values that are out of their ranges; FAULT_STATE if one was.
 
-    The smoothed volts must lie in ``[0, max_voltage_v]``, the plate model's in
-    ``[-max_voltage_v, max_voltage_v]`` and its gain (m/V) a finite number >= 0, the gain ramp position in
+    The smoothed volts must lie in ``[0, max_voltage_v]``, the plate model's within ``max_voltage_v`` times
+    the device's gain span (:func:`_model_bound_v`) and its gain (m/V) a finite number >= 0, the gain ramp position in
     ``[0, ramp samples]`` (both 0 for a fresh stream); a reset one restarts from 0 (no
     ramp can start from a value that is not finite). The per-sample tables are then
     rebuilt, in case they were overwritten too.
@@ -618,7 +623,7 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     if not 0.0 <= state[STATE_SMOOTH_START_V] <= cfg[CFG_MAX_VOLTAGE_V]:
         state[STATE_SMOOTH_START_V] = 0.0
         fault = FAULT_STATE
-    if not abs(state[STATE_MODEL_V]) <= cfg[CFG_MAX_VOLTAGE_V]:
+    if not abs(state[STATE_MODEL_V]) <= _model_bound_v(cfg):
         state[STATE_MODEL_V] = 0.0
         fault = FAULT_STATE
     if not (state[STATE_MODEL_ON_REF] == 0.0 or state[STATE_MODEL_ON_REF] == 1.0):
@@ -636,6 +641,18 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
 
 
 @_inline
+def _model_bound_v(cfg: np.ndarray) -> float:
+    """The most volts of drive the plate model may hold: ``max_voltage_v`` times the device's gain span
+    (CFG_GAIN_SPAN, a span that is not a finite number >= 1 counts as 1).
+
+    A drive within ``max_voltage_v`` brings the plate to at most ``max_voltage_v`` times the largest gain; a press
+    then makes that amplitude worth up to the span times as many volts at the smallest gain.
+    """
+    span = cfg[CFG_GAIN_SPAN]
+    return cfg[CFG_MAX_VOLTAGE_V] * (span if 1.0 <= span < math.inf else 1.0)
+
+
+@_inline
 def _guard_model(cfg: np.ndarray, state: np.ndarray, gain_m_per_v: float, p1_w: float) -> None:
     """Brake a plate that holds more than the power cap allows at the step's gain ``gain_m_per_v`` (m/V) and
     power bound ``p1_w`` (W/V^2).
@@ -644,9 +661,10 @@ def _guard_model(cfg: np.ndarray, state: np.ndarray, gain_m_per_v: float, p1_w: 
     sample"). A finger that presses harder lowers the gain and raises the damping: the
     amplitude the plate already holds is worth ``old gain / new gain`` times the volts it
     was, and dissipates more. Where that is over the power cap by more than
-    MODEL_GUARD_FRACTION, the model is set to it (held at ``max_voltage_v``) and leaves
-    the command, so the shaper brakes the plate down to the command instead of driving on
-    as if it held what the cap allows. Smaller changes leave the model as it is (the
+    MODEL_GUARD_FRACTION, the model is set to it (unclamped: it may exceed ``max_voltage_v``,
+    up to :func:`_model_bound_v`) and leaves the command, so the shaper brakes the plate down to
+    the command, at up to the full volts while it holds more than the cap (_control_step),
+    instead of driving on as if it held what the cap allows. Smaller changes leave the model as it is (the
     plate settles to them within its time constant; the shaper does not answer every
     wobble of a finger's force with a full-volt correction). No gain, or one that is not a
     finite number > 0 (a fresh stream, a fault step), leaves the model as it is.
@@ -658,7 +676,7 @@ def _guard_model(cfg: np.ndarray, state: np.ndarray, gain_m_per_v: float, p1_w: 
     model_v = state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
     held_v = model_v * (previous / gain_m_per_v)
     if held_v > 0.0 and held_v * held_v * p1_w > cfg[CFG_POWER_CAP_W] * (1.0 + MODEL_GUARD_FRACTION):
-        state[STATE_MODEL_V] = min(held_v, cfg[CFG_MAX_VOLTAGE_V])
+        state[STATE_MODEL_V] = min(held_v, _model_bound_v(cfg))
         state[STATE_MODEL_ON_REF] = 0.0
 
 
@@ -792,13 +810,18 @@ def _control_step(
     else:
         state[STATE_FAULT_PREVIOUS] = 0.0
     _guard_model(cfg, state, amplitude_m_per_v if fault == 0 else 0.0, p1_w)
+    model_v = state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
+    plate_w = p1_w * model_v * model_v  # the plate's power as the model has it (a press may take it over the cap)
+    state[STATE_PLATE_W] = plate_w if 0.0 <= plate_w < math.inf else 0.0
     state[STATE_COMMAND_V] = command_v
     state[STATE_CAP_V] = cap_v
     state[STATE_AMPLITUDE_M] = command_v * amplitude_m_per_v if fault == 0 else 0.0
     state[STATE_POWER_PER_V2] = p1_w
     state[STATE_FOLLOW_GAIN] = follow_gain
     state[STATE_MODEL_STEP] = model_step
-    state[STATE_DRIVE_LOW_V] = -cap_v if cfg[CFG_BRAKING] != 0.0 and follow_gain > 0.0 else 0.0
+    # Braking: down to -cap, or to the full volts while the plate holds more than the power cap (a press).
+    brake_v = cfg[CFG_MAX_VOLTAGE_V] * (1.0 - SAFETY_MARGIN) if state[STATE_PLATE_W] > cfg[CFG_POWER_CAP_W] else cap_v
+    state[STATE_DRIVE_LOW_V] = -brake_v if cfg[CFG_BRAKING] != 0.0 and follow_gain > 0.0 else 0.0
     state[STATE_GATE] = 1.0 if finger_status > 0 and fault == 0 and cfg[CFG_RUN] != 0.0 else 0.0
     state[STATE_RAMP_SAMPLES] = max(1.0, float(round(cfg[CFG_RAMP_S] * fs_hz)))
     state[STATE_RAMP_START] = min(state[STATE_RAMP_START], state[STATE_RAMP_SAMPLES])
@@ -957,7 +980,7 @@ def _output_fault(state: np.ndarray, rejected: int) -> None:
 @_kernel
 def _write_telemetry(
     telem: np.ndarray, telem_count: np.ndarray, t_s: float, state: np.ndarray,
-    peak_v: float, power_w: float, flags: int,
+    peak_v: float, power_w: float, plate_w: float, flags: int,
 ) -> None:
     """Append one telemetry row (slot ``telem_count % T``), then bump ``telem_count``."""
     row = telem_count[0] % telem.shape[0]
@@ -970,6 +993,7 @@ def _write_telemetry(
     telem[row, TEL_AMPLITUDE_UM] = state[STATE_AMPLITUDE_M] * 1e6
     telem[row, TEL_VOLTAGE_V] = peak_v
     telem[row, TEL_POWER_W] = power_w
+    telem[row, TEL_PLATE_W] = plate_w
     telem[row, TEL_FLAGS] = flags
     telem_count[0] += 1
 
@@ -1011,6 +1035,7 @@ def render_block(
     total = out.shape[0]
     peak_v = 0.0
     energy_w = 0.0
+    plate_w = 0.0
     flags = 0
     next_phase = state[STATE_NEXT_PHASE]
     continues = start_index == state[STATE_NEXT_INDEX] and 0.0 <= next_phase < interval
@@ -1032,7 +1057,9 @@ def render_block(
             state[STATE_FIRST_SEGMENT_V2] = segment_v2
             state[STATE_FIRST_SEGMENT_SAMPLES] = stop - i
         peak_v = max(peak_v, segment_peak_v)
-        energy_w += state[STATE_POWER_PER_V2] * segment_v2
+        # Braking a pressed plate at the full volts counts as the cap, as the ring counts it.
+        energy_w += min(state[STATE_POWER_PER_V2] * segment_v2, cfg[CFG_POWER_CAP_W] * (stop - i))
+        plate_w = max(plate_w, state[STATE_PLATE_W])
         flags |= _step_flags(state)
         phase += stop - i
         if phase == interval:
@@ -1040,4 +1067,7 @@ def render_block(
         i = stop
     state[STATE_NEXT_INDEX] = start_index + total
     state[STATE_NEXT_PHASE] = phase
-    _write_telemetry(telem, telem_count, start_index / cfg[CFG_FS_HZ], state, peak_v, energy_w / max(total, 1), flags)
+    if plate_w > cfg[CFG_POWER_CAP_W]:
+        state[STATE_OVER_CAP_BLOCKS] += 1.0
+    _write_telemetry(telem, telem_count, start_index / cfg[CFG_FS_HZ], state, peak_v, energy_w / max(total, 1),
+                     plate_w, flags)
