@@ -24,6 +24,12 @@ values that are all refused. ``amp emulate`` always ends: ``--duration 0.2`` unl
 fuzzed from refused values. Renders get
 ``--duration 0.05`` unless it is fuzzed, show ``--resolution-mm 2``.
 
+Every command that writes a file the user names (render, play --record, wav://, show,
+schema, calibrate build, convert and --plot) is also run against an attacker's folder
+(issue 20): a victim file elsewhere, links to it planted at the target and at the names
+a temporary file could take, the target a FIFO, a directory or a dangling link. The
+victim must stay as it was and no temporary file may stay behind.
+
 The examples are derandomized (the same on every run, so CI is reproducible); a failure
 prints the falsifying example. Each test counts its outcomes and asserts that most
 examples were errors, so the fuzzer is known to reach the error paths.
@@ -31,10 +37,15 @@ examples were errors, so the fuzzer is known to reach the error paths.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import random
 import shlex
 import shutil
+import stat
+import string
+import subprocess
 import tempfile
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -698,3 +709,112 @@ def test_fuzz_amp_emulate() -> None:
 
     run()
     outcomes.assert_mostly_errors()
+
+
+# --- writers against planted links (issue 20) ----------------------------------------------------------------
+
+EXAMPLE = REPO / "examples" / "calibration"
+STILL = "scripted://still?duration_s=0.01"
+PRECIOUS = b"the victim's own bytes\n"
+#: Every command that writes a file the user names: (suffix, argv with OUT where the path goes).
+WRITERS: dict[str, tuple[str, list[str]]] = {
+    "render --out .npz": (".npz", ["render", GRATING, "--input", STILL, "--out", "OUT"]),
+    "render --out .wav": (".wav", ["render", GRATING, "--input", STILL, "--out", "OUT"]),
+    "render --output wav://": (".wav", ["render", GRATING, "--input", STILL, "--output", "wav://OUT", "--out",
+                                        "RECORDING"]),
+    "play --record": (".npz", ["play", GRATING, "--input", STILL, "--output", "null://", "--duration", "0.05",
+                               "--record", "OUT"]),
+    "show --out": (".svg", ["show", GRATING, "--resolution-mm", "4", "--out", "OUT"]),
+    "schema --out": (".json", ["schema", "device", "--out", "OUT"]),
+    "calibrate build": (".yaml", ["calibrate", "build", "--impedance", str(EXAMPLE / "sweeps.csv"), "--amplitude",
+                                  str(EXAMPLE / "amplitudes.csv"), "--out", "OUT"]),
+    "calibrate convert": (".yaml", ["calibrate", "convert", str(REPO / "tests" / "bad_files" / "device_format_1.yaml"),
+                                    "--out", "OUT"]),
+    "calibrate impedance --plot": (".png", ["calibrate", "impedance", str(EXAMPLE / "sweep_0n_polar.csv"),
+                                            "--plot", "OUT"]),
+}
+#: What is at the target before the command runs.
+TARGET_STATES = ["nothing", "old file", "link to the victim", "dangling link", "link to a FIFO", "FIFO", "directory"]
+#: Links planted at the names a writer's temporary file could take.
+TEMPORARY_PLANTS = ["the next PIDs", "guessed random names"]
+
+
+def _plant(folder: Path, target: Path, state: str, plants: list[str], victim: Path) -> list[Path]:
+    """Put ``state`` at ``target`` and the ``plants`` beside it; the links planted at temporary names."""
+    if state == "old file":
+        target.write_bytes(PRECIOUS)
+        target.chmod(0o640)
+    elif state == "link to the victim":
+        target.symlink_to(victim)
+    elif state == "dangling link":
+        target.symlink_to(victim.parent / "created-through-the-link")
+    elif state == "link to a FIFO":
+        os.mkfifo(folder / "fifo")
+        target.symlink_to(folder / "fifo")
+    elif state == "FIFO":
+        os.mkfifo(target)
+    elif state == "directory":
+        target.mkdir()
+    planted = []
+    if "the next PIDs" in plants:  # the old '.NAME.PID.tmp' (PIDs are handed out in turn)
+        with subprocess.Popen(["true"]) as child:
+            start = child.pid
+        planted += [folder / f".{target.name}.{start + step}.tmp" for step in range(1, 500)]
+    if "guessed random names" in plants:
+        guesses = random.Random(target.name)  # mkstemp's alphabet and length, guessed as an attacker could
+        planted += [folder / f".{target.name[:64]}.{''.join(guesses.choices(string.ascii_lowercase + string.digits + '_', k=8))}.tmp"
+                    for _ in range(200)]
+    for path in planted:
+        with contextlib.suppress(FileExistsError):
+            path.symlink_to(victim)
+    return planted
+
+
+@st.composite
+def writer_case(draw: st.DrawFn) -> tuple[str, str, str, list[str]]:
+    """(writer, file name, what is at the target, links planted at temporary names)."""
+    writer = draw(st.sampled_from(sorted(WRITERS)))
+    name = draw(st.sampled_from(["out", "a b", "n" * 180, "-dash", ".hidden", "x.tmp"])) + WRITERS[writer][0]
+    state = draw(st.sampled_from(TARGET_STATES + ["link to the victim", "dangling link", "old file"]))  # links more
+    plants = draw(st.lists(st.sampled_from(TEMPORARY_PLANTS), unique=True))
+    return writer, name, state, plants
+
+
+def test_fuzz_writers_against_planted_links() -> None:
+    """Every writer, a victim file elsewhere and links planted at its target and at the temporary names it could
+    take: the victim is never written, nothing is created through a link, no temporary file stays, the target
+    is the old file (on an error) or a new regular file (on success, with the old file's permissions), and a
+    target that is no regular file is one error line."""
+    outcomes = Outcomes()
+
+    @settings(FUZZ, max_examples=16)  # about 1 s an example
+    @given(case=writer_case())
+    def run(case: tuple[str, str, str, list[str]]) -> None:
+        writer, name, state, plants = case
+        with workdir() as work:
+            folder, elsewhere = work / "shared", work / "elsewhere"
+            folder.mkdir()
+            elsewhere.mkdir()
+            victim = elsewhere / "victim.txt"
+            victim.write_bytes(PRECIOUS)
+            target = folder / name
+            planted = _plant(folder, target, state, plants, victim)
+            argv = [word.replace("RECORDING", str(work / "r.npz")).replace("OUT", str(target))
+                    for word in WRITERS[writer][1]]
+            status = run_cli(argv, " ".join(argv[:2]) if argv[0] == "calibrate" else argv[0], [], timeout_s=120)
+            outcomes.add(status)
+            assert victim.read_bytes() == PRECIOUS and sorted(os.listdir(elsewhere)) == ["victim.txt"]
+            assert all(path.is_symlink() and path.readlink() == victim for path in planted)
+            assert [path.name for path in folder.iterdir() if path.name.endswith(".tmp") and not path.is_symlink()] == []
+            if state in ("link to a FIFO", "FIFO", "directory"):
+                assert status == 1
+            elif status == 0:
+                assert target.is_file() and not target.is_symlink() and target.stat().st_size > 0
+                if state == "old file":
+                    assert stat.S_IMODE(target.stat().st_mode) == 0o640 and target.read_bytes() != PRECIOUS
+            elif state == "old file":
+                assert target.read_bytes() == PRECIOUS
+
+    run()
+    print(f"fuzz outcomes: {outcomes.counts}")
+    assert outcomes.counts[0] >= 3 and outcomes.counts[1] >= 3, outcomes.counts
