@@ -267,6 +267,21 @@ def test_every_mistake_is_one_line(tmp_path: Path, args: tuple[str, ...], expect
     assert not (tmp_path / "x.yaml").exists()
 
 
+@pytest.mark.parametrize("rows", [3, 300])
+def test_old_mac_line_ends_are_told_so_short_or_over_4_kib(tmp_path: Path, rows: int) -> None:
+    """A measurement file whose lines end in CR alone reads as one line: refused by the csv module when short, by
+    its length over 4 KiB; both messages say what is wrong with the line ends."""
+    lines = ["freq_hz,z_real_ohm,z_imag_ohm"] + [f"{30000 + 10 * k},{1.0},{-500.0}" for k in range(rows)]
+    mac = tmp_path / "mac.csv"
+    mac.write_bytes(("\r".join(lines) + "\r").encode())
+    assert (mac.stat().st_size > 4096) == (rows == 300)
+    run = tpad_rt("calibrate", "impedance", str(mac))
+    run.assert_one_line_error(f"{mac}:1: ")
+    assert run.stderr.endswith("; it holds a carriage return (CR): lines must end in LF or CR LF, not CR alone "
+                               "(old Mac line ends)\n")
+    assert ("line longer than 4,096 bytes" in run.stderr) == (rows == 300)
+
+
 def test_a_sweep_the_model_does_not_fit_is_one_line(tmp_path: Path) -> None:
     lines = ["freq_hz,z_real_ohm,z_imag_ohm"] + [f"{30000 + 10 * k},{1.0},{-500.0}" for k in range(100)]
     flat = tmp_path / "flat.csv"
