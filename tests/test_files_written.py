@@ -125,6 +125,19 @@ def test_a_link_at_the_old_predictable_temporary_name_is_not_followed(folder: Pa
     assert _leftovers(folder) == []
 
 
+def test_a_device_that_does_not_load_is_not_written_and_its_errors_name_the_target(tmp_path: Path) -> None:
+    """write_device loads the temporary file before renaming it: its errors name the target (escaped as every
+    message does), never the temporary file, and nothing is left."""
+    folder = tmp_path / "odd\nfolder"
+    folder.mkdir()
+    document, _ = convert_document(FORMAT_1)
+    document["max_voltage_v"] = -1
+    with pytest.raises(ConfigError) as caught:
+        write_device(document, folder / "rig.yaml")
+    assert str(caught.value).startswith(f"{tmp_path}/odd\\x0afolder/rig.yaml (not written): max_voltage_v: ")
+    assert ".tmp" not in str(caught.value) and os.listdir(folder) == []
+
+
 def test_links_at_the_random_temporary_names_are_refused_even_when_guessed(
         folder: Path, victim: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """An attacker who guesses the random names (here: is told them) still cannot make the writer follow a link:

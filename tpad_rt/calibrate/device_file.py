@@ -283,6 +283,6 @@ def write_device(document: dict[str, Any], out: str | Path, header: str = "") ->
             device = Device.from_file(new.temporary)
         except ConfigError as error:
             # The lines name the temporary file and its line numbers: the user sees neither.
-            raise ConfigError([re.sub(r" \(line \d+\)$", "", line.replace(new.temporary, f"{shown} (not written)"))
+            raise ConfigError([re.sub(r" \(line \d+\)$", "", line.replace(printable(new.temporary), f"{shown} (not written)"))
                                for line in error.errors]) from None
     return device
