@@ -102,7 +102,7 @@ def test_open_body_checks_length_crc_and_version() -> None:
     flipped = bytearray(body)
     flipped[2] ^= 0x10
     assert codec.open_body(as_array(bytes(flipped)), len(body)) == codec.CHECK_CRC
-    other = bytes([2]) + body[1:4]
+    other = bytes([codec.VERSION + 1]) + body[1:4]
     other += REFERENCE_CRC.checksum(other).to_bytes(2, "little")
     assert codec.open_body(as_array(other), len(other)) == codec.CHECK_VERSION
 

@@ -11,16 +11,16 @@ from tpad_rt.amp import wire
 
 #: Section 7: (body, line) of the KEEPALIVE, the HELLO and the ENVELOPE.
 WORKED = {
-    "keepalive": ("01 06 05 00 21 bf", "04 01 06 05 03 21 bf 00"),
-    "hello": ("01 01 00 00 74 70 61 64 2d 72 74 00 00 00 00 00 00 00 00 00 5f 20",
-              "03 01 01 01 08 74 70 61 64 2d 72 74 01 01 01 01 01 01 01 01 03 5f 20 00"),
-    "envelope": ("01 04 03 00 00 00 00 00 00 00 00 40 00 c0 ff 7f 27 6f",
-                 "04 01 04 03 01 01 01 01 01 01 01 02 40 06 c0 ff 7f 27 6f 00"),
+    "keepalive": ("02 06 05 00 fd 24", "04 02 06 05 03 fd 24 00"),
+    "hello": ("02 01 00 00 74 70 61 64 2d 72 74 00 00 00 00 00 b9 79 37 9e c0 c4",
+              "03 02 01 01 08 74 70 61 64 2d 72 74 01 01 01 01 07 b9 79 37 9e c0 c4 00"),
+    "envelope": ("02 04 03 00 00 00 00 00 00 00 00 40 00 c0 ff 7f 6a 87",
+                 "04 02 04 03 01 01 01 01 01 01 01 02 40 06 c0 ff 7f 6a 87 00"),
 }
 #: The same frames as (type, seq, payload).
 MESSAGES = {
     "keepalive": (wire.Type.KEEPALIVE, 5, b""),
-    "hello": (wire.Type.HELLO, 0, wire.Hello("tpad-rt").pack()),
+    "hello": (wire.Type.HELLO, 0, wire.Hello("tpad-rt", 0x9E3779B9).pack()),
     "envelope": (wire.Type.ENVELOPE, 3, wire.Envelope(0, np.array([0, 16384, -16384, 32767], np.int16)).pack()),
 }
 
@@ -47,7 +47,7 @@ def test_worked_bytes_decode(name: str) -> None:
 
 
 def test_worked_payloads_unpack() -> None:
-    assert wire.Hello.unpack(MESSAGES["hello"][2]) == wire.Hello("tpad-rt")
+    assert wire.Hello.unpack(MESSAGES["hello"][2]) == wire.Hello("tpad-rt", 0x9E3779B9)
     envelope = wire.Envelope.unpack(MESSAGES["envelope"][2])
     assert envelope.first_index == 0 and envelope.samples.tolist() == [0, 16384, -16384, 32767]
 
@@ -60,7 +60,7 @@ def test_cobs_as_section_2_1_says() -> None:
     encoded = wire.encode(wire.Type.ENVELOPE, 7, payload)
     assert 0 not in encoded[:-1] and encoded[-1] == 0
     assert 255 in encoded
-    assert wire.decode(encoded[:-1]) == wire.Frame(1, wire.Type.ENVELOPE, 7, payload)
+    assert wire.decode(encoded[:-1]) == wire.Frame(wire.VERSION, wire.Type.ENVELOPE, 7, payload)
 
 
 @pytest.mark.parametrize("encoded", [
@@ -81,7 +81,7 @@ def test_body_length_limits() -> None:
     assert wire.Envelope.unpack(wire.decode(line[:-1]).payload).samples.tolist() == samples.tolist()
     with pytest.raises(ValueError):
         wire.encode(wire.Type.ENVELOPE, 1, wire.Envelope(9, np.zeros(257, np.int16)).pack())
-    body = bytes([1, 4, 0, 0]) + bytes(4 + 2 * 257)
+    body = bytes([wire.VERSION, 4, 0, 0]) + bytes(4 + 2 * 257)
     body += wire.crc16(body).to_bytes(2, "little")
     assert wire.decode(cobs.encode(body)) is None
 
@@ -108,14 +108,15 @@ def test_layouts_have_the_documented_sizes() -> None:
 
 def test_info_status_ack_round_trip_at_their_offsets() -> None:
     info = wire.Info("tpad-emu 1.0", "EMU-1", (8000, 16000, 0, 0), 10_000_000, 80_000_000, 10, 50_000, 40_000,
-                     100_000, 1024, 256, 50, 5, 7, 82)
+                     100_000, 1024, 256, 50, 5, 7, 82, 0xDEADBEEF)
     payload = info.pack()
     assert wire.Info.unpack(payload) == info
     assert payload[:12] == b"tpad-emu 1.0" and payload[12:16] == bytes(4)
+    assert int.from_bytes(payload[84:88], "little") == 0xDEADBEEF  # hello_nonce (version 2)
     assert int.from_bytes(payload[36:40], "little") == 16000
     assert int.from_bytes(payload[60:64], "little") == 50_000
     assert int.from_bytes(payload[72:74], "little") == 1024
-    assert payload[80] == 7 and payload[81:88] == bytes(7)
+    assert payload[80] == 7 and payload[81:84] == bytes(3)
     assert int.from_bytes(payload[88:92], "little") == 82
     status = wire.Status(2**32 - 1, 2**32 - 2, 1024, 2, 1, 3, 4, 5, 6, 7, 8, 65535, -9000, -40_000, 28_284, 54_074,
                          31_360_000)

@@ -1,4 +1,4 @@
-"""The serial amplifier's side of docs/amp-protocol.md (version 1), written from that document alone.
+"""The serial amplifier's side of docs/amp-protocol.md (version 2), written from that document alone.
 
 :mod:`tpad_rt.amp.wire` is the amplifier's codec (COBS framing, CRC-16/IBM-3740, the
 message layouts); :mod:`tpad_rt.amp.emulator` is a software amplifier built on it, run

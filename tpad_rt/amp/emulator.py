@@ -1,4 +1,4 @@
-"""A software serial amplifier that follows docs/amp-protocol.md (version 1); ``tpad-rt amp emulate`` runs it.
+"""A software serial amplifier that follows docs/amp-protocol.md (version 2); ``tpad-rt amp emulate`` runs it.
 
 The :class:`Amplifier` is the protocol's amplifier side as a discrete-event machine on
 the host's ``time.monotonic()`` clock: host frames arrive at given times, envelope
@@ -58,7 +58,7 @@ import tty
 import zipfile
 from collections import deque
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -541,7 +541,8 @@ class Amplifier:
         self.out.clear()
         if self.on_hello is not None:
             self.on_hello()
-        self._send(Type.INFO, self.info.pack())
+        # INFO echoes the HELLO's nonce, so that the host can tell it from a late answer to an earlier HELLO.
+        self._send(Type.INFO, replace(self.info, hello_nonce=wire.Hello.unpack(frame.payload).nonce).pack())
         self._accept(frame)
         self._next_status_us = self.time_us(t_s) + self.info.status_period_ms * 1000
 

@@ -1,4 +1,4 @@
-"""The amplifier's codec for docs/amp-protocol.md, version 1: framing, frame checks, message layouts.
+"""The amplifier's codec for docs/amp-protocol.md, version 2: framing, frame checks, message layouts.
 
 A frame on the line is a body encoded with COBS and one ``0x00`` (section 2.1). A body is
 ``version`` (u8), ``type`` (u8), ``seq`` (u16), the payload and a CRC-16/IBM-3740 of all
@@ -37,7 +37,7 @@ from cobs import cobs  # type: ignore[import-untyped]
 from crc import Calculator, Crc16
 
 #: The protocol version this codec speaks (body byte 0).
-VERSION = 1
+VERSION = 2
 #: Longest body (bytes): an ENVELOPE of 256 samples (section 2.1).
 MAX_BODY = 522
 #: Shortest body (bytes): the header and the CRC, no payload (2.3 step 1).
@@ -217,17 +217,20 @@ class _Flat:
 
 @dataclass(frozen=True)
 class Hello:
-    """HELLO (0x01): opens a session; ``host`` names the host (16-byte string)."""
+    """HELLO (0x01): opens a session; ``host`` names the host (12-byte string), ``nonce`` (u32) is echoed by the
+    INFO that answers it."""
 
     host: str
-    LAYOUT: ClassVar[struct.Struct] = struct.Struct("<16s")
+    nonce: int = 0
+    LAYOUT: ClassVar[struct.Struct] = struct.Struct("<12sI")
 
     def pack(self) -> bytes:
-        return self.LAYOUT.pack(_field(self.host, 16))
+        return self.LAYOUT.pack(_field(self.host, 12), self.nonce)
 
     @classmethod
     def unpack(cls, payload: bytes) -> Hello:
-        return cls(_text(cls.LAYOUT.unpack(payload)[0]))
+        host, nonce = cls.LAYOUT.unpack(payload)
+        return cls(_text(host), nonce)
 
 
 @dataclass(frozen=True)
@@ -295,6 +298,7 @@ class Info:
     status_period_ms: int
     measures: int
     max_current_ma: int
+    hello_nonce: int = 0  # the nonce of the HELLO this INFO answers (at offset 84)
     LAYOUT: ClassVar[struct.Struct] = struct.Struct("<16s16s4I6I4HB3xII")
 
     def pack(self) -> bytes:
@@ -302,16 +306,16 @@ class Info:
             _field(self.firmware, 16), _field(self.serial, 16), *self.envelope_rates_hz,
             self.carrier_min_mhz, self.carrier_max_mhz, self.carrier_step_mhz, self.full_scale_mv, self.max_mv,
             self.slew_mv_per_ms, self.buffer_samples, self.max_frame_samples, self.watchdog_ms,
-            self.status_period_ms, self.measures, 0, self.max_current_ma)
+            self.status_period_ms, self.measures, self.hello_nonce, self.max_current_ma)
 
     @classmethod
     def unpack(cls, payload: bytes) -> Info:
         (firmware, serial, rate_0, rate_1, rate_2, rate_3, carrier_min_mhz, carrier_max_mhz, carrier_step_mhz,
          full_scale_mv, max_mv, slew_mv_per_ms, buffer_samples, max_frame_samples, watchdog_ms, status_period_ms,
-         measures, _reserved, max_current_ma) = cls.LAYOUT.unpack(payload)
+         measures, hello_nonce, max_current_ma) = cls.LAYOUT.unpack(payload)
         return cls(_text(firmware), _text(serial), (rate_0, rate_1, rate_2, rate_3), carrier_min_mhz, carrier_max_mhz,
                    carrier_step_mhz, full_scale_mv, max_mv, slew_mv_per_ms, buffer_samples, max_frame_samples,
-                   watchdog_ms, status_period_ms, measures, max_current_ma)
+                   watchdog_ms, status_period_ms, measures, max_current_ma, hello_nonce)
 
 
 @dataclass(frozen=True)

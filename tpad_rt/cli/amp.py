@@ -1,4 +1,4 @@
-"""``tpad-rt amp emulate``: a software serial amplifier that follows docs/amp-protocol.md (version 1).
+"""``tpad-rt amp emulate``: a software serial amplifier that follows docs/amp-protocol.md (version 2).
 
 The emulator is an amplifier a host can talk to without hardware. By default it opens a
 new pseudo-terminal and prints, as its first line, ``amplifier emulator on /dev/pts/N``:
@@ -138,7 +138,7 @@ def add_parser(subparsers: Subparsers) -> None:
         "emulate",
         help="a software amplifier on a new pty (or --port), following docs/amp-protocol.md",
         description=textwrap.fill(
-            "Run a software amplifier that follows docs/amp-protocol.md (version 1). It prints 'amplifier "
+            "Run a software amplifier that follows docs/amp-protocol.md (version 2). It prints 'amplifier "
             "emulator on PATH' first (PATH: a new pty, or --port), serves the protocol in real time with the "
             "device's simulated plate, and ends on SIGTERM, Ctrl-C, --duration or a disconnect fault: the "
             "output ramps to 0, --record is written and a summary of the counters is printed.", 79),

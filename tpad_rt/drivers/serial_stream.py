@@ -51,17 +51,20 @@ class SerialStreamDriver(Driver):
         serial_amp.warm_up(table)
 
     def open(self, pipeline: Pipeline) -> None:
-        """Open the port, make the handshake, set the carrier to the device's resonance; the amplifier's full
-        scale, clamp and achieved carrier go into the pipeline. BackendError as AmpLink.open says."""
-        link = self.link = self._last_link = serial_amp.AmpLink.open(self.target, carrier_hz=self.device.carrier_hz)
-        assert link.info is not None
-        pipeline.set_drive_scale(link.info.full_scale_v, link.info.max_v, link.carrier_hz)
+        """Open the port, make the handshake, set the carrier to the device's resonance; the envelope's scale the
+        link decided (the amplifier's full scale; the lower of its clamp and the device's max_voltage_v) and the
+        achieved carrier go into the pipeline. BackendError as AmpLink.open says."""
+        link = self.link = self._last_link = serial_amp.AmpLink.open(self.target, carrier_hz=self.device.carrier_hz,
+                                                                    max_voltage_v=self.device.max_voltage_v)
+        scale = link.scale  # decided once, from the INFO the handshake took (H1, H3); the streamer clamps to it
+        assert scale is not None
+        pipeline.set_drive_scale(scale.full_scale_v, scale.max_v, link.carrier_hz)
         self.block_frames = link.frame_samples
 
     def start(self, table: CallbackTable) -> None:
         """START the amplifier at the table's next sample and stream in a thread of its own."""
         assert self.link is not None, "open() first"
-        self.link.start(table, track=self.options.track)
+        self.link.start(table, track=self.options.track, ramp_ms=self.options.ramp_ms)
 
     def poll(self, table: CallbackTable) -> BaseException | None:
         """The error that ended the stream (a BackendError: port lost, amplifier fault, silence...), or None."""

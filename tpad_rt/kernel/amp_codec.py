@@ -1,4 +1,4 @@
-"""The host's codec of the amplifier protocol (docs/amp-protocol.md, version 1): COBS, CRC-16, message layouts.
+"""The host's codec of the amplifier protocol (docs/amp-protocol.md, version 2): COBS, CRC-16, message layouts.
 
 API map
 -------
@@ -35,7 +35,7 @@ from tpad_rt.kernel.cache_stamp import stamp_cache
 stamp_cache(__file__)
 
 #: The protocol version this host speaks (byte 0 of every body).
-VERSION = 1
+VERSION = 2
 #: Header: version (u8), type (u8), seq (u16); the payload starts at PAYLOAD.
 HEADER_BYTES = 4
 PAYLOAD = HEADER_BYTES
@@ -61,6 +61,8 @@ MSG_ACK = 0x83
 
 # --- payload lengths ----------------------------------------------------------------
 HELLO_BYTES = 16
+HELLO_NAME_BYTES = 12         # HELLO: ``host`` (string), then ``nonce`` (u32) at HELLO_NONCE
+HELLO_NONCE = 12
 SET_CARRIER_BYTES = 4
 START_BYTES = 10
 STOP_BYTES = 2
@@ -106,6 +108,7 @@ INFO_MAX_FRAME_SAMPLES = 74   # u16
 INFO_WATCHDOG_MS = 76         # u16
 INFO_STATUS_PERIOD_MS = 78    # u16
 INFO_MEASURES = 80            # u8
+INFO_HELLO_NONCE = 84         # u32: the nonce of the HELLO this INFO answers
 INFO_MAX_CURRENT_MA = 88      # u32
 STATUS_TIME_US = 0            # u32
 STATUS_PLAY_INDEX = 4         # u32

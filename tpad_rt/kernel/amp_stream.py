@@ -174,7 +174,21 @@ LINK_CARRIER_SETS = 51        # SET_CARRIERs sent
 LINK_CARRIER_REFUSED = 52     # SET_CARRIERs the amplifier refused, or left unanswered for CARRIER_ACK_NS
 LINK_LOCK_OFFSET_MHZ = 53     # the lock's correction to the model's resonance
 LINK_LOCK_UPDATES = 54        # STATUS frames that moved it
-LINK_SIZE = 55
+# --- what the amplifier's reports are checked against (H1, H3, H10): the Python side writes these at INFO -------
+LINK_NONCE = 55               # the nonce of the HELLO whose INFO was taken (buffers[BUF_INFO])
+LINK_MAX_MV = 56              # INFO's clamp (mV)
+LINK_LEVEL_LIMIT = 57         # no sample sent exceeds this in magnitude (the host's envelope scale, H3)
+LINK_START_NS = 58            # CLOCK_MONOTONIC (ns) just before the last START went out (the streamer's restarts too)
+# --- written by the streamer's checks ---------------------------------------------------------------------
+LINK_CHECK_INDEX = 59         # the highest play index a PRIMING or RUNNING STATUS gave since the last START
+LINK_CHECK_TIME_US = 60       # the time_us of the last RUNNING STATUS since that START (-1: none)
+LINK_CHECK_RUN_INDEX = 61     # its play index
+LINK_REPORT = 62              # the REPORT_* the run ended for (EXIT_BAD_REPORT), and the value sent, the range allowed
+LINK_REPORT_VALUE = 63
+LINK_REPORT_LOW = 64
+LINK_REPORT_HIGH = 65
+LINK_INFOS_STALE = 66         # INFO frames passed over: answers to an earlier HELLO, or the taken one again
+LINK_SIZE = 67
 
 # --- LINK_TRACK --------------------------------------------------------------------------------
 TRACK_OFF = 0                 # the handshake's carrier throughout
@@ -190,14 +204,44 @@ EXIT_FAULT = 4                # a STATUS reported a fault (LINK_AMP_FAULTS)
 EXIT_VERSION = 5              # a frame of another protocol version (LINK_AMP_VERSION), or ACK BAD_VERSION
 EXIT_REFUSED = 6              # the amplifier refused a restart (LINK_ACK_CODE)
 EXIT_TX_STALLED = 7           # the port took no byte for LINK_STATUS_TIMEOUT_NS
-EXIT_NAMES = ("running", "stopped", "port lost", "status timeout", "fault", "version", "refused", "stalled")
+EXIT_CONTRADICTED = 8         # an INFO answering the HELLO otherwise than the one taken (buffers[BUF_INFO_OTHER])
+EXIT_BAD_REPORT = 9           # a value the amplifier reported out of range (LINK_REPORT*)
+EXIT_NAMES = ("running", "stopped", "port lost", "status timeout", "fault", "version", "refused", "stalled",
+              "contradicted", "bad report")
+
+# --- LINK_REPORT: the value out of range (docs/amp-protocol.md H10) ----------------------------------------------
+REPORT_STATE = 1
+REPORT_BUFFER_FILL = 2
+REPORT_ENVELOPE_MV = 3
+REPORT_CARRIER_MHZ = 4
+REPORT_PHASE_CDEG = 5
+REPORT_PLAY_BACKWARDS = 6     # play index before START's or an earlier STATUS's
+REPORT_PLAY_AHEAD = 7         # play index past what the envelope rate allows since START
+REPORT_PLAY_RATE = 8          # the play index moved otherwise than its own time_us says (value: samples moved)
+REPORT_TIME_BACKWARDS = 9     # time_us ran backwards (value: us, signed)
+REPORT_CARRIER_ACK = 10       # SET_CARRIER's achieved carrier (value; LOW: the carrier asked)
+REPORT_START_ACK = 11         # START's ACK value (value; LOW: the index asked)
+#: (field, why) for the STATUS reports' messages.
+REPORT_TEXT = {
+    REPORT_STATE: ("state", "no such state"),
+    REPORT_BUFFER_FILL: ("buffer_fill", "more than its buffer holds"),
+    REPORT_ENVELOPE_MV: ("envelope_mv", "more than its own clamp (A1)"),
+    REPORT_CARRIER_MHZ: ("carrier_mhz", "a carrier outside its own range"),
+    REPORT_PHASE_CDEG: ("phase_cdeg", "not a phase"),
+    REPORT_PLAY_BACKWARDS: ("play_index", "it ran backwards, or before the index START named"),
+    REPORT_PLAY_AHEAD: ("play_index", "further than the envelope rate allows since START"),
+    REPORT_PLAY_RATE: ("samples played", "not what its own time_us says passed at the envelope rate"),
+    REPORT_TIME_BACKWARDS: ("time_us step", "its clock ran backwards"),
+}
 
 # --- buffers: uint8[BUF_ROWS, BUF_BYTES] ------------------------------------------------------
 BUF_RX = 0                    # bytes received, up to a delimiter
 BUF_BODY = 1                  # a decoded body
 BUF_FRAME = 2                 # a body being built
 BUF_TX = 3                    # encoded bytes waiting for the port
-BUF_ROWS = 4
+BUF_INFO = 4                  # the INFO body the handshake took (H1)
+BUF_INFO_OTHER = 5            # an INFO body that contradicted it (EXIT_CONTRADICTED)
+BUF_ROWS = 6
 BUF_BYTES = 1 << 16
 #: Seconds between the loop's wake-ups when no frame is due sooner (ns).
 WAKE_NS = 250_000
@@ -211,6 +255,14 @@ CLOCK_SKEW = 1e-4
 ENVELOPE_SCRATCH = codec.MAX_FRAME_SAMPLES
 #: A SET_CARRIER unanswered this long (ns) counts as refused, and the next may go.
 CARRIER_ACK_NS = 100_000_000
+#: An achieved carrier may lie this share of the carrier asked from it (or a carrier step, if more) (H2).
+CARRIER_ECHO_FRACTION = 1e-3
+#: The amplifier's envelope clock may run this much faster than the host's (a play index is checked against
+#: the time since START: H10), and its play index may move this much (share, samples) otherwise than its own
+#: time_us says between two RUNNING STATUS.
+RATE_TOLERANCE = 1e-3
+PLAY_SLACK = 2
+STEP_TOLERANCE = 0.01
 #: The share of the way from its correction to the shift a STATUS implies that the lock moves per STATUS
 #: (a first-order filter over STATUS periods: the amplifier's measurement is quantised, 0.01 degree and 1 uA).
 LOCK_GAIN = 0.25
@@ -232,8 +284,99 @@ def _unwrap(index_u32: int, near: int) -> int:
 
 
 @njit(**_KERNEL)
-def _take_status(link: np.ndarray, body: np.ndarray, now_ns: int) -> None:
-    """Copy a STATUS payload (docs/amp-protocol.md 3.2) into the link."""
+def _report(link: np.ndarray, code: int, value: int, low: int, high: int) -> int:
+    """Note the report ``code`` out of range (its value, the range allowed) in the link; ``code``."""
+    link[LINK_REPORT] = code
+    link[LINK_REPORT_VALUE] = value
+    link[LINK_REPORT_LOW] = low
+    link[LINK_REPORT_HIGH] = high
+    return code
+
+
+@njit(**_KERNEL)
+def carrier_echo_tolerance_mhz(link: np.ndarray, asked_mhz: int) -> int:
+    """How far (mHz) an achieved carrier may lie from ``asked_mhz``: a carrier step, or CARRIER_ECHO_FRACTION of
+    it if more (H2)."""
+    return max(link[LINK_CARRIER_STEP_MHZ], np.int64(asked_mhz * CARRIER_ECHO_FRACTION))
+
+
+@njit(**_KERNEL)
+def carrier_echo_ok(link: np.ndarray, asked_mhz: int, achieved_mhz: int) -> bool:
+    """Whether a SET_CARRIER ACK's ``achieved_mhz`` may answer ``asked_mhz``: within the amplifier's carrier range
+    (LINK_CARRIER_MIN/MAX_MHZ, from INFO) and carrier_echo_tolerance_mhz of the carrier asked (H2, H10)."""
+    return (link[LINK_CARRIER_MIN_MHZ] <= achieved_mhz <= link[LINK_CARRIER_MAX_MHZ]
+            and abs(achieved_mhz - asked_mhz) <= carrier_echo_tolerance_mhz(link, asked_mhz))
+
+
+@njit(**_KERNEL)
+def status_problem(link: np.ndarray, body: np.ndarray) -> int:
+    """The first value of the STATUS ``body`` out of the document's ranges or the amplifier's INFO (H10: state,
+    buffer_fill, envelope_mv, carrier_mhz, phase_cdeg; the play index is :func:`_play_problem`'s), noted in the
+    link as :func:`_report` does; 0 if none."""
+    p = PAYLOAD
+    state = int(body[p + STATUS_STATE])
+    if state > codec.STATE_FAULT:
+        return _report(link, REPORT_STATE, state, 0, codec.STATE_FAULT)
+    fill = codec.get_u16(body, p + STATUS_BUFFER_FILL)
+    if fill > link[LINK_BUFFER_SAMPLES]:
+        return _report(link, REPORT_BUFFER_FILL, fill, 0, link[LINK_BUFFER_SAMPLES])
+    envelope_mv = codec.get_i32(body, p + STATUS_ENVELOPE_MV)
+    if abs(envelope_mv) > link[LINK_MAX_MV]:
+        return _report(link, REPORT_ENVELOPE_MV, envelope_mv, -link[LINK_MAX_MV], link[LINK_MAX_MV])
+    carrier_mhz = codec.get_u32(body, p + STATUS_CARRIER_MHZ)
+    if carrier_mhz != 0 and not link[LINK_CARRIER_MIN_MHZ] <= carrier_mhz <= link[LINK_CARRIER_MAX_MHZ]:
+        return _report(link, REPORT_CARRIER_MHZ, carrier_mhz, link[LINK_CARRIER_MIN_MHZ], link[LINK_CARRIER_MAX_MHZ])
+    phase_cdeg = codec.get_i16(body, p + STATUS_PHASE_CDEG)
+    if abs(phase_cdeg) > 18000:
+        return _report(link, REPORT_PHASE_CDEG, phase_cdeg, -18000, 18000)
+    return 0
+
+
+@njit(**_KERNEL)
+def _play_problem(link: np.ndarray, body: np.ndarray, now_ns: int) -> int:
+    """The play index of a PRIMING or RUNNING STATUS checked (H10): not before the last START's index nor an
+    earlier STATUS's, not past what the envelope rate (RATE_TOLERANCE) allows since START went out, and, from one
+    RUNNING STATUS to the next, moved by what its own time_us says passed (STEP_TOLERANCE, PLAY_SLACK). A REPORT_*
+    code noted as :func:`_report` does, or 0 (the check's state then moves on)."""
+    p = PAYLOAD
+    state = body[p + STATUS_STATE]
+    if state != codec.STATE_PRIMING and state != codec.STATE_RUNNING:
+        return 0
+    index = _unwrap(codec.get_u32(body, p + STATUS_PLAY_INDEX), link[LINK_WRITTEN])
+    rate_hz = link[LINK_ENVELOPE_HZ]
+    if index < link[LINK_CHECK_INDEX]:
+        return _report(link, REPORT_PLAY_BACKWARDS, index, link[LINK_CHECK_INDEX], link[LINK_WRITTEN])
+    elapsed_s = max(now_ns - link[LINK_START_NS], 0) * 1e-9
+    highest = link[LINK_START_INDEX] + np.int64(elapsed_s * rate_hz * (1.0 + RATE_TOLERANCE)) + PLAY_SLACK
+    if index > highest:
+        return _report(link, REPORT_PLAY_AHEAD, index, link[LINK_CHECK_INDEX], highest)
+    time_us = codec.get_u32(body, p + codec.STATUS_TIME_US)
+    if state == codec.STATE_RUNNING:
+        if link[LINK_CHECK_TIME_US] >= 0:
+            step_us = _unwrap(time_us, link[LINK_CHECK_TIME_US]) - link[LINK_CHECK_TIME_US]
+            if step_us < 0:
+                return _report(link, REPORT_TIME_BACKWARDS, step_us, 0, _U32 // 2)
+            expected = step_us * 1e-6 * rate_hz
+            low = int(np.floor(expected * (1.0 - STEP_TOLERANCE))) - PLAY_SLACK
+            high = int(np.ceil(expected * (1.0 + STEP_TOLERANCE))) + PLAY_SLACK
+            moved = index - link[LINK_CHECK_RUN_INDEX]
+            if not low <= moved <= high:
+                return _report(link, REPORT_PLAY_RATE, moved, low, high)
+        link[LINK_CHECK_TIME_US] = time_us
+        link[LINK_CHECK_RUN_INDEX] = index
+    link[LINK_CHECK_INDEX] = index
+    return 0
+
+
+@njit(**_KERNEL)
+def _take_status(link: np.ndarray, body: np.ndarray, now_ns: int) -> int:
+    """Check a STATUS payload (docs/amp-protocol.md 3.2, H10) and copy it into the link; 0, or the REPORT_* code
+    of a value out of range (nothing copied then)."""
+    problem = status_problem(link, body)
+    if problem == 0:
+        problem = _play_problem(link, body, now_ns)
+    if problem != 0:
+        return problem
     p = PAYLOAD
     link[LINK_AMP_PLAY_INDEX] = _unwrap(codec.get_u32(body, p + STATUS_PLAY_INDEX), link[LINK_WRITTEN])
     link[LINK_AMP_FILL] = codec.get_u16(body, p + STATUS_BUFFER_FILL)
@@ -253,14 +396,28 @@ def _take_status(link: np.ndarray, body: np.ndarray, now_ns: int) -> None:
     link[LINK_AMP_TIME_US] = codec.get_u32(body, p + codec.STATUS_TIME_US)
     link[LINK_STATUS_NS] = now_ns
     link[LINK_STATUSES] += 1
+    return 0
 
 
 @njit(**_KERNEL)
-def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.ndarray, now_ns: int) -> int:
+def _same_info(body: np.ndarray, taken: np.ndarray) -> bool:
+    """Whether the INFO ``body`` says what the INFO ``taken`` says (their payloads; their seq may differ)."""
+    for k in range(PAYLOAD, PAYLOAD + codec.INFO_BYTES):
+        if body[k] != taken[k]:
+            return False
+    return True
+
+
+@njit(**_KERNEL)
+def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.ndarray, info: np.ndarray,
+                now_ns: int) -> int:
     """Decode and act on one frame from the amplifier (``encoded[:length]``, no delimiter).
 
     Returns 1 for a STATUS, 0 for anything else, or -EXIT_VERSION for a frame of another
-    version or an ACK BAD_VERSION. Bad frames are counted and dropped.
+    version or an ACK BAD_VERSION, -EXIT_BAD_REPORT for a value out of range (H10),
+    -EXIT_CONTRADICTED for an INFO answering the handshake's HELLO otherwise than the
+    INFO taken (``info[0]``; it is copied to ``info[1]``). Bad frames are counted and
+    dropped; INFO frames answering an earlier HELLO are passed over.
     """
     if length == 0:
         return 0  # an empty frame (a lone delimiter)
@@ -274,8 +431,13 @@ def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.nda
         return 0
     payload = size - PAYLOAD - codec.CRC_BYTES
     if kind == MSG_STATUS and payload == STATUS_BYTES:
-        _take_status(link, body, now_ns)
-        return 1
+        return 1 if _take_status(link, body, now_ns) == 0 else -EXIT_BAD_REPORT
+    if kind == codec.MSG_INFO and payload == codec.INFO_BYTES:
+        if codec.get_u32(body, PAYLOAD + codec.INFO_HELLO_NONCE) != link[LINK_NONCE] or _same_info(body, info[0]):
+            link[LINK_INFOS_STALE] += 1  # an answer to an earlier HELLO, or the same INFO again
+            return 0
+        info[1, :size] = body[:size]
+        return -EXIT_CONTRADICTED
     if kind == MSG_ACK and payload == codec.ACK_BYTES:
         link[LINK_ACK_TYPE] = body[PAYLOAD + ACK_ACKED_TYPE]
         link[LINK_ACK_CODE] = body[PAYLOAD + ACK_CODE]
@@ -283,8 +445,16 @@ def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.nda
         if link[LINK_ACK_CODE] == codec.ACK_BAD_VERSION:
             link[LINK_AMP_VERSION] = link[LINK_ACK_VALUE]
             return -EXIT_VERSION
+        if (link[LINK_ACK_TYPE] == MSG_START and link[LINK_ACK_CODE] == codec.ACK_OK
+                and link[LINK_ACK_VALUE] != link[LINK_START_INDEX] % _U32):
+            _report(link, REPORT_START_ACK, link[LINK_ACK_VALUE], link[LINK_START_INDEX], link[LINK_START_INDEX])
+            return -EXIT_BAD_REPORT
         if link[LINK_ACK_TYPE] == MSG_SET_CARRIER and link[LINK_CARRIER_PENDING_NS] >= 0:
             if link[LINK_ACK_CODE] == codec.ACK_OK:
+                if not carrier_echo_ok(link, link[LINK_CARRIER_ASKED_MHZ], link[LINK_ACK_VALUE]):
+                    _report(link, REPORT_CARRIER_ACK, link[LINK_ACK_VALUE], link[LINK_CARRIER_ASKED_MHZ],
+                            link[LINK_CARRIER_ASKED_MHZ])
+                    return -EXIT_BAD_REPORT
                 link[LINK_CARRIER_MHZ] = link[LINK_ACK_VALUE]
             else:
                 link[LINK_CARRIER_REFUSED] += 1
@@ -306,6 +476,7 @@ def _receive(link: np.ndarray, buffers: np.ndarray, rx_length: int, now_ns: int)
     """
     rx = buffers[BUF_RX]
     body = buffers[BUF_BODY]
+    info = buffers[BUF_INFO:BUF_INFO_OTHER + 1]
     statuses = 0
     while True:
         got = read_fd(link[LINK_FD], rx.ctypes.data + rx_length, rx.shape[0] - rx_length)
@@ -324,7 +495,7 @@ def _receive(link: np.ndarray, buffers: np.ndarray, rx_length: int, now_ns: int)
         start = 0
         for i in range(rx_length, end):
             if rx[i] == 0:
-                taken = _take_frame(link, rx[start:i], i - start, body, now_ns)
+                taken = _take_frame(link, rx[start:i], i - start, body, info, now_ns)
                 if taken < 0:
                     return 0, statuses, -taken, now_ns
                 statuses += taken
@@ -366,12 +537,22 @@ def _queue(link: np.ndarray, buffers: np.ndarray, payload_length: int, msg_type:
 
 
 @njit(**_KERNEL)
+def _start_checks(link: np.ndarray) -> None:
+    """A new START (LINK_START_INDEX): the play index checks (H10) begin again from it."""
+    link[LINK_CHECK_INDEX] = link[LINK_START_INDEX]
+    link[LINK_CHECK_TIME_US] = -1
+    link[LINK_CHECK_RUN_INDEX] = link[LINK_START_INDEX]
+
+
+@njit(**_KERNEL)
 def _queue_start(link: np.ndarray, buffers: np.ndarray, end: int) -> int:
     """Queue a START from LINK_WRITTEN with the target fill as prefill (a restart after the watchdog)."""
     frame = buffers[BUF_FRAME]
     codec.put_u32(frame, PAYLOAD + START_ENVELOPE_HZ, link[LINK_ENVELOPE_HZ])
     codec.put_u32(frame, PAYLOAD + START_INDEX, link[LINK_WRITTEN])
     link[LINK_START_INDEX] = link[LINK_WRITTEN]
+    link[LINK_START_NS] = monotonic_ns()  # before it can go out: no sample of it plays earlier
+    _start_checks(link)
     codec.put_u16(frame, PAYLOAD + START_PREFILL, min(link[LINK_TARGET_FILL], link[LINK_BUFFER_SAMPLES]))
     return _queue(link, buffers, START_BYTES, MSG_START, end)
 
@@ -387,8 +568,9 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
     (the time info says its first sample plays ``delay_ns`` from now; the status flags
     count it as late, the stream having skipped ahead before it, or priming, part of a
     prefill). So the render kernel is compiled once, for both drivers. Its samples are in
-    [-1, 1] of full scale (the output guard); each becomes round(32767 x sample), and
-    anything else (never expected) is sent as 0.
+    [-1, 1] of full scale (the output guard); each becomes round(32767 x sample), clamped
+    to +-LINK_LEVEL_LIMIT (the host's envelope scale: H3), and anything else (never
+    expected) is sent as 0.
     """
     count = link[LINK_FRAME_SAMPLES]
     first = int(state[STATE_NEXT_INDEX])
@@ -400,10 +582,11 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
                          table.ctypes.data)
     frame = buffers[BUF_FRAME]
     codec.put_u32(frame, PAYLOAD + ENVELOPE_FIRST_INDEX, first)
+    limit = min(max(link[LINK_LEVEL_LIMIT], 0), 32767)
     for k in range(count):
         value = envelope[k]
         level = int(round(value * 32767.0)) if abs(value) <= 1.0 else 0  # NaN is not <= 1
-        codec.put_i16(frame, PAYLOAD + ENVELOPE_SAMPLES + 2 * k, level)
+        codec.put_i16(frame, PAYLOAD + ENVELOPE_SAMPLES + 2 * k, min(max(level, -limit), limit))
     end = _queue(link, buffers, ENVELOPE_SAMPLES + 2 * count, MSG_ENVELOPE, end)
     link[LINK_WRITTEN] = first + count
     link[LINK_FRAMES_SENT] += 1
@@ -510,6 +693,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
     offset_ns = np.int64(1) << 62  # no STATUS yet
     synced_ns = now_ns
     trips_at_start = link[LINK_AMP_WATCHDOG_TRIPS]
+    _start_checks(link)
     rx_length = 0
     first, end = 0, 0
     moved_ns = now_ns  # the last time the port took bytes
@@ -579,19 +763,27 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
             (link[LINK_WRITTEN] - link[LINK_TARGET_FILL] - frame_samples - ref_index) * 1e9 / rate_hz)
         sleep_until_ns(min(now_ns + WAKE_NS, max(next_due_ns, now_ns + 20_000)))
     link[LINK_STOP_SEQ] = -1
-    if exit_reason == EXIT_STOPPED:  # H8: STOP right after the last envelope frame, then flush it all
+    if exit_reason != EXIT_PORT_LOST:
+        # H8: STOP right after the last envelope frame, then flush it all: also when a failure ended the run (H7),
+        # as long as the port takes bytes. The failure stays the reason; a stop that cannot flush becomes one.
         frame = buffers[BUF_FRAME]
-        codec.put_u16(frame, PAYLOAD, min(max(link[LINK_STOP_RAMP_MS], 1), 0xFFFF))
+        ramp_ms = link[LINK_STOP_RAMP_MS] if exit_reason == EXIT_STOPPED else 0
+        codec.put_u16(frame, PAYLOAD, min(max(ramp_ms, 1), 0xFFFF))
         link[LINK_STOP_SEQ] = link[LINK_SEQ]
         end = _queue(link, buffers, codec.STOP_BYTES, codec.MSG_STOP, end)
-        while end > first and exit_reason == EXIT_STOPPED and monotonic_ns() - moved_ns <= timeout_ns:
+        flushed = 0
+        while end > first and flushed == 0:
             before = first
             first, end, flushed = _flush(link, tx, (first, end))
-            exit_reason = flushed if flushed != 0 else exit_reason
             if first != before or end == 0:
                 moved_ns = monotonic_ns()
-            sleep_until_ns(monotonic_ns() + WAKE_NS)
-        if end > first and exit_reason == EXIT_STOPPED:
-            exit_reason = EXIT_TX_STALLED
+            elif monotonic_ns() - moved_ns > timeout_ns:
+                break
+            if end > first:
+                sleep_until_ns(monotonic_ns() + WAKE_NS)
+        if end > first:
+            link[LINK_STOP_SEQ] = -1  # it did not go out whole
+        if exit_reason == EXIT_STOPPED and (flushed != 0 or end > first):
+            exit_reason = flushed if flushed != 0 else EXIT_TX_STALLED
     link[LINK_EXIT] = exit_reason
     return exit_reason

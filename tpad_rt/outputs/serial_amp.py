@@ -6,13 +6,18 @@ FORMS
     ``serial:///dev/ttyACM0?envelope_hz=16000&buffer_ms=2&frame_ms=0.5&baud=921600``
 parse_serial_url(url) -> SerialTarget
     the port and options; ConfigError (showing the expected form) for a bad one
-AmpLink.open(target, *, carrier_hz, timeout_s=HELLO_TIMEOUT_S) -> AmpLink
-    open the port (pyserial), say HELLO, check INFO (rule H1), set the carrier (H2);
-    BackendError for a port that cannot open, no or a bad answer, another protocol
-    version, a carrier or envelope rate the amplifier cannot make
-AmpLink.start(table, track=False) / .failure() / .stop(ramp_ms) / .stats() / .info / .carrier_hz
+AmpLink.open(target, *, carrier_hz, max_voltage_v=inf, timeout_s=None) -> AmpLink
+    open the port (pyserial), say HELLO with a new nonce, take the INFO that echoes it
+    (rule H1), decide the envelope's scale from it (H3: ``.scale``), set the carrier and
+    check the achieved one (H2); BackendError naming the port for one that cannot open,
+    no or a bad answer, an amplifier that contradicts itself, another protocol version,
+    a carrier or envelope rate the amplifier cannot make
+AmpLink.start(table, track=False, ramp_ms=STOP_RAMP_MS) / .failure() / .stop(ramp_ms) / .stats() / .info / .scale / .carrier_hz
     stream with the GIL-free streamer (:mod:`tpad_rt.kernel.amp_stream`) in a thread;
-    the error that ended the stream (a BackendError), or None; end with STOP (H8), close
+    the error that ended the stream (a BackendError), or None; end with STOP (H8, also
+    after a failure), close
+envelope_scale(full_scale_mv, max_mv, max_voltage_v) -> EnvelopeScale
+    the one place the host's envelope scale and cap are decided (H3)
 AmpLink.set_carrier(carrier_hz) / .tone(envelope_v, seconds) -> AmpStatus
     measuring instead of rendering (``tpad-rt calibrate sweep``): move the carrier, hold a
     constant envelope from Python and read the amplifier's measured voltage, current, phase
@@ -26,11 +31,12 @@ handshake runs in Python with the same codec the streamer uses
 
 from __future__ import annotations
 
+import math
 import os
 import select
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -50,6 +56,8 @@ KIND = OutputKind(Consumes.ENVELOPE, Runs.STREAM, realtime_only=True)
 #: Seconds to wait for INFO after a HELLO (H1), and HELLOs sent before giving up.
 HELLO_TIMEOUT_S = 0.5
 HELLO_TRIES = 3
+#: STOP's ramp (ms) after a failure, unless AmpLink.start is given the run's.
+STOP_RAMP_MS = 5.0
 #: Seconds to wait for the ACK of SET_CARRIER, START and STOP.
 ACK_TIMEOUT_S = 0.5
 STOP_ACK_TIMEOUT_S = 0.2
@@ -64,7 +72,7 @@ CARRIER_RESEND_MHZ = 10
 LOCK_MIN_CURRENT_UA = 1000
 #: AmpLink.stats()["tracking"] for LINK_TRACK's values.
 TRACKING_NAMES = ("off", "model", "model + phase lock")
-#: What the host calls itself in HELLO.
+#: What the host calls itself in HELLO (then the HELLO's nonce).
 HOST_NAME = b"tpad-rt"
 
 
@@ -98,6 +106,27 @@ class AmpInfo:
     status_period_ms: int
     measures: int
     max_current_a: float
+    full_scale_mv: int
+    max_mv: int
+
+
+@dataclass(frozen=True)
+class EnvelopeScale:
+    """How the host scales the envelope (H3), decided once from the INFO the handshake took: sample 32767 is
+    ``full_scale_v`` (V peak), the drive is capped at ``max_v`` (V peak: the lower of the amplifier's clamp and the
+    device's max_voltage_v), and no sample sent exceeds ``level_limit`` in magnitude (``level_limit / 32767 *
+    full_scale_v <= max_v``)."""
+
+    full_scale_v: float
+    max_v: float
+    level_limit: int
+
+
+def envelope_scale(full_scale_mv: int, max_mv: int, max_voltage_v: float) -> EnvelopeScale:
+    """The envelope scale for an amplifier of ``full_scale_mv`` and clamp ``max_mv`` (INFO, mV peak, 0 < max_mv <=
+    full_scale_mv) on a device capped at ``max_voltage_v`` (V peak, > 0; inf: the amplifier's clamp alone)."""
+    cap_mv = min(float(max_mv), max_voltage_v * 1000.0)
+    return EnvelopeScale(full_scale_mv / 1000, cap_mv / 1000, min(32767, math.floor(32767 * cap_mv / full_scale_mv)))
 
 
 def parse_serial_url(url: Url | str) -> SerialTarget:
@@ -116,8 +145,8 @@ def _text(field: np.ndarray) -> str:
     return "".join(chr(b) if 32 <= b < 127 else "?" for b in raw)
 
 
-def _read_info(body: np.ndarray) -> AmpInfo:
-    """AmpInfo from an INFO body; BackendError naming the first field out of the document's ranges (H1)."""
+def _parse_info(body: np.ndarray) -> AmpInfo:
+    """AmpInfo from an INFO body, unchecked."""
     p = codec.PAYLOAD
     u16 = lambda at: int(codec.get_u16(body, p + at))  # noqa: E731
     u32 = lambda at: int(codec.get_u32(body, p + at))  # noqa: E731
@@ -133,7 +162,16 @@ def _read_info(body: np.ndarray) -> AmpInfo:
         max_frame_samples=u16(codec.INFO_MAX_FRAME_SAMPLES), watchdog_ms=u16(codec.INFO_WATCHDOG_MS),
         status_period_ms=u16(codec.INFO_STATUS_PERIOD_MS), measures=int(body[p + codec.INFO_MEASURES]),
         max_current_a=u32(codec.INFO_MAX_CURRENT_MA) / 1000,
+        full_scale_mv=u32(codec.INFO_FULL_SCALE_MV), max_mv=u32(codec.INFO_MAX_MV),
     )
+    return info
+
+
+def _read_info(body: np.ndarray, port: str) -> AmpInfo:
+    """AmpInfo from an INFO body; BackendError naming the amplifier's ``port`` and the first field out of the
+    document's ranges (H1)."""
+    info = _parse_info(body)
+    rates = info.envelope_rates_hz
     for problem, bad in (
         ("no envelope rate", not rates),
         (f"carrier range {info.carrier_min_hz:g}-{info.carrier_max_hz:g} Hz is empty",
@@ -150,8 +188,18 @@ def _read_info(body: np.ndarray) -> AmpInfo:
         (f"status period {info.status_period_ms} ms is not in [1, 100]", not 1 <= info.status_period_ms <= 100),
     ):
         if bad:
-            raise BackendError(f"the amplifier's INFO is out of the protocol's ranges: {problem}")
+            raise BackendError(f"serial: the amplifier on {port} sent an INFO out of the protocol's ranges: {problem}")
     return info
+
+
+def _info_difference(first: np.ndarray, second: np.ndarray) -> str:
+    """How two INFO bodies differ: the first field by name, with both values."""
+    one, two = _parse_info(first), _parse_info(second)
+    for field in fields(AmpInfo):
+        a, b = getattr(one, field.name), getattr(two, field.name)
+        if a != b:
+            return f"{field.name} {a!r}, then {b!r}"
+    return "their reserved bytes differ"
 
 
 @dataclass(frozen=True)
@@ -194,6 +242,10 @@ class AmpLink:
         self._failure: BackendError | None = None  # the error that ended the stream, made once
         self._start_sent = False  # a START went out: the amplifier may be streaming
         self.info: AmpInfo | None = None
+        self.scale: EnvelopeScale | None = None  # decided once, from info (H3)
+        self._nonce = -1  # the nonce of the last HELLO sent (-1: none yet)
+        self._nonces = {-1}  # those of every HELLO sent
+        self._info_body: np.ndarray | None = None  # the INFO taken, to compare any other answer with (H1)
         self.carrier_hz = float("nan")
         self.frame_samples = 0
         self.target_fill = 0
@@ -204,8 +256,11 @@ class AmpLink:
     # --- opening ----------------------------------------------------------------------
 
     @classmethod
-    def open(cls, target: SerialTarget, *, carrier_hz: float, timeout_s: float = HELLO_TIMEOUT_S) -> AmpLink:
-        """Open ``target``'s port, make the handshake (H1) and set the carrier (H2); errors as the module says."""
+    def open(cls, target: SerialTarget, *, carrier_hz: float, max_voltage_v: float = math.inf,
+             timeout_s: float | None = None) -> AmpLink:
+        """Open ``target``'s port, make the handshake (H1: HELLO_TRIES HELLOs, ``timeout_s`` each, HELLO_TIMEOUT_S
+        unless given), decide the envelope's scale for a device capped at ``max_voltage_v`` (V peak) and set the
+        carrier to ``carrier_hz`` (H2); errors as the module says."""
         import serial  # pyserial
 
         try:
@@ -216,7 +271,7 @@ class AmpLink:
         os.set_blocking(fd, False)
         link = cls(target, port, fd)
         try:
-            link._hello(timeout_s)
+            link._hello(HELLO_TIMEOUT_S if timeout_s is None else timeout_s, max_voltage_v)
             link._set_carrier(carrier_hz)
             link._plan()
         except BaseException:
@@ -249,8 +304,11 @@ class AmpLink:
     def _receive(self, wanted: int, deadline: float) -> np.ndarray | None:
         """The next valid body of type ``wanted`` before ``deadline`` (time.monotonic); None on timeout.
 
-        Other valid frames (STATUS) are passed over; an ACK BAD_VERSION or a frame of another
-        version is a BackendError (H6); so is a lost port.
+        Other valid frames (STATUS) are passed over, and so is an INFO that does not answer the
+        last HELLO (H1: its ``hello_nonce`` is another's, or its length wrong); once an INFO was
+        taken, another answering the same HELLO with other bytes is a BackendError (the
+        amplifier contradicts itself), as are an ACK BAD_VERSION, a frame of another version
+        (H6) and a lost port.
         """
         while True:
             while b"\0" in self._rx:
@@ -260,6 +318,8 @@ class AmpLink:
                     continue
                 if body[1] == codec.MSG_ACK and body[codec.PAYLOAD + codec.ACK_CODE] == codec.ACK_BAD_VERSION:
                     raise _version_error(int(codec.get_u32(body, codec.PAYLOAD + codec.ACK_VALUE)))
+                if body[1] == codec.MSG_INFO and not self._answers_hello(body):
+                    continue
                 if body[1] == wanted:
                     return body
             left = deadline - time.monotonic()
@@ -278,6 +338,21 @@ class AmpLink:
                 if not chunk:
                     raise BackendError(f"serial: {self.target.port}: the port closed")
                 self._rx = (self._rx + chunk)[-4 * codec.MAX_ENCODED:]
+
+    def _answers_hello(self, body: np.ndarray) -> bool:
+        """Whether the INFO ``body`` answers the last HELLO and none was taken yet; BackendError if it answers it
+        with other bytes than the INFO taken."""
+        if len(body) != codec.PAYLOAD + codec.INFO_BYTES + codec.CRC_BYTES or \
+                codec.get_u32(body, codec.PAYLOAD + codec.INFO_HELLO_NONCE) != self._nonce:
+            return False  # an answer to an earlier HELLO (or no INFO at all): passed over
+        taken = self._info_body
+        if taken is None:
+            return True
+        payload = slice(codec.PAYLOAD, codec.PAYLOAD + codec.INFO_BYTES)
+        if not np.array_equal(taken[payload], body[payload]):  # its seq may differ, its content may not
+            raise BackendError(f"serial: the amplifier on {self.target.port} contradicts itself: two INFOs answer one "
+                               f"HELLO, {_info_difference(taken, body)} (refused: which one it runs by is unknown)")
+        return False  # the same INFO again
 
     def _decode(self, encoded: bytes) -> np.ndarray | None:
         """The checked body of one received frame, or None for an empty or bad one."""
@@ -305,28 +380,55 @@ class AmpLink:
         raise BackendError(f"serial: the amplifier on {self.target.port} did not acknowledge {what} "
                            f"within {ACK_TIMEOUT_S:g} s")
 
-    def _hello(self, timeout_s: float) -> None:
-        """HELLO until INFO comes (H1), HELLO_TRIES times at most."""
+    def _hello(self, timeout_s: float, max_voltage_v: float) -> None:
+        """HELLO with a new nonce until the INFO echoing it comes (H1), HELLO_TRIES times at most; the envelope's
+        scale from that INFO (H3), for a device capped at ``max_voltage_v`` (V peak)."""
         for _ in range(HELLO_TRIES):
             self.link[amp_stream.LINK_SEQ] = 0
-            self._send(HOST_NAME.ljust(codec.HELLO_BYTES, b"\0"), codec.MSG_HELLO)
+            nonce = self._nonce
+            while nonce in self._nonces:  # never an earlier HELLO's: a late answer to it must not pass
+                nonce = int.from_bytes(os.urandom(4), "little")
+            self._nonce = nonce
+            self._nonces.add(nonce)
+            self._send(HOST_NAME.ljust(codec.HELLO_NAME_BYTES, b"\0") + nonce.to_bytes(4, "little"), codec.MSG_HELLO)
             body = self._receive(codec.MSG_INFO, time.monotonic() + timeout_s)
-            if body is not None and len(body) == codec.PAYLOAD + codec.INFO_BYTES + codec.CRC_BYTES:
-                self.info = _read_info(body)
+            if body is not None:
+                info = self.info = _read_info(body, self.target.port)
+                self._info_body = body.copy()
+                self.scale = envelope_scale(info.full_scale_mv, info.max_mv, max_voltage_v)
+                self._set_limits(info)
                 return
         raise BackendError(f"serial: no amplifier answered on {self.target.port} ({HELLO_TRIES} HELLOs, "
                            f"{timeout_s:g} s each): is it powered, and does it speak tpad-rt's protocol "
                            f"version {codec.VERSION}? (docs/amplifiers.md)")
 
+    def _set_limits(self, info: AmpInfo) -> None:
+        """Give the streamer what it checks the amplifier's reports against and clamps to (H3, H10): the INFO
+        taken and its nonce, the carrier range, the clamp and the scale's sample limit."""
+        link, scale = self.link, self.scale
+        assert self._info_body is not None and scale is not None
+        self._buffers[amp_stream.BUF_INFO, :len(self._info_body)] = self._info_body
+        link[amp_stream.LINK_NONCE] = self._nonce
+        link[amp_stream.LINK_BUFFER_SAMPLES] = info.buffer_samples
+        link[amp_stream.LINK_MAX_MV] = info.max_mv
+        link[amp_stream.LINK_LEVEL_LIMIT] = scale.level_limit
+        link[amp_stream.LINK_CARRIER_MIN_MHZ] = round(info.carrier_min_hz * 1000)
+        link[amp_stream.LINK_CARRIER_MAX_MHZ] = round(info.carrier_max_hz * 1000)
+        link[amp_stream.LINK_CARRIER_STEP_MHZ] = max(round(info.carrier_step_hz * 1000), CARRIER_RESEND_MHZ)
+
     def _set_carrier(self, carrier_hz: float) -> None:
-        """SET_CARRIER (H2): the achieved carrier goes to ``carrier_hz``; BackendError out of the amplifier's range."""
-        info = self.info
+        """SET_CARRIER (H2): the achieved carrier goes to ``carrier_hz``; BackendError out of the amplifier's range,
+        for a refusal, and for an achieved carrier out of its range or far from the one asked (H10)."""
+        info, link = self.info, self.link
         assert info is not None
         if not info.carrier_min_hz <= carrier_hz <= info.carrier_max_hz:
             raise BackendError(f"serial: the device's carrier {carrier_hz:g} Hz is outside the amplifier's range "
                                f"{info.carrier_min_hz:g}-{info.carrier_max_hz:g} Hz")
-        achieved_mhz = self._command(round(carrier_hz * 1000).to_bytes(4, "little"), codec.MSG_SET_CARRIER,
+        asked_mhz = round(carrier_hz * 1000)
+        achieved_mhz = self._command(asked_mhz.to_bytes(4, "little"), codec.MSG_SET_CARRIER,
                                      f"the carrier {carrier_hz:g} Hz")
+        if not amp_stream.carrier_echo_ok(link, asked_mhz, achieved_mhz):
+            raise BackendError(_carrier_echo_error(self.target.port, link, asked_mhz, achieved_mhz))
         self.carrier_hz = achieved_mhz / 1000
 
     def _plan(self) -> None:
@@ -365,7 +467,8 @@ class AmpLink:
         """
         info = self.info
         assert info is not None and self._thread is None
-        value = round(max(-1.0, min(1.0, envelope_v / info.full_scale_v)) * 32767)
+        limit = self.scale.level_limit if self.scale is not None else 0
+        value = min(max(round(envelope_v / info.full_scale_v * 32767), -limit), limit)
         fill = min(info.buffer_samples - self.frame_samples,
                    max(self.target_fill, round(TONE_BUFFER_S * self.target.envelope_hz)))
         if self._tone_index < 0:
@@ -416,15 +519,24 @@ class AmpLink:
         payload = (rate.to_bytes(4, "little") + (start_index & 0xFFFFFFFF).to_bytes(4, "little")
                    + min(fill, info.buffer_samples).to_bytes(2, "little"))
         self._start_sent = True
-        self._command(payload, codec.MSG_START, f"START at {rate} Hz")
+        self._check_start_ack(start_index, self._command(payload, codec.MSG_START, f"START at {rate} Hz"))
         self._tone_started = time.monotonic()
         self._tone_index = start_index & 0xFFFFFFFF
         self._write_tone(value, start_index, fill)
 
+    def _check_start_ack(self, start_index: int, value: int) -> None:
+        """BackendError unless START's ACK ``value`` is the ``start_index`` it answers (H10)."""
+        if value != start_index & 0xFFFFFFFF:
+            raise BackendError(f"serial: the amplifier on {self.target.port} acknowledged START at index "
+                               f"{start_index & 0xFFFFFFFF} with index {value} (refused: its reports cannot be trusted)")
+
     def _status(self, body: np.ndarray) -> AmpStatus | None:
-        """The STATUS ``body`` measured, or None while it plays nothing; BackendError for a fault."""
+        """The STATUS ``body`` measured, or None while it plays nothing; BackendError for a fault or a value out
+        of range (H10)."""
         info = self.info
         assert info is not None
+        if amp_stream.status_problem(self.link, body):
+            raise BackendError(self._report_error())
         at = codec.PAYLOAD
         faults = int(body[at + codec.STATUS_FAULTS])
         if faults:
@@ -460,10 +572,11 @@ class AmpLink:
 
     # --- streaming --------------------------------------------------------------------
 
-    def start(self, table: object, track: bool = False) -> None:
+    def start(self, table: object, track: bool = False, ramp_ms: float = STOP_RAMP_MS) -> None:
         """START at the table's next sample (prefill: the target fill), then stream in a thread of its own;
         with ``track`` (the kernel's cfg tracking too) send the carrier of each control step as it moves, and
-        lock it onto the plate's resonance if the amplifier measures voltage, current and phase."""
+        lock it onto the plate's resonance if the amplifier measures voltage, current and phase. A failure
+        that ends the stream sends STOP with ``ramp_ms`` (ms; :meth:`stop` gives its own)."""
         link = self.link
         info = self.info
         assert info is not None
@@ -471,7 +584,8 @@ class AmpLink:
         payload = (self.target.envelope_hz.to_bytes(4, "little") + (index & 0xFFFFFFFF).to_bytes(4, "little")
                    + min(self.target_fill, info.buffer_samples).to_bytes(2, "little"))
         self._start_sent = True  # even if its ACK never comes, the amplifier may have started
-        self._command(payload, codec.MSG_START, f"START at {self.target.envelope_hz} Hz")
+        link[amp_stream.LINK_START_NS] = time.monotonic_ns()  # no sample can play before this (H10)
+        self._check_start_ack(index, self._command(payload, codec.MSG_START, f"START at {self.target.envelope_hz} Hz"))
         link[amp_stream.LINK_FD] = self._fd
         link[amp_stream.LINK_ENVELOPE_HZ] = self.target.envelope_hz
         link[amp_stream.LINK_FRAME_SAMPLES] = self.frame_samples
@@ -479,6 +593,7 @@ class AmpLink:
         link[amp_stream.LINK_BUFFER_SAMPLES] = info.buffer_samples
         link[amp_stream.LINK_STATUS_TIMEOUT_NS] = (4 * info.status_period_ms + 100) * 1_000_000
         link[amp_stream.LINK_START_INDEX] = index
+        link[amp_stream.LINK_STOP_RAMP_MS] = _ramp(ramp_ms)
         link[amp_stream.LINK_CALLBACK] = render_callback_address()
         self._track_with(track)
         self._thread = threading.Thread(target=self._run, args=(table,), name="tpad-rt serial streamer", daemon=True)
@@ -491,9 +606,6 @@ class AmpLink:
         locked = info.measures & MEASURES_FOR_LOCK == MEASURES_FOR_LOCK
         link[amp_stream.LINK_TRACK] = (amp_stream.TRACK_OFF if not track
                                        else amp_stream.TRACK_LOCKED if locked else amp_stream.TRACK_MODEL)
-        link[amp_stream.LINK_CARRIER_MIN_MHZ] = round(info.carrier_min_hz * 1000)
-        link[amp_stream.LINK_CARRIER_MAX_MHZ] = round(info.carrier_max_hz * 1000)
-        link[amp_stream.LINK_CARRIER_STEP_MHZ] = max(round(info.carrier_step_hz * 1000), CARRIER_RESEND_MHZ)
         link[amp_stream.LINK_LOCK_RANGE_MHZ] = round(LOCK_RANGE * self.carrier_hz * 1000)
         link[amp_stream.LINK_LOCK_MIN_CURRENT_UA] = LOCK_MIN_CURRENT_UA
         link[amp_stream.LINK_CARRIER_MHZ] = round(self.carrier_hz * 1000)
@@ -536,12 +648,35 @@ class AmpLink:
             return f"serial: the amplifier on {port} reported a fault: {', '.join(names)}; its output is off"
         if reason == amp_stream.EXIT_VERSION:
             return str(_version_error(int(link[amp_stream.LINK_AMP_VERSION])))
+        if reason == amp_stream.EXIT_CONTRADICTED:
+            taken, other = self._buffers[amp_stream.BUF_INFO], self._buffers[amp_stream.BUF_INFO_OTHER]
+            size = codec.PAYLOAD + codec.INFO_BYTES + codec.CRC_BYTES
+            return (f"serial: the amplifier on {port} contradicts itself: an INFO during the stream answers its "
+                    f"HELLO otherwise, {_info_difference(taken[:size], other[:size])} (the run ended)")
+        if reason == amp_stream.EXIT_BAD_REPORT:
+            return self._report_error()
         if reason == amp_stream.EXIT_REFUSED:
             code = int(link[amp_stream.LINK_ACK_CODE])
             name = codec.ACK_NAMES[code] if code < len(codec.ACK_NAMES) else f"code {code}"
             return f"serial: the amplifier on {port} refused to start again after its watchdog: {name}"
         return (f"serial: the amplifier on {port} stopped reading (the port took no byte for "
                 f"{4 * info.status_period_ms + 100} ms)")
+
+    def _report_error(self) -> str:
+        """The one-line message for the report the streamer (or :func:`amp_stream.status_problem`) refused (H10)."""
+        link, s = self.link, amp_stream
+        code = int(link[s.LINK_REPORT])
+        value, low, high = (int(link[k]) for k in (s.LINK_REPORT_VALUE, s.LINK_REPORT_LOW, s.LINK_REPORT_HIGH))
+        port = self.target.port
+        if code == s.REPORT_CARRIER_ACK:
+            return _carrier_echo_error(port, link, low, value)
+        if code == s.REPORT_START_ACK:
+            return (f"serial: the amplifier on {port} acknowledged START at index {low & 0xFFFFFFFF} with index "
+                    f"{value & 0xFFFFFFFF} (the run ended: its reports cannot be trusted)")
+        name, why = s.REPORT_TEXT.get(code, (f"field {code}", "out of range"))
+        sent = f"{name} {value & 0xFFFFFFFF} (the stream's index {value})" if name == "play_index" else f"{name} {value}"
+        return (f"serial: the amplifier on {port} sent a STATUS with {sent}, outside {low}..{high}: {why} "
+                "(the run ended: its reports cannot be trusted)")
 
     @property
     def streaming(self) -> bool:
@@ -553,7 +688,7 @@ class AmpLink:
         frame; after a START that no stream followed, this does), wait (STOP_ACK_TIMEOUT_S at most) for its
         ACK, and close the port. A missing ACK is not an error: the amplifier's watchdog ramps to 0 anyway
         (A4)."""
-        ramp = min(0xFFFF, max(1, round(ramp_ms)))
+        ramp = _ramp(ramp_ms)
         if self._thread is not None:
             self.link[amp_stream.LINK_STOP_RAMP_MS] = ramp
             publish(self.link, amp_stream.LINK_STOP, 1)
@@ -567,7 +702,7 @@ class AmpLink:
         self._start_sent = False
         try:
             seq = int(self.link[amp_stream.LINK_STOP_SEQ])
-            if self.failure() is None and seq >= 0:
+            if seq >= 0 and int(self.link[amp_stream.LINK_EXIT]) != amp_stream.EXIT_PORT_LOST:
                 self._rx = b""
                 deadline = time.monotonic() + STOP_ACK_TIMEOUT_S
                 while (body := self._receive(codec.MSG_ACK, deadline)) is not None:
@@ -614,6 +749,11 @@ class AmpLink:
         }
 
 
+def _ramp(ramp_ms: float) -> int:
+    """STOP's ``ramp_ms`` field for a ramp of ``ramp_ms`` (ms): whole, 1 to 65535."""
+    return min(0xFFFF, max(1, round(ramp_ms)))
+
+
 def _realtime_thread() -> bool:
     """Give the calling thread SCHED_FIFO STREAMER_PRIORITY, as audio servers give their callbacks; False where
     the system refuses (the stream then runs at normal priority: a loaded machine can delay it)."""
@@ -643,6 +783,15 @@ def render_callback_address() -> int:
     if address is None:  # numba types it Optional: a compiled cfunc always has one
         raise BackendError("serial: the audio callback has no address (it did not compile)")
     return int(address)
+
+
+def _carrier_echo_error(port: str, link: np.ndarray, asked_mhz: int, achieved_mhz: int) -> str:
+    """The message for a SET_CARRIER ACK whose achieved carrier ``carrier_echo_ok`` refused (H2, H10)."""
+    low, high = link[amp_stream.LINK_CARRIER_MIN_MHZ] / 1000, link[amp_stream.LINK_CARRIER_MAX_MHZ] / 1000
+    return (f"serial: the amplifier on {port} answered SET_CARRIER {asked_mhz / 1000:g} Hz with an achieved carrier "
+            f"of {achieved_mhz / 1000:g} Hz (value {achieved_mhz} mHz), outside its own range {low:g}-{high:g} Hz or "
+            f"more than {amp_stream.carrier_echo_tolerance_mhz(link, asked_mhz) / 1000:g} Hz from the carrier asked "
+            "(refused: its reports cannot be trusted)")
 
 
 def _version_error(version: int) -> BackendError:
