@@ -288,6 +288,17 @@ def test_an_error_mid_write_leaves_the_old_file_and_no_temporary_file(folder: Pa
     assert target.read_bytes() == PRECIOUS and sorted(os.listdir(folder)) == ["old.yaml"]
 
 
+def test_a_discarded_temporary_name_taken_by_another_is_left_to_it(folder: Path) -> None:
+    """Once discarded, the temporary name is free: a file someone makes there is not removed by a second discard
+    (the wav output discards on a write error and again as its block ends)."""
+    new = NewFile(folder / "out.bin", "things")
+    new.discard()
+    Path(new.temporary).write_bytes(PRECIOUS)
+    new.discard()
+    new.commit()
+    assert Path(new.temporary).read_bytes() == PRECIOUS and not (folder / "out.bin").exists()
+
+
 def test_nothing_is_at_the_target_until_the_file_is_whole(folder: Path) -> None:
     target = folder / "old.yaml"
     target.write_bytes(PRECIOUS)

@@ -220,6 +220,7 @@ class NewFile:
             raise ConfigError(f"{self.name}: cannot write {what} there: {shown}") from None
         self.file: BinaryIO = os.fdopen(handle, "w+b")
         self.committed = False
+        self._discarded = False
 
     @property
     def closed(self) -> bool:
@@ -233,7 +234,8 @@ class NewFile:
             return
         try:
             self.file.flush()
-            os.fchmod(self.file.fileno(), self._mode())
+            with contextlib.suppress(OSError):  # a file system without Unix permissions (FAT) may refuse it
+                os.fchmod(self.file.fileno(), self._mode())
             os.fsync(self.file.fileno())
             self.file.close()
             os.replace(self.temporary, self.path)
@@ -248,9 +250,11 @@ class NewFile:
                 os.close(folder)
 
     def discard(self) -> None:
-        """Close and remove the temporary file, leaving ``path`` as it was. Nothing once committed."""
-        if self.committed:
+        """Close and remove the temporary file, leaving ``path`` as it was. Nothing once committed or discarded
+        (the name, free again, may be another's by then)."""
+        if self.committed or self._discarded:
             return
+        self._discarded = True
         with contextlib.suppress(OSError):
             self.file.close()
         with contextlib.suppress(OSError):
