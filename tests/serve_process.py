@@ -162,3 +162,69 @@ def stopped_by_signal_cleanly(serve: Serve, sig: int = signal.SIGINT) -> str:
     assert status == 0, (status, err)
     assert "Traceback" not in err, err
     return out
+
+
+class ServeThread:
+    """``tpad-rt serve``'s Server in this process, on an asyncio loop in a thread, in front of a started
+    Renderer on ``null://`` (loopback, free ports): for tests that reach into the server (a gate in its texture
+    loading) while its clients are real sockets. ``server``, ``port``, ``osc_port``; a context manager."""
+
+    def __init__(self) -> None:
+        import asyncio
+
+        from tpad_rt.engine import Renderer
+        from tpad_rt.serve.server import Server, Settings
+        from tpad_rt.shipped import TEXTURES_DIR
+
+        self.renderer = Renderer(output="null://", texture=TEXTURES_DIR / "grating.yaml")
+        self.renderer.start()
+        self.server = Server(self.renderer, Settings(port=0, osc_port=0, texture_dirs=(TEXTURES_DIR,)))
+        self.loop = asyncio.new_event_loop()
+        self._stop = asyncio.Event()
+        self._ready = threading.Event()
+        self.failure: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="serve", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(START_TIMEOUT_S) or self.failure is not None:
+            raise AssertionError(f"the server did not start: {self.failure!r}")
+
+    def _run(self) -> None:
+        import asyncio
+
+        async def serve() -> None:
+            ready = asyncio.Event()
+            task = asyncio.create_task(self.server.run(self._stop, ready))
+            await asyncio.wait([task, asyncio.create_task(ready.wait())], return_when=asyncio.FIRST_COMPLETED)
+            self._ready.set()
+            await task
+
+        try:
+            self.loop.run_until_complete(serve())
+        except BaseException as error:  # noqa: BLE001 - reported by the constructor or close()
+            self.failure = error
+            self._ready.set()
+
+    @property
+    def port(self) -> int:
+        return self.server.port
+
+    @property
+    def osc_port(self) -> int | None:
+        return self.server.osc_port
+
+    @property
+    def ws_url(self) -> str:
+        return f"ws://127.0.0.1:{self.port}/ws"
+
+    def close(self) -> None:
+        """Stop the server (its loop) and the renderer; AssertionError if the server failed."""
+        self.loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(START_TIMEOUT_S)
+        self.renderer.stop()
+        assert self.failure is None and not self._thread.is_alive(), self.failure
+
+    def __enter__(self) -> ServeThread:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
