@@ -411,7 +411,9 @@ class Renderer:
         (time in the callback, over the recent blocks); ``callback_load_p99`` (that p99 as a
         fraction of a block's duration); ``blocks``,
         ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (blocks), ``power_mean_w``,
-        ``power_peak_w``, ``power_budget_w``, ``power_avg_w`` (from telemetry);
+        ``power_peak_w``, ``power_budget_w``, ``power_avg_w`` (from telemetry); ``plate_peak_w`` (the most power
+        the plate held, as the kernel's model has it) and ``over_cap_blocks`` (blocks in which that was over the cap:
+        a press);
         ``latency_ms_p50/p99``: from a push to the DAC time of the first block that
         read it, over the recent blocks; ``dac_delay_ms``: the part of it the host
         reports from a callback to the DAC (median over the recent blocks, from the
@@ -448,7 +450,8 @@ class Renderer:
                       power_saturated=totals["power_saturated"], fault_blocks=totals["fault_blocks"],
                       power_mean_w=totals["energy_w"] / totals["blocks"] if totals["blocks"] else math.nan,
                       power_peak_w=totals["peak_w"], power_budget_w=float(cfg[CFG_POWER_CAP_W]),
-                      power_avg_w=float(cfg[CFG_POWER_AVG_W]))
+                      power_avg_w=float(cfg[CFG_POWER_AVG_W]), plate_peak_w=totals["plate_peak_w"],
+                      over_cap_blocks=self._pipeline.over_cap_blocks)
         result.update(self._pipeline.faults())
         return result
 

@@ -553,6 +553,14 @@ class Pipeline:
         last = finger[(count[0] - 1) % finger.shape[0]]
         return float(last[layout.FINGER_X_MM]), float(last[layout.FINGER_Y_MM])
 
+    @property
+    def over_cap_blocks(self) -> int:
+        """Rendered blocks in which the plate held more than the power cap as the model has it (telemetry
+        ``plate_w``): a press takes the vibration the plate holds into a finger that damps more, and the kernel
+        brakes it back (docs/kernel.md "A harder press")."""
+        count = self._arrays.state[layout.STATE_OVER_CAP_BLOCKS]
+        return int(count) if 0.0 <= count < 2**62 else 0
+
     def faults(self) -> dict[str, object]:
         """The kernel's fault counters (docs/kernel.md "Faults"): ``faults`` (faults that began),
         ``fault_steps`` (control steps), ``fault_samples`` (samples the output guard zeroed) and

@@ -10,8 +10,9 @@ reads every one):
   amplifier: metadata ``output_consumes`` is ``"envelope"``) the envelope at the
   envelope rate, in the amplifier's full scale;
 - one 1-D array per block, all the same length: the telemetry columns ``t, x_mm, y_mm,
-  speed_mm_s, force_n, target_mu, amplitude_um, voltage_v, power_w, saturated``
-  (``tpad_rt.kernel.layout.TEL_NAMES``), plus ``achieved_mu`` and
+  speed_mm_s, force_n, target_mu, amplitude_um, voltage_v, power_w, saturated, plate_w``
+  (``tpad_rt.kernel.layout.TEL_NAMES``; ``plate_w`` may be absent from a recording made before
+  it was added), plus ``achieved_mu`` and
   ``plate_amplitude_um`` when the output was the simulated plate, and ``departed``
   (1 where the achieved friction was further than the metadata's
   ``departure_tolerance_mu`` from the texture under the finger) from ``tpad-rt render``;
@@ -40,6 +41,8 @@ from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_RENDER_BLOCKS
 
 FORMAT = "tpad-rt recording"
 FORMAT_VERSION = 1
+#: Telemetry columns added to format 1 since its first recordings: read when present.
+ADDED_NAMES = ("plate_w",)
 #: Per-block arrays the simulated plate adds (both or neither).
 SIM_NAMES = ("achieved_mu", "plate_amplitude_um")
 #: Per-block arrays a render on the simulated plate adds (optional): 1 where the achieved friction
@@ -190,7 +193,7 @@ def _check_header(entries: dict[str, np.ndarray]) -> list[str]:
 
 
 def _check_blocks(entries: dict[str, np.ndarray]) -> list[str]:
-    problems = [f"{name}: missing" for name in TEL_NAMES if name not in entries]
+    problems = [f"{name}: missing" for name in TEL_NAMES if name not in entries and name not in ADDED_NAMES]
     present_sim = [name for name in SIM_NAMES if name in entries]
     if present_sim and len(present_sim) != len(SIM_NAMES):
         problems.append(f"{' and '.join(SIM_NAMES)}: must both be present or both absent")

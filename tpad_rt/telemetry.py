@@ -42,7 +42,7 @@ class TelemetryLog:
         self._pending: deque[dict[str, np.ndarray]] = deque()
         self._pending_rows = 0
         self._totals: dict[str, Any] = {"blocks": 0, "voltage_saturated": 0, "power_saturated": 0,
-                                        "fault_blocks": 0, "energy_w": 0.0, "peak_w": 0.0}
+                                        "fault_blocks": 0, "energy_w": 0.0, "peak_w": 0.0, "plate_peak_w": 0.0}
         self._record_path: Path | None = None
         self._recorded: list[dict[str, np.ndarray]] = []
         self._drive_chunks: list[np.ndarray] = []
@@ -73,6 +73,7 @@ class TelemetryLog:
             totals["fault_blocks"] += int(np.count_nonzero(flags & FLAG_FAULT))
             totals["energy_w"] += float(rows["power_w"].sum())
             totals["peak_w"] = max(totals["peak_w"], float(rows["power_w"].max()))
+            totals["plate_peak_w"] = max(totals["plate_peak_w"], float(rows["plate_w"].max()))
             self._pending.append(rows)
             self._pending_rows += count
             while self._pending_rows > MAX_PENDING_ROWS:
@@ -111,7 +112,8 @@ class TelemetryLog:
 
     def totals(self) -> dict[str, Any]:
         """``blocks``, ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (counts), ``energy_w`` (the
-        sum of the blocks' power, W), ``peak_w`` (W), over every row drained."""
+        sum of the blocks' drive power, W), ``peak_w`` (W), ``plate_peak_w`` (the most power the plate held as
+        the model has it, W), over every row drained."""
         with self._lock:
             return dict(self._totals)
 

@@ -108,6 +108,7 @@ class _Stream:
         self.smoothed_v = 0.0
         self.model_v = 0.0  # the shaper's first-order model of the plate envelope (volts of drive)
         self.model_gain_m_per_v = 0.0  # the plate amplitude per volt those volts were worth (0: none yet)
+        self.slip_v = 0.0  # the volts the plate holds beyond the model (force changes the guard let pass)
         start_n, step_n, intervals = force_grid(device)
         gains = device.amplitude_m_per_v(start_n + step_n * np.arange(intervals + 1))
         self.model_bound_v = device.max_voltage_v * float(gains.max() / gains.min())  # the most a press makes it
@@ -146,12 +147,16 @@ class _Stream:
         # A plate holding more than the power cap (plus MODEL_GUARD_FRACTION) allows at its now lower gain is braked:
         # the model takes the volts that amplitude is worth now
         gain_m_per_v = float(device.amplitude_m_per_v(force_n))
-        if self.model_gain_m_per_v > gain_m_per_v:
-            held_v = self.model_v * (self.model_gain_m_per_v / gain_m_per_v)
-            if held_v**2 * self.p1_w > self.cap_w * (1 + MODEL_GUARD_FRACTION):
-                self.model_v = min(held_v, self.model_bound_v)
+        if self.model_gain_m_per_v > 0:
+            held_v = (self.model_v + self.slip_v) * (self.model_gain_m_per_v / gain_m_per_v)
+            held_v = min(max(held_v, -self.model_bound_v), self.model_bound_v)
+            if held_v > 0 and held_v**2 * self.p1_w > self.cap_w * (1 + MODEL_GUARD_FRACTION):
+                self.model_v, self.slip_v = held_v, 0.0
+            else:
+                self.slip_v = held_v - self.model_v
         self.model_gain_m_per_v = gain_m_per_v
-        self.plate_w = self.p1_w * self.model_v**2 if self.preemphasis else 0.0  # the plate's power, as modelled
+        # the plate's power, as modelled
+        self.plate_w = self.p1_w * (self.model_v + self.slip_v) ** 2 if self.preemphasis else 0.0
         tau_s = float(device.envelope_time_constant_s(force_n))
         self.model_step = 1 - math.exp(-1 / (tau_s * self.fs_hz))
         self.follow_gain = 1 / self.model_step if self.preemphasis else 0.0
@@ -183,15 +188,16 @@ class _Stream:
                 self.step_flags |= SHAPER_LIMIT
             self.shaper_margin_v = min(self.shaper_margin_v, abs(min(self.cap_v - drive_v, drive_v - self.low_v)))
         self.model_v += self.model_step * (envelope_v - self.model_v)
+        self.slip_v *= 1 - self.model_step  # the plate follows the same drive: what it holds beyond decays
         phase = n * self.carrier
         sine = math.sin(2 * math.pi * float(phase - math.floor(phase)))
         self.energy_v2.append(envelope_v * envelope_v)
         return envelope_v, envelope_v / self.device.volts_per_full_scale * sine
 
     def close_step(self) -> tuple[float, float]:
-        """The finished step's power ``p1 * mean(e^2)`` (W), at most the cap (braking a pressed plate at the full
-        volts counts as the cap), remembered for the window, and its peak (V)."""
-        drive_w = min(self.p1_w * sum(self.energy_v2) / len(self.energy_v2), self.cap_w)
+        """The finished step's power ``p1 * mean(e^2)`` (W), at most ``p1 * cap^2`` (braking a pressed plate at the
+        full volts counts as braking at the cap), remembered for the window, and its peak (V)."""
+        drive_w = min(self.p1_w * sum(self.energy_v2) / len(self.energy_v2), self.p1_w * self.cap_v**2)
         self.step_powers.append(drive_w)
         return drive_w, math.sqrt(max(self.energy_v2))
 

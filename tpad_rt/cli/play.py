@@ -369,6 +369,10 @@ class Session:
             f"power: mean {stats['power_mean_w']:.3f} W, peak {stats['power_peak_w']:.3f} W "
             f"(cap {stats['power_budget_w']:g} W, average budget {stats['power_avg_w']:g} W)",
         ]
+        if stats["over_cap_blocks"]:
+            lines.append(f"plate: over the power cap in {stats['over_cap_blocks']} blocks (peak "
+                         f"{stats['plate_peak_w']:.3f} W as the plate model has it): a press took the vibration it "
+                         "held into a finger that damps more, and the drive braked it back (docs/kernel.md)")
         if stats["faults"]:
             lines.append(f"faults: {stats['faults']} ({stats['fault_steps']} control steps, "
                          f"{stats['fault_blocks']} blocks; {', '.join(stats['fault_causes'])}): the drive ramped to 0 "

@@ -194,9 +194,10 @@ STATE_STEP_CARRIER_HZ = 44
 STATE_MODEL_GAIN_M_PER_V = 45  # plate amplitude per volt (m/V) the model's volts were worth at the last step (0: none)
 STATE_PLATE_W = 46            # the plate's power as the model has it at the open step's start, p1 * model^2 (W)
 STATE_OVER_CAP_BLOCKS = 47    # rendered blocks whose plate power (TEL_PLATE_W) exceeded CFG_POWER_CAP_W
+STATE_MODEL_SLIP_V = 48       # volts the plate holds beyond the model (force changes the guard let pass), decaying
 # Per-sample tables, indexed by j, the sample's offset in its control step:
 MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
-STATE_COS_TABLE = 48          # cos(j w), w the carrier's phase step (rad)
+STATE_COS_TABLE = 49          # cos(j w), w the carrier's phase step (rad)
 STATE_SIN_TABLE = STATE_COS_TABLE + MAX_CONTROL_INTERVAL       # sin(j w)
 STATE_DECAY_TABLE = STATE_SIN_TABLE + MAX_CONTROL_INTERVAL     # d^j (0 <= j <= MAX_CONTROL_INTERVAL), d the smoothing decay
 STATE_ENVELOPE = STATE_DECAY_TABLE + MAX_CONTROL_INTERVAL + 1  # the open step's envelope e_j (V)

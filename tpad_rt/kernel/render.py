@@ -121,6 +121,7 @@ from tpad_rt.kernel.layout import (
     STATE_GATE,
     STATE_MODEL_GAIN_M_PER_V,
     STATE_MODEL_ON_REF,
+    STATE_MODEL_SLIP_V,
     STATE_MODEL_STEP,
     STATE_MODEL_V,
     STATE_NEXT_INDEX,
@@ -371,6 +372,15 @@ def _envelope_sums(state: np.ndarray, first: int, stop: int) -> tuple[float, flo
     return peak_v, (s0 + s1) + (s2 + s3)
 
 
+@_inline
+def _drive_power_w(state: np.ndarray, energy_v2: float, samples: int) -> float:
+    """The open step's drive power (W) over ``samples`` samples whose squared envelopes sum to ``energy_v2`` (V^2):
+    ``p1 * mean(e^2)``, at most what a drive at the step's cap costs (a pressed plate braked at the full volts
+    spends what braking at the cap would: the budgets hold; the plate's power is reported apart, TEL_PLATE_W)."""
+    p1_w = state[STATE_POWER_PER_V2]
+    return min(p1_w * energy_v2 / samples, p1_w * state[STATE_CAP_V] * state[STATE_CAP_V])
+
+
 @_kernel
 def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> None:
     """Account for the open control step: its power into the ring, its smoothing and ramp advanced.
@@ -380,9 +390,8 @@ def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> N
     step, else the same sum recomputed), whatever the blocks were. The ring's
     running sum is recomputed from scratch each time the last slot is written, so its
     rounding error never accumulates beyond one window. A step whose power is not a
-    number in ``[0, power_cap_w]`` is entered as ``power_cap_w``: a step that braked a pressed
-    plate at more than the cap's volts (the limits keep every other step's power in it), or a
-    corrupt ``p1`` or envelope.
+    number in ``[0, power_cap_w]`` (the limits keep every step's power in it; only a
+    corrupt ``p1`` or envelope gets out) is entered as ``power_cap_w``.
     """
     if state[STATE_STEP_OPEN] == 0.0 or not 0.0 < state[STATE_STEP_SAMPLES] <= MAX_CONTROL_INTERVAL:
         return
@@ -392,7 +401,7 @@ def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> N
     energy_v2 = state[STATE_FIRST_SEGMENT_V2]
     if state[STATE_FIRST_SEGMENT_SAMPLES] != samples:  # rendered in pieces: sum them in the same order
         energy_v2 = _envelope_sums(state, 0, samples)[1]
-    power_w = state[STATE_POWER_PER_V2] * energy_v2 / samples
+    power_w = _drive_power_w(state, energy_v2, samples)
     if not 0.0 <= power_w <= cfg[CFG_POWER_CAP_W]:  # only a bad p1 or envelope: counted as the whole cap
         power_w = cfg[CFG_POWER_CAP_W]
     slot = int(state[STATE_RING_SLOT])
@@ -400,6 +409,8 @@ def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> N
     power_ring[slot] = power_w
     if slot == power_ring.shape[0] - 1:
         state[STATE_WINDOW_SUM_W] = _ring_sum(power_ring)
+    # The plate and the model follow the same drive with the same step: what one holds beyond the other decays.
+    state[STATE_MODEL_SLIP_V] *= math.exp(samples * math.log1p(-state[STATE_MODEL_STEP]))
     command_v = state[STATE_COMMAND_V]
     decay = state[STATE_DECAY_TABLE + samples]
     state[STATE_SMOOTH_START_V] = command_v + (state[STATE_SMOOTH_START_V] - command_v) * decay
@@ -626,6 +637,9 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     if not abs(state[STATE_MODEL_V]) <= _model_bound_v(cfg):
         state[STATE_MODEL_V] = 0.0
         fault = FAULT_STATE
+    if not abs(state[STATE_MODEL_SLIP_V]) <= 2.0 * _model_bound_v(cfg):
+        state[STATE_MODEL_SLIP_V] = 0.0
+        fault = FAULT_STATE
     if not (state[STATE_MODEL_ON_REF] == 0.0 or state[STATE_MODEL_ON_REF] == 1.0):
         state[STATE_MODEL_ON_REF] = 0.0
         fault = FAULT_STATE
@@ -664,20 +678,26 @@ def _guard_model(cfg: np.ndarray, state: np.ndarray, gain_m_per_v: float, p1_w: 
     MODEL_GUARD_FRACTION, the model is set to it (unclamped: it may exceed ``max_voltage_v``,
     up to :func:`_model_bound_v`) and leaves the command, so the shaper brakes the plate down to
     the command, at up to the full volts while it holds more than the cap (_control_step),
-    instead of driving on as if it held what the cap allows. Smaller changes leave the model as it is (the
-    plate settles to them within its time constant; the shaper does not answer every
-    wobble of a finger's force with a full-volt correction). No gain, or one that is not a
-    finite number > 0 (a fresh stream, a fault step), leaves the model as it is.
+    instead of driving on as if it held what the cap allows. Smaller changes (a lighter touch too) leave the
+    model as it is (the shaper does not answer every wobble of a finger's force with a full-volt correction)
+    and are kept as its slip (STATE_MODEL_SLIP_V): the volts the plate holds beyond the model, which the next
+    changes add to and which decays as the plate settles (_close_step), so a press made of many small
+    changes is braked once they add up to the guard's fraction. No gain, or one that is not a finite
+    number > 0 (a fresh stream, a fault step), leaves the model and its slip as they are.
     """
     previous = state[STATE_MODEL_GAIN_M_PER_V]
     state[STATE_MODEL_GAIN_M_PER_V] = gain_m_per_v
-    if not (previous > gain_m_per_v > 0.0 and previous < math.inf and p1_w > 0.0):
+    if not (previous > 0.0 and gain_m_per_v > 0.0 and previous < math.inf and p1_w > 0.0):
         return
     model_v = state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
-    held_v = model_v * (previous / gain_m_per_v)
+    bound_v = _model_bound_v(cfg)
+    held_v = min(max((model_v + state[STATE_MODEL_SLIP_V]) * (previous / gain_m_per_v), -bound_v), bound_v)
     if held_v > 0.0 and held_v * held_v * p1_w > cfg[CFG_POWER_CAP_W] * (1.0 + MODEL_GUARD_FRACTION):
-        state[STATE_MODEL_V] = min(held_v, _model_bound_v(cfg))
+        state[STATE_MODEL_V] = held_v
         state[STATE_MODEL_ON_REF] = 0.0
+        state[STATE_MODEL_SLIP_V] = 0.0
+    else:
+        state[STATE_MODEL_SLIP_V] = held_v - model_v
 
 
 @_kernel
@@ -810,8 +830,9 @@ def _control_step(
     else:
         state[STATE_FAULT_PREVIOUS] = 0.0
     _guard_model(cfg, state, amplitude_m_per_v if fault == 0 else 0.0, p1_w)
-    model_v = state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
-    plate_w = p1_w * model_v * model_v  # the plate's power as the model has it (a press may take it over the cap)
+    held_v = (state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]) \
+        + state[STATE_MODEL_SLIP_V]
+    plate_w = p1_w * held_v * held_v  # the plate's power as the model has it (a press may take it over the cap)
     state[STATE_PLATE_W] = plate_w if 0.0 <= plate_w < math.inf else 0.0
     state[STATE_COMMAND_V] = command_v
     state[STATE_CAP_V] = cap_v
@@ -972,6 +993,7 @@ def _output_fault(state: np.ndarray, rejected: int) -> None:
     state[STATE_SMOOTH_START_V] = 0.0
     state[STATE_MODEL_V] = 0.0
     state[STATE_MODEL_ON_REF] = 0.0
+    state[STATE_MODEL_SLIP_V] = 0.0
     state[STATE_RAMP_START] = 0.0
     state[STATE_GATE] = 0.0
     state[STATE_TABLE_FS_HZ] = math.nan
@@ -1057,8 +1079,7 @@ def render_block(
             state[STATE_FIRST_SEGMENT_V2] = segment_v2
             state[STATE_FIRST_SEGMENT_SAMPLES] = stop - i
         peak_v = max(peak_v, segment_peak_v)
-        # Braking a pressed plate at the full volts counts as the cap, as the ring counts it.
-        energy_w += min(state[STATE_POWER_PER_V2] * segment_v2, cfg[CFG_POWER_CAP_W] * (stop - i))
+        energy_w += _drive_power_w(state, segment_v2, stop - i) * (stop - i)
         plate_w = max(plate_w, state[STATE_PLATE_W])
         flags |= _step_flags(state)
         phase += stop - i
