@@ -138,9 +138,11 @@ def test_an_output_failing_mid_run_ends_it_with_the_output_s_error(tmp_path: Pat
     done = subprocess.run([sys.executable, "-c", FAILING_OUTPUT_APP, str(tmp_path / "out.wav"), str(GRATING)],
                           capture_output=True, text=True, timeout=120)
     lines = done.stdout.splitlines()
-    assert lines[0].startswith("join: wav: cannot ") and "(File too large)" in lines[0], done.stdout + done.stderr
+    assert lines[0] == f"join: {tmp_path / 'out.wav'}: cannot write WAV files there: file too large", \
+        done.stdout + done.stderr
     assert lines[1:] == ["running: True", "stopped: False"], done.stdout + done.stderr
     assert done.returncode == 0, done.stderr
+    assert list(tmp_path.iterdir()) == []  # no part of a WAV at the path, no temporary file beside it
 
 
 def test_a_recording_past_its_limit_ends_the_run_once_and_keeps_what_came_before(
