@@ -158,6 +158,7 @@ BAD_DATAGRAMS: list[tuple[str, bytes, str]] = [
     ("a MIDI argument", osc_message("/tpad/finger", ((1, 2, 3, 4), "m")), "type tag 'm'"),
     ("an array", b"/tpad/finger\0\0\0\0,[f]\0\0\0\0" + struct.pack(">f", 1.0), "type tag '['"),
     ("tags longer than the arguments", b"/tpad/finger\0\0\0\0,ffd\0\0\0\0" + struct.pack(">ff", 1, 2), "shorter"),
+    ("an address not UTF-8", b"/\x80pad/ping\0\0,\0\0\0", "address is not UTF-8"),
     ("an address without NUL", b"/tpad/finger", "address without its terminating NUL"),
     ("a type tag string without NUL", b"/a\0\0,fff", "type tag string without"),
     ("a string argument without NUL", b"/tpad/texture\0\0\0,s\0\0abcd", "string argument without"),

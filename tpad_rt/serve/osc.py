@@ -90,8 +90,8 @@ def message_count(data: bytes) -> int:
     """How many messages ``data`` (one datagram) holds; ProtocolError ``bad_message`` saying what is wrong
     when it is larger than MAX_DATAGRAM_BYTES, holds more than MAX_DATAGRAM_MESSAGES, nests bundles deeper than
     MAX_BUNDLE_DEPTH, is not framed as OSC 1.0 says (4-byte alignment, element sizes within their bundle), or
-    has a type tag outside TYPE_TAG_BYTES or arguments shorter than their tags. Costs one pass over the
-    elements, none over the bytes of strings (``bytes.find``)."""
+    has a type tag outside TYPE_TAG_BYTES, arguments shorter than their tags, or text that is not UTF-8.
+    One pass over the datagram (per element, and ``bytes.find`` and a decode per string)."""
     if len(data) > MAX_DATAGRAM_BYTES:
         raise _bad(f"{len(data):,} bytes; at most {MAX_DATAGRAM_BYTES:,}")
     count = 0
@@ -144,10 +144,15 @@ def _check_message(data: bytes, start: int, end: int) -> None:
 
 
 def _string_end(data: bytes, start: int, end: int, what: str) -> int:
-    """Where the NUL-terminated, 4-byte padded string at ``start`` ends; ProtocolError if it does not by ``end``."""
+    """Where the NUL-terminated, 4-byte padded UTF-8 string at ``start`` ends; ProtocolError if it does not by
+    ``end``, or is not UTF-8."""
     nul = data.find(b"\0", start, end)
     if nul < 0:
         raise _bad(f"{what} without its terminating NUL")
+    try:
+        data[start:nul].decode("utf-8")
+    except UnicodeDecodeError:
+        raise _bad(f"{what} is not UTF-8") from None
     return start + (nul - start) // 4 * 4 + 4
 
 
