@@ -162,9 +162,15 @@ def test_a_recording_past_its_limit_ends_the_run_once_and_keeps_what_came_before
     assert abs(len(recording.drive) - blocks * renderer.block_frames) <= renderer.block_frames  # drive and rows agree
 
 
-def test_record_needs_npz() -> None:
+def test_record_needs_npz_and_a_place_to_write(tmp_path: Path) -> None:
+    """Refused when asked for, not when the run stops and its recording would be lost."""
     with pytest.raises(ConfigError, match="must end in .npz"):
         Renderer(output="null://").record("out.wav")
+    (tmp_path / "d.npz").mkdir()
+    for path, problem in [(tmp_path / "missing" / "r.npz", "cannot write recordings there: no folder "),
+                          (tmp_path / "d.npz", "exists and is not a regular file (a directory)")]:
+        with pytest.raises(ConfigError, match=problem.replace("(", r"\(").replace(")", r"\)")):
+            Renderer(output="null://").record(path)
 
 
 def test_the_package_offers_the_renderer_and_imports_it_only_when_asked() -> None:

@@ -492,7 +492,8 @@ class Renderer:
 
     def record(self, path: str | Path) -> None:
         """Record the drive and telemetry from now on; :meth:`stop` writes them to ``path`` (.npz, the
-        format of ``tpad-rt render``). Raises ConfigError unless ``path`` ends in ``.npz``. A recording
+        format of ``tpad-rt render``). Raises ConfigError unless ``path`` ends in ``.npz``, or when it is no
+        place to write (no folder, a FIFO, a directory). A recording
         keeps at most ``tpad_rt.limits.MAX_RECORDING_SAMPLES`` drive samples in memory: past that the
         run ends with a TpadError (re-raised once, by :meth:`check`, :meth:`join` or :meth:`stop`), and
         :meth:`stop` writes what came before it, its metadata's ``truncated`` saying why."""

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from tpad_rt.errors import ConfigError, TpadError
+from tpad_rt.files import check_writable_target
 from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES
 from tpad_rt.pipeline import Pipeline
@@ -119,10 +120,12 @@ class TelemetryLog:
 
     def record(self, path: str | Path) -> None:
         """Record the drive and telemetry from now on, for :meth:`write_recording` to ``path`` (.npz). Raises
-        ConfigError unless ``path`` ends in ``.npz``."""
+        ConfigError unless ``path`` ends in ``.npz``, or when it is no place to write (no folder, one that cannot
+        be written, a FIFO: :func:`tpad_rt.files.check_writable_target`), before anything is recorded."""
         path = Path(path)
         if path.suffix.lower() != ".npz":
             raise ConfigError(f"record: the path must end in .npz, got '{path}'")
+        check_writable_target(path, "recordings")
         with self._lock:
             self._record_path = path
             self._recorded, self._drive_chunks, self._truncated = [], [], None
