@@ -312,3 +312,19 @@ def test_a_large_texture_of_unknown_keys_is_refused_in_one_capped_message_while_
             assert refused["code"] == "texture" and len(lines) == MAX_LISTED_ERRORS + 1, lines[-2:]
             assert lines[0].endswith("unknown key (line 5)") and "more problems" in lines[-1]
             assert pinger.request({"type": "ping"}, "pong")["type"] == "pong"
+
+
+def test_a_library_log_record_while_serving_is_one_counted_line(capfd: pytest.CaptureFixture[str]) -> None:
+    """Should a library log (websockets on a handler that failed, asyncio on a callback, python-osc on a packet),
+    stderr gets one line naming it, counted, never its traceback."""
+    import logging
+
+    with ServeThread() as serve:
+        try:
+            raise ValueError("boom")
+        except ValueError:
+            logging.getLogger("websockets.server").error("connection handler failed", exc_info=True)
+        assert serve.server.counters["internal_logged"] == 1
+    err = capfd.readouterr().err
+    assert err.splitlines() == ["tpad-rt serve: websockets.server: connection handler failed: ValueError('boom') "
+                                "(please report it)"], err

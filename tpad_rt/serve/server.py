@@ -22,12 +22,15 @@ one client's texture holds up nobody else's messages; the one requested last win
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hmac
 import itertools
+import logging
 import math
 import sys
 import time
 from collections import Counter, OrderedDict
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from http import HTTPStatus
 from importlib import resources
@@ -158,6 +161,10 @@ class Server:
     async def run(self, stop: asyncio.Event, ready: asyncio.Event | None = None) -> None:
         """Serve until ``stop`` is set (connections closed with 1001, the finger lifted) or the renderer fails
         (its error re-raised); ``ready`` is set once listening (``port``/``osc_port`` then bound)."""
+        with _one_line_logs(self.counters):
+            await self._run(stop, ready)
+
+    async def _run(self, stop: asyncio.Event, ready: asyncio.Event | None) -> None:
         loop = asyncio.get_running_loop()
         async with serve(self._connected, self.settings.host, self.settings.port, process_request=self._http,
                          process_response=self._handshake_done,
@@ -563,6 +570,33 @@ class Server:
             raise
         except Exception as error:  # noqa: BLE001 - as for a WebSocket message
             raise self.internal_error(error, request) from None
+
+
+class _OneLine(logging.Handler):
+    """A library's log record (websockets, asyncio, python-osc) as one counted line on stderr, its traceback
+    left out: what a client sends never prints a traceback."""
+
+    def __init__(self, counters: Counter[str]):
+        super().__init__(logging.WARNING)
+        self.counters = counters
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.counters["internal_logged"] += 1
+        why = f": {record.exc_info[1]!r}" if record.exc_info and record.exc_info[1] is not None else ""
+        text = printable(f"{record.getMessage()}{why}")
+        print(f"tpad-rt serve: {record.name}: {text[:300]} (please report it)", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def _one_line_logs(counters: Counter[str]) -> Iterator[None]:
+    """While open, every log record of WARNING and above (any library's) is one counted line (_OneLine)."""
+    handler = _OneLine(counters)
+    root = logging.getLogger()
+    root.addHandler(handler)
+    try:
+        yield
+    finally:
+        root.removeHandler(handler)
 
 
 def _wire(message: dict[str, Any]) -> str:
