@@ -5,9 +5,9 @@ is opened with :func:`open_regular`: ``O_NONBLOCK`` (a FIFO would otherwise bloc
 ``open``), then ``fstat`` on the open descriptor, so what is read is what was checked.
 A FIFO, a character or block device, a directory or a socket is refused before a byte
 is read, and so is a file larger than the reader's limit. An output path that exists
-and is not a regular file (``/dev/zero``, a FIFO, a directory), lies in no folder, or is
-a file the command reads, is refused before the work that fills it
-(:func:`check_writable_target`); a new path in a folder is fine.
+and is not a regular file (``/dev/zero``, a FIFO, a directory), lies in no folder or in
+one that cannot be written, or is a file the command reads, is refused before the work
+that fills it (:func:`check_writable_target`); a new path in a folder is fine.
 
 Every file tpad-rt writes at a path the user names (device files, recordings, WAV files,
 figures, schemas, sweeps) is written through :class:`NewFile`: a temporary file created
@@ -15,7 +15,8 @@ exclusively beside the target (``tempfile.mkstemp``: ``O_CREAT | O_EXCL | O_NOFO
 a random name), so a link planted at any name in the folder is never followed, then
 flushed, fsync'ed and renamed onto the target with ``os.replace`` only once complete. A
 failure or an interruption removes the temporary file and leaves whatever was at the
-target as it was; no reader ever sees part of a file. A symbolic link at the target
+target as it was (a process killed outright leaves its hidden temporary file, mode
+0600, and the target intact); no reader ever sees part of a file. A symbolic link at the target
 (to a regular file: one to anything else is refused) is replaced itself by the new
 file; the file it pointed to is never written.
 
@@ -28,7 +29,8 @@ read_regular(path, what, limit_bytes, name=None) -> bytes
 ensure_regular(path, what)
     ConfigError unless ``path`` is a readable regular file (for readers that open it themselves)
 check_writable_target(path, what, inputs=())
-    ConfigError when ``path`` exists and is not a regular file, lies in no folder, or is one of ``inputs``
+    ConfigError when ``path`` exists and is not a regular file, lies in no folder or an unwritable one, or is
+    one of ``inputs``
 NewFile(path, what) -> NewFile
     a temporary file beside ``path`` (``.file``) that ``commit()`` moves there, ``discard()`` removes;
     as a context manager, committed when the block ends, discarded when it raises
