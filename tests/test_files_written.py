@@ -173,6 +173,16 @@ def test_a_link_at_the_target_is_replaced_and_its_file_never_written(folder: Pat
     assert not target.is_symlink() and target.read_bytes() == b"mine"
 
 
+def test_a_hard_link_at_the_target_is_replaced_and_its_other_name_never_written(folder: Path, victim: Path) -> None:
+    """A plain open(path, "w") writes through a hard link to the victim (where the file system lets the attacker
+    make one); the rename replaces the folder's entry instead."""
+    target = folder / "out.yaml"
+    os.link(victim, target)
+    _write(target, b"mine")
+    assert victim.read_bytes() == PRECIOUS and target.read_bytes() == b"mine"
+    assert os.stat(victim).st_nlink == 1
+
+
 def test_a_dangling_link_at_the_target_creates_nothing_where_it_points(folder: Path, victim: Path) -> None:
     target, aimed = folder / "out.yaml", victim.parent / "planted-by-the-writer"
     target.symlink_to(aimed)
@@ -407,6 +417,15 @@ def test_calibrate_replaces_a_link_at_its_out_and_leaves_the_victim(folder: Path
     run = tpad_rt(*command(out))
     assert run.returncode == 0, run.stderr
     assert victim.read_bytes() == PRECIOUS and not out.is_symlink() and Device.from_file(out).label
+
+
+def test_calibrate_refuses_an_out_that_links_to_its_own_input(folder: Path) -> None:
+    old = folder / "old.yaml"
+    old.write_bytes(FORMAT_1.read_bytes())
+    (folder / "new.yaml").symlink_to(old)
+    tpad_rt(*_convert(folder / "new.yaml")[:2], str(old), "--out", str(folder / "new.yaml")).assert_one_line_error(
+        f"{folder / 'new.yaml'}: is also a file this command reads ({old}): write to another file")
+    assert old.read_bytes() == FORMAT_1.read_bytes() and (folder / "new.yaml").is_symlink()
 
 
 @pytest.mark.parametrize("command", [_build, _convert])
