@@ -16,6 +16,7 @@ sooner.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, Callable
 
@@ -82,26 +83,29 @@ def _cap_w(device: Device) -> float:
 
 
 class Run:
-    """A swipe at 100 mm/s pressing with ``force_n(t)``, rendered one control step a block (the drive a DAC
-    plays), with the simulated plate of ``sim://`` fed the same blocks."""
+    """A swipe at 100 mm/s pressing with ``force_n(t)``, rendered in blocks of ``block`` frames (one finger
+    sample a block, pushed before it renders, as a DAC's callback or ``sim://``'s paced driver take them), with
+    the simulated plate of ``sim://`` fed the same blocks."""
 
-    def __init__(self, device: Device, texture: Path, force_n: Callable[[float], float], track: bool = False):
-        self.device, self.cap_w = device, _cap_w(device)
-        pipeline = Pipeline(device, load_compiled(texture), FS_HZ,
-                            options=RenderOptions(power_budget_w=self.cap_w, power_avg_w=self.cap_w, track=track))
+    def __init__(self, device: Device, texture: Path, force_n: Callable[[float], float], track: bool = False,
+                 block: int = STEP, preemphasis: bool | None = None):
+        self.device, self.cap_w, self.block = device, _cap_w(device), block
+        options = RenderOptions(power_budget_w=self.cap_w, power_avg_w=self.cap_w, track=track,
+                                preemphasis=preemphasis)
+        pipeline = Pipeline(device, load_compiled(texture), FS_HZ, options=options)
         self.sim = SimOutput(device, FS_HZ)
         pipeline.start()
-        block = np.empty(STEP, dtype=np.float32)
+        samples = np.empty(block, dtype=np.float32)
         blocks, forces = [], []
-        for _ in range(int(2 * PRESS_AT_S * FS_HZ / STEP)):
+        for _ in range(int(2 * PRESS_AT_S * FS_HZ / block)):
             t_s = pipeline.time_s
             pipeline.push_finger(t_s, 5.0 + 100.0 * t_s, 30.0, force_n(t_s))
-            pipeline.render(block)
-            self.sim.write(block, pipeline.last_telemetry_row())
-            blocks.append(block.astype(np.float64) * device.volts_per_full_scale)
+            pipeline.render(samples)
+            self.sim.write(samples, pipeline.last_telemetry_row())
+            blocks.append(samples.astype(np.float64) * device.volts_per_full_scale)
             forces.append(force_n(t_s))
         self.volts = np.concatenate(blocks)
-        self.forces_n = np.repeat(forces, STEP)
+        self.forces_n = np.repeat(forces, block)
         self.telemetry = pipeline.drain_telemetry()
         self.over_cap_blocks = pipeline.over_cap_blocks
         self.power_w = _circuit_power_w(device, self.volts, self.forces_n)
@@ -110,37 +114,42 @@ class Run:
     def seconds_over(self, power_w: np.ndarray) -> float:
         """From the press's first step to the last sample over the cap (s), the last block left out (its average
         runs past the end)."""
-        over = np.nonzero(power_w[self.pressed:-STEP] > OVER * self.cap_w)[0]
+        over = np.nonzero(power_w[self.pressed:-self.block] > OVER * self.cap_w)[0]
         return (over[-1] + 1) / FS_HZ if len(over) else 0.0
 
     def reverse_floor_s(self, carrier_hz: float) -> float:
         """Full reverse braking from the press's first step, the carrier at ``carrier_hz`` from there on: the
-        time until the circuit's power is first back under the cap (s)."""
+        time until the circuit's power, once over the cap, is first back under it (s). (Braking on would ring the
+        plate up in anti-phase: the floor ends where it would stop.)"""
         volts = self.volts.copy()
         n = np.arange(len(volts) - self.pressed)
         phase = self.pressed * self.device.carrier_hz / FS_HZ + n * carrier_hz / FS_HZ
         volts[self.pressed:] = -self.device.max_voltage_v * np.sin(2 * np.pi * phase)
-        power_w = _circuit_power_w(self.device, volts, self.forces_n)[self.pressed:]
-        peak = int(np.argmax(power_w))
-        under = np.nonzero(power_w[peak:] <= OVER * self.cap_w)[0]
-        assert len(under), "full reverse never brings the plate back under the cap"
-        return (peak + under[0]) / FS_HZ
+        over = _circuit_power_w(self.device, volts, self.forces_n)[self.pressed:] > OVER * self.cap_w
+        assert np.any(over), "the press does not take the plate over the cap"
+        first_over = int(np.argmax(over))
+        assert not np.all(over[first_over:]), "full reverse never brings the plate back under the cap"
+        return (first_over + int(np.argmin(over[first_over:]))) / FS_HZ
 
 
 def _sudden(force_n: float) -> Callable[[float], float]:
     return lambda t_s: force_n if t_s >= PRESS_AT_S else 0.0
 
 
+@pytest.mark.parametrize(("block", "preemphasis"), [(STEP, None), (64, None), (256, None), (64, False)],
+                         ids=["step-blocks", "64-frames", "256-frames", "no-preemphasis"])
 @pytest.mark.parametrize("track", [False, True], ids=["fixed", "track"])
 @pytest.mark.parametrize("name", ["SLG_0.56", "SLG_0.4"])
 def test_a_sudden_press_is_braked_back_under_the_cap_near_the_full_reverse_floor(
-        texture: Path, name: str, track: bool) -> None:
+        texture: Path, name: str, track: bool, block: int, preemphasis: bool | None) -> None:
     """Pressed from 0 to 2 N at once: the vibration the plate holds dissipates in the harder press at once (no
     drive can stop that); the kernel brakes it back under the cap within 1.2 times the time full reverse braking
     takes, and its telemetry shows the excursion (a drive that braked at the cap's volts and drove on took 4.6-12
-    times the floor)."""
+    times the floor). Blocks of 64 frames are the default of ``audio://`` and ``sim://`` alike; the kernel's
+    samples do not depend on how a stream is cut into blocks (test_render_properties), only on when the finger
+    sample arrives: here before the block it is due in."""
     device = Device.from_file(DEVICES_DIR / f"{name}.yaml")
-    run = Run(device, texture, _sudden(2.0), track)
+    run = Run(device, texture, _sudden(2.0), track, block, preemphasis)
     carrier_hz = float(device.motional_resonance_hz(2.0)) if track else device.carrier_hz
     floor_s = run.reverse_floor_s(carrier_hz)
     assert np.max(run.power_w[run.pressed:]) > 1.3 * run.cap_w  # the press itself takes the plate over
@@ -148,12 +157,13 @@ def test_a_sudden_press_is_braked_back_under_the_cap_near_the_full_reverse_floor
     # The telemetry: the drive's estimate stays within the cap, the plate's shows the excursion, and it is counted.
     plate_w, power_w = run.telemetry["plate_w"], run.telemetry["power_w"]
     assert np.max(power_w) <= run.cap_w
-    pressed_block = run.pressed // STEP
+    pressed_block = run.pressed // block
     assert np.max(plate_w[:pressed_block]) <= run.cap_w < plate_w[pressed_block]
     assert run.over_cap_blocks == np.count_nonzero(plate_w > run.cap_w) >= 1
     # sim:// was fed the same drive: its plate, a resonator of its own, is back down with the circuit's.
     amplitude_um = run.sim.measurements()["plate_amplitude_um"]
-    assert amplitude_um[pressed_block + round(2 * floor_s * FS_HZ / STEP)] < amplitude_um[pressed_block - 1]
+    settled_block = pressed_block + math.ceil(2 * floor_s * FS_HZ / block)
+    assert amplitude_um[settled_block] < amplitude_um[pressed_block - 1]
 
 
 def test_a_press_over_10_ms_keeps_the_plate_under_the_cap(texture: Path) -> None:
@@ -170,29 +180,30 @@ def test_a_press_over_10_ms_keeps_the_plate_under_the_cap(texture: Path) -> None
     assert run.power_w[int(0.05 * FS_HZ):-STEP].max() <= run.cap_w * OVER
 
 
-def _scaled_device(folder: Path, rise: float, press_ms: float) -> Device:
+def _scaled_device(folder: Path, rise: float, press_ms: float, preemphasis: bool) -> Device:
     """SLG_0.56 with its motional R rising ``rise`` times from 0 to 2 N (L and C as shipped), checked as a file."""
     tree: dict[str, Any] = yaml.safe_load((DEVICES_DIR / "SLG_0.56.yaml").read_text())
+    tree["preemphasis"] = preemphasis
     circuit = tree["circuit"]
     forces = np.array(circuit["force_n"])
     r0 = circuit["motional_r_ohm"][0]
     circuit["motional_r_ohm"] = [float(r0 * (1 + (rise - 1) * f / forces[-1])) for f in forces]
-    path = folder / f"rise_{rise:.3f}_{press_ms:.2f}.yaml"
+    path = folder / f"rise_{rise:.3f}_{press_ms:.2f}_{preemphasis}.yaml"
     path.write_text(yaml.safe_dump(tree))
     assert check_file(path) == [], path.read_text()
     return Device.from_file(path)
 
 
-@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                 HealthCheck.function_scoped_fixture])
-@given(rise=st.floats(1.5, 10.0), press_ms=st.sampled_from([0.0, 1.0, 2.0, 10.0]))
+@given(rise=st.floats(1.5, 10.0), press_ms=st.sampled_from([0.0, 1.0, 2.0, 10.0]), preemphasis=st.booleans())
 def test_presses_on_devices_whose_damping_rises_up_to_tenfold_are_braked_near_the_floor(
-        tmp_path: Path, texture: Path, rise: float, press_ms: float) -> None:
+        tmp_path: Path, texture: Path, rise: float, press_ms: float, preemphasis: bool) -> None:
     """Devices `check` accepts whose motional R rises up to ten times from 0 to 2 N, pressed at once or over up to
-    10 ms (R rising 90 % between two 1 kHz finger samples): the kernel handles any such change, whatever its rate;
-    the plate is back within the cap within 1.2 times the full-reverse floor of a sudden press (plus the press's
-    own duration)."""
-    device = _scaled_device(tmp_path, rise, press_ms)
+    10 ms (R rising 90 % between two 1 kHz finger samples), with pre-emphasis or without: the kernel handles any
+    such change, whatever its rate; the plate spends no longer over the cap than 1.2 times the full-reverse floor
+    of a sudden press on the same device."""
+    device = _scaled_device(tmp_path, rise, press_ms, preemphasis)
 
     def force_n(t_s: float) -> float:
         if press_ms == 0.0:
@@ -202,6 +213,6 @@ def test_presses_on_devices_whose_damping_rises_up_to_tenfold_are_braked_near_th
 
     run = Run(device, texture, force_n)
     sudden = run if press_ms == 0.0 else Run(device, texture, _sudden(2.0))
+    assert np.max(sudden.power_w[sudden.pressed:]) > OVER * run.cap_w  # a sudden press takes the plate over
     floor_s = sudden.reverse_floor_s(device.carrier_hz)
-    assert run.seconds_over(run.power_w) <= FLOOR_FACTOR * floor_s + press_ms / 1000, \
-        (run.seconds_over(run.power_w), floor_s)
+    assert run.seconds_over(run.power_w) <= FLOOR_FACTOR * floor_s, (run.seconds_over(run.power_w), floor_s)

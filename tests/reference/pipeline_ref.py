@@ -155,14 +155,15 @@ class _Stream:
             else:
                 self.slip_v = held_v - self.model_v
         self.model_gain_m_per_v = gain_m_per_v
-        # the plate's power, as modelled
-        self.plate_w = self.p1_w * (self.model_v + self.slip_v) ** 2 if self.preemphasis else 0.0
+        self.plate_w = self.p1_w * (self.model_v + self.slip_v) ** 2  # the plate's power, as modelled
         tau_s = float(device.envelope_time_constant_s(force_n))
         self.model_step = 1 - math.exp(-1 / (tau_s * self.fs_hz))
-        self.follow_gain = 1 / self.model_step if self.preemphasis else 0.0
-        # braking: to -cap, or to the full volts while the plate holds more than the cap
-        brake_v = device.max_voltage_v * keep if self.plate_w > self.cap_w else self.cap_v
-        self.low_v = -brake_v if options.braking and self.preemphasis else 0.0
+        # braking: to -cap, or to the full volts while the plate holds more than the cap (then with the shaper,
+        # pre-emphasis or not)
+        pressed = self.plate_w > self.cap_w and options.braking
+        self.follow_gain = 1 / self.model_step if self.preemphasis or pressed else 0.0
+        brake_v = device.max_voltage_v * keep if pressed else self.cap_v
+        self.low_v = -brake_v if options.braking and self.follow_gain else 0.0
         self.gate = finger.active and run
         self.energy_v2: list[float] = []
         self.step_flags = flags

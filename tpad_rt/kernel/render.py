@@ -838,10 +838,14 @@ def _control_step(
     state[STATE_CAP_V] = cap_v
     state[STATE_AMPLITUDE_M] = command_v * amplitude_m_per_v if fault == 0 else 0.0
     state[STATE_POWER_PER_V2] = p1_w
+    # Braking: down to -cap, or to the full volts while the plate holds more than the power cap (a press; the
+    # shaper then brakes it even without pre-emphasis).
+    pressed = state[STATE_PLATE_W] > cfg[CFG_POWER_CAP_W] and cfg[CFG_BRAKING] != 0.0 and fault == 0
+    if pressed:
+        follow_gain = 1.0 / model_step
     state[STATE_FOLLOW_GAIN] = follow_gain
     state[STATE_MODEL_STEP] = model_step
-    # Braking: down to -cap, or to the full volts while the plate holds more than the power cap (a press).
-    brake_v = cfg[CFG_MAX_VOLTAGE_V] * (1.0 - SAFETY_MARGIN) if state[STATE_PLATE_W] > cfg[CFG_POWER_CAP_W] else cap_v
+    brake_v = cfg[CFG_MAX_VOLTAGE_V] * (1.0 - SAFETY_MARGIN) if pressed else cap_v
     state[STATE_DRIVE_LOW_V] = -brake_v if cfg[CFG_BRAKING] != 0.0 and follow_gain > 0.0 else 0.0
     state[STATE_GATE] = 1.0 if finger_status > 0 and fault == 0 and cfg[CFG_RUN] != 0.0 else 0.0
     state[STATE_RAMP_SAMPLES] = max(1.0, float(round(cfg[CFG_RAMP_S] * fs_hz)))
@@ -899,6 +903,18 @@ def _shape_in_sequence(
 
 
 @_inline
+def _follow_model(state: np.ndarray, envelope: np.ndarray, reference_before_v: float, model_step: float) -> None:
+    """Carry the plate model through the drives ``envelope`` (V) the shaper did not make (no pre-emphasis):
+    ``m += k (e - m)``, from ``reference_before_v`` (the smoothed volts before the first) if it sat on the
+    command. The guard reads it after a press (_guard_model)."""
+    model_v = reference_before_v if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
+    for k in range(envelope.shape[0]):
+        model_v += (envelope[k] - model_v) * model_step
+    state[STATE_MODEL_V] = model_v
+    state[STATE_MODEL_ON_REF] = 0.0
+
+
+@_inline
 def _render_samples(
     out: np.ndarray, first: int, stop: int, state: np.ndarray, out_per_v: float, limit: float, modulate: bool
 ) -> bool:
@@ -937,6 +953,7 @@ def _render_samples(
         for k in range(count):
             ramp = min(max(ramp_start + ramp_direction * (j0 + k), 0.0), ramp_samples)
             envelope[k] = ramp * per_ramp_sample * min(max(command_v + start_offset_v * decay[k + 1], 0.0), cap_v)
+        _follow_model(state, envelope, command_v + start_offset_v * decay[0], model_step)
     elif ramp_full and state[STATE_MODEL_ON_REF] != 0.0:
         # The model sits on the command: each drive depends on the command alone (vectorises). If one
         # is clipped the segment is rendered again below, sample by sample, with the same expressions.
