@@ -272,6 +272,49 @@ def test_a_folder_not_even_root_can_write_is_refused_before_anything_is_written(
     assert (folder / "old.yaml").read_bytes() == PRECIOUS and _leftovers(folder) == []
 
 
+@contextlib.contextmanager
+def _as_a_user() -> Iterator[None]:
+    """The block runs as a user other than root: as root, with the effective user id set to nobody's (65534)
+    (the real one stays root, so os.access still says yes and a folder's refusal comes from creating the
+    temporary file in it)."""
+    if os.geteuid() != 0:
+        yield
+        return
+    os.seteuid(65534)
+    try:
+        yield
+    finally:
+        os.seteuid(0)
+
+
+def test_a_read_only_folder_is_refused_for_a_user_and_the_old_file_kept() -> None:
+    top = Path(tempfile.mkdtemp(prefix="tpad-rt-read-only-"))  # under /tmp: pytest's own folders are root's alone
+    try:
+        top.chmod(0o755)
+        folder, hidden = top / "read-only", top / "unsearchable"
+        for path, mode in ((folder, 0o555), (hidden, 0o700 if os.geteuid() == 0 else 0o000)):
+            path.mkdir()
+            (path / "old.yaml").write_bytes(PRECIOUS)
+            path.chmod(mode)
+        with _as_a_user():
+            with pytest.raises(ConfigError) as caught:
+                _write(folder / "old.yaml", b"x")
+            assert str(caught.value) in (
+                f"{folder}/old.yaml: cannot write things there: the folder {folder} is not writable",  # os.access
+                f"{folder}/old.yaml: cannot write things there: the folder {folder} is not writable (permission "
+                "denied)")
+            with pytest.raises(ConfigError) as caught:
+                _write(hidden / "old.yaml", b"x")
+            assert str(caught.value) == f"{hidden}/old.yaml: cannot write things there: permission denied"
+        for path in (folder, hidden):
+            path.chmod(0o755)
+            assert (path / "old.yaml").read_bytes() == PRECIOUS and os.listdir(path) == ["old.yaml"]
+    finally:
+        for path in top.iterdir():
+            path.chmod(0o755)
+        shutil.rmtree(top)
+
+
 def test_a_target_that_cannot_be_replaced_fails_at_commit_leaving_it_whole(folder: Path) -> None:
     """An immutable target (root cannot replace it either): the rename fails; the old file and the folder are as
     they were."""

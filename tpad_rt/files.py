@@ -156,7 +156,8 @@ def check_writable_target(path: PathLike, what: str, inputs: Sequence[PathLike] 
     regular file is then replaced by :class:`NewFile`, not written through). The folder
     must be writable even when the file exists: NewFile creates its new version beside it.
     Checked before the work that makes what is written, so that a long run is not lost
-    at its end. A name too long for the file system is refused here too.
+    at its end. A name too long for the file system, or behind a folder that cannot be
+    searched, is refused here too.
     """
     name = _name(path, None)
     folder = os.path.dirname(os.fspath(path)) or "."  # as written: 'missing/../x' needs 'missing'
@@ -165,7 +166,7 @@ def check_writable_target(path: PathLike, what: str, inputs: Sequence[PathLike] 
     except ValueError:
         raise ConfigError(f"{name}: the path contains a NUL byte") from None
     except OSError as error:
-        if error.errno == errno.ENAMETOOLONG:
+        if error.errno in (errno.ENAMETOOLONG, errno.EACCES):  # too long; a folder on the way not searchable
             raise ConfigError(f"{name}: cannot write {what} there: {_reason(error)}") from None
         mode = None  # missing: creating it says what else goes wrong
     if mode is None and not os.path.isdir(folder):
