@@ -4,8 +4,8 @@ Written as an attacker who can create files in the folder the user writes to (a 
 ``/tmp``) would try: links planted at the temporary names a writer could pick (the old
 predictable ``.NAME.PID.tmp``, and the random names, guessed right) and at the target
 itself, the target swapped for a FIFO, a directory, a device or a link while the file
-is being written, a folder that cannot be written (even by root: an immutable folder),
-and failures and crashes mid-write. What must hold: a victim file elsewhere is never
+is being written, a folder that cannot be written (by a user: read-only or not
+searchable; by root: immutable), and failures and crashes mid-write. What must hold: a victim file elsewhere is never
 written, the file at the target is the old one or the whole new one and never part of
 one, no temporary file stays behind when the writer fails (only a process killed
 outright can leave one, hidden beside the target), nothing hangs, and every mistake is
