@@ -5,8 +5,10 @@ API map
 stream(table, link, buffers) -> int
     render envelope frames with the pointer table's arrays (:mod:`tpad_rt.kernel.table`)
     and write them to the port's file descriptor at the amplifier's pace, reading its
-    STATUS and ACK frames, until ``link[LINK_STOP]`` is set or the link fails; returns
-    the EXIT_* reason (also in ``link[LINK_EXIT]``)
+    STATUS and ACK frames, until ``link[LINK_STOP]`` is set or the link fails, then send
+    STOP unless the port is lost (H8); returns the EXIT_* reason (also in ``link[LINK_EXIT]``)
+carrier_echo_ok(link, asked_mhz, achieved_mhz) / status_problem(link, body)
+    the checks of what the amplifier reports (H2, H10), shared with the Python side
 LINK_*, EXIT_*, EXIT_NAMES, BUF_*
     the layout of the int64 ``link`` array it shares with the Python side, the exit
     reasons, and the uint8 buffers it works in
@@ -36,6 +38,13 @@ more than the amplifier's buffer ahead; if ``p`` has passed what was sent (the h
 held up), it skips the stream ahead, since samples for played indices are refused.
 A STATUS showing that the amplifier's watchdog tripped (it went IDLE) makes the host
 send START again from the next sample (``LINK_RESTARTS``): the run recovers.
+
+Every report is checked before it is acted on (H10): a STATUS's fields against the
+document's ranges and the amplifier's INFO, its play index against the last START and
+the time since it went out; a SET_CARRIER or START ACK against what was asked; an INFO
+(only ever an answer to a HELLO) against the one the handshake took. One out of range
+ends the run (EXIT_BAD_REPORT, EXIT_CONTRADICTED; the value in LINK_REPORT*), STOP and
+all. Every sample is clamped to LINK_LEVEL_LIMIT, the host's envelope scale (H3).
 
 Tracking (``LINK_TRACK``, rule H9): after each frame the host sends SET_CARRIER when the
 carrier the kernel rendered its last step for (``STATE_STEP_CARRIER_HZ``, the model's
@@ -156,7 +165,7 @@ LINK_AMP_CURRENT_UA_RMS = 35
 LINK_AMP_PHASE_CDEG = 36
 LINK_AMP_CARRIER_MHZ = 37
 LINK_AMP_TIME_US = 38         # the amplifier's clock when it sent the last STATUS (us, 32 bits)
-LINK_STOP_RAMP_MS = 39        # the STOP the run ends with: its ramp (ms), set before LINK_STOP
+LINK_STOP_RAMP_MS = 39        # the STOP the run ends with: its ramp (ms), set before the run and again before LINK_STOP
 LINK_STOP_SEQ = 40            # the seq that STOP went out with (-1 if it could not)
 LINK_CALLBACK = 41            # the address of the compiled render callback (kernel.callback.render_callback)
 # --- tracking (docs/amplifiers.md "Tracking"): the Python side writes these before the run ----------------
@@ -767,8 +776,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
         # H8: STOP right after the last envelope frame, then flush it all: also when a failure ended the run (H7),
         # as long as the port takes bytes. The failure stays the reason; a stop that cannot flush becomes one.
         frame = buffers[BUF_FRAME]
-        ramp_ms = link[LINK_STOP_RAMP_MS] if exit_reason == EXIT_STOPPED else 0
-        codec.put_u16(frame, PAYLOAD, min(max(ramp_ms, 1), 0xFFFF))
+        codec.put_u16(frame, PAYLOAD, min(max(link[LINK_STOP_RAMP_MS], 1), 0xFFFF))
         link[LINK_STOP_SEQ] = link[LINK_SEQ]
         end = _queue(link, buffers, codec.STOP_BYTES, codec.MSG_STOP, end)
         flushed = 0

@@ -746,6 +746,7 @@ class AmpLink:
             "tracked_carrier_hz": link[s.LINK_CARRIER_MHZ] / 1e3 if link[s.LINK_TRACK] else self.carrier_hz,
             "carrier_sets": int(link[s.LINK_CARRIER_SETS]), "carrier_refused": int(link[s.LINK_CARRIER_REFUSED]),
             "lock_offset_hz": link[s.LINK_LOCK_OFFSET_MHZ] / 1e3, "lock_updates": int(link[s.LINK_LOCK_UPDATES]),
+            "infos_passed_over": int(link[s.LINK_INFOS_STALE]),
         }
 
 
