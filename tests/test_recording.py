@@ -81,6 +81,11 @@ def test_invalid_recordings_name_the_problem(tmp_path: Path, changes: dict, expe
     assert f"{path}: {expected}" in str(caught.value)
 
 
+def test_a_recording_made_before_plate_w_was_added_still_reads(tmp_path: Path) -> None:
+    recording = read_recording(_broken(tmp_path, plate_w=None))
+    assert "plate_w" not in recording.blocks and len(recording.blocks["power_w"]) == len(recording.blocks["t"])
+
+
 def test_nan_metadata_is_refused(tmp_path: Path) -> None:
     path = _broken(tmp_path, metadata_json=np.array(json.dumps({key: float("nan") for key in REQUIRED_METADATA})))
     with pytest.raises(ConfigError, match="metadata_json: carrier_hz: must be finite, got nan"):

@@ -267,6 +267,31 @@ def test_departures_are_flagged_counted_and_plotted_when_the_plate_cannot_follow
     assert main(["plot", str(out), "--out", str(tmp_path / "r.png")]) == 0
 
 
+def test_a_sudden_press_over_the_cap_is_recorded_counted_and_plotted(tmp_path: Path) -> None:
+    """A swipe asking for the least friction that presses from 0 to 2 N at once on SLG_0.4 under a cap that binds
+    (the drive sits at it): the recording's plate_w shows
+    the plate over the cap in the blocks after the press and only there, its drive power stays within the cap, the
+    summary counts the blocks, and the plot draws them."""
+    rows = "\n".join(f"{k / 1000:.3f},{10 + 0.1 * k:.2f},30,{2.0 if k >= 150 else 0.0}" for k in range(300))
+    (tmp_path / "press.csv").write_text("t,x_mm,y_mm,force_n\n" + rows + "\n")
+    (tmp_path / "smooth.yaml").write_text("description: the least friction everywhere\nkind: grating\n"
+                                          "period_mm: 5\nfriction: {low: 0.1, high: 0.1}\n")
+    out = tmp_path / "p.npz"
+    done = _tpad_rt("render", str(tmp_path / "smooth.yaml"), "--device", "tpad_rt/devices/SLG_0.4.yaml", "--input",
+                    f"file://{tmp_path}/press.csv", "--power-budget", "0.1", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    blocks = read_recording(out).blocks
+    over = blocks["plate_w"] > 0.1
+    pressed = np.flatnonzero(blocks["force_n"] == 2.0)[0]
+    assert np.flatnonzero(over)[0] == pressed and blocks["plate_w"][pressed] > 2 * 0.1
+    assert np.count_nonzero(over) < 40  # braked back within a few ms of 64-frame blocks (1 / 3 ms each)
+    assert blocks["power_w"].max() <= 0.1
+    line = next(line for line in done.stdout.splitlines() if line.startswith("plate: "))
+    assert line.startswith(f"plate: over the power cap in {np.count_nonzero(over)} blocks (peak "
+                           f"{blocks['plate_w'].max():.3f} W")
+    assert main(["plot", str(out), "--out", str(tmp_path / "p.png")]) == 0
+
+
 def test_wav_out_holds_the_same_drive(grating: tuple[Recording, str], tmp_path: Path) -> None:
     recording, _ = grating
     assert main(["render", str(GRATING), "--input", SWIPE, "--out", str(tmp_path / "g.wav")]) == 0

@@ -45,7 +45,7 @@ from rich.live import Live
 from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number
-from tpad_rt.cli.render import add_session_arguments, session_options
+from tpad_rt.cli.render import add_session_arguments, over_cap_line, session_options
 from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
@@ -370,9 +370,7 @@ class Session:
             f"(cap {stats['power_budget_w']:g} W, average budget {stats['power_avg_w']:g} W)",
         ]
         if stats["over_cap_blocks"]:
-            lines.append(f"plate: over the power cap in {stats['over_cap_blocks']} blocks (peak "
-                         f"{stats['plate_peak_w']:.3f} W as the plate model has it): a press took the vibration it "
-                         "held into a finger that damps more, and the drive braked it back (docs/kernel.md)")
+            lines.append(over_cap_line(stats["over_cap_blocks"], stats["plate_peak_w"]))
         if stats["faults"]:
             lines.append(f"faults: {stats['faults']} ({stats['fault_steps']} control steps, "
                          f"{stats['fault_blocks']} blocks; {', '.join(stats['fault_causes'])}): the drive ramped to 0 "

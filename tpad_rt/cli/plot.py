@@ -3,7 +3,8 @@
 Four panels against time (or, with ``--along x``, the finger's x): relative friction
 (target, and achieved when the plate was simulated), plate amplitude (commanded, and
 simulated), drive volts against the device maximum, and power against the cap and the
-average budget (instantaneous, and averaged over the budget's window). Blocks where
+average budget (the drive's per block, and averaged over the budget's window; the
+plate's, as the kernel's model has it, where a press took it over the cap). Blocks where
 the drive saturated are shaded red, blocks without a touching finger grey; on the
 friction panel, blocks whose achieved friction departed from the texture under the
 finger by more than the recording's tolerance (``departed``, from ``tpad-rt render``
@@ -110,15 +111,21 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
     volts.axhline(meta["max_voltage_v"], color=_LIMIT, ls="--", lw=1.2, label=f"max {meta['max_voltage_v']:g} V")
     volts.set(ylabel="drive (V peak)", ylim=(0, meta["max_voltage_v"] * 1.12))
 
-    power.plot(axis, blocks["power_w"], color=_TARGET, lw=0.8, alpha=0.8, label="instantaneous (per block)")
+    power.plot(axis, blocks["power_w"], color=_TARGET, lw=0.8, alpha=0.8, label="drive (per block)")
     power.plot(axis, power_average, color=_AVERAGE, lw=1.6, label=f"average over {meta['power_window_s']:g} s")
+    plate_w = blocks.get("plate_w", np.zeros(0))  # absent from recordings made before it was added
+    over = plate_w > meta["power_budget_w"]
+    if over.any():  # a press took the plate's vibration over the cap: show the excursion and its braking
+        power.plot(axis, np.where(over, plate_w, np.nan), color=_ACHIEVED, lw=1.4,
+                   label=f"plate over the cap, as the model has it ({np.count_nonzero(over)} blocks)")
     cap_w, average_w = meta["power_budget_w"], meta["power_avg_w"]
     if average_w == cap_w:
         power.axhline(cap_w, color=_LIMIT, ls="--", lw=1.2, label=f"cap and average budget {cap_w:g} W")
     else:
         power.axhline(cap_w, color=_LIMIT, ls="--", lw=1.2, label=f"cap {cap_w:g} W")
         power.axhline(average_w, color=_AVERAGE, ls=":", lw=1.4, label=f"average budget {average_w:g} W")
-    power.set(ylabel="power (W)", xlabel=label, ylim=(0, max(cap_w, blocks["power_w"].max()) * 1.15))
+    power.set(ylabel="power (W)", xlabel=label,
+              ylim=(0, max(cap_w, blocks["power_w"].max(), plate_w.max(initial=0.0)) * 1.15))
 
     shading = [Patch(color=_SATURATED, alpha=0.3, label="saturated"),
                Patch(color=_LIFTED, alpha=0.25, label="finger lifted")]

@@ -259,6 +259,14 @@ def _departure_line(result: RenderResult, texture: CompiledTexture) -> str:
             f"finger ({worst_text}); `tpad-rt plot` shades them")
 
 
+def over_cap_line(blocks: int, peak_w: float) -> str:
+    """The summary line of ``play`` and ``render`` for ``blocks`` (> 0) blocks in which the plate held more than
+    the power cap, ``peak_w`` (W) at most, as the kernel's model has it."""
+    return (f"plate: over the power cap in {blocks} blocks (peak {peak_w:.3f} W as the kernel's plate model has it): "
+            "a press took the vibration it held into a finger that damps more, and the drive braked it back "
+            "(docs/kernel.md, \"A harder press\")")
+
+
 def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
                   texture: CompiledTexture) -> list[str]:
     """The end-of-render summary: speed, peak volts, power vs budgets, saturation, friction error.
@@ -284,6 +292,9 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
         f"saturated: {_percent(saturated)} of blocks (voltage {_percent((flags & FLAG_VOLTAGE) != 0)}, "
         f"power {_percent((flags & FLAG_POWER) != 0)}); finger touching in {_percent(touching)}",
     ]
+    over_cap = blocks["plate_w"] > metadata["power_budget_w"]
+    if over_cap.any():
+        lines.append(over_cap_line(int(np.count_nonzero(over_cap)), float(blocks["plate_w"].max())))
     faults = (flags & FLAG_FAULT) != 0
     if faults.any():
         lines.append(f"faults: {_percent(faults)} of blocks ({np.count_nonzero(faults)}): the drive ramped to 0 there "
