@@ -269,9 +269,8 @@ def test_departures_are_flagged_counted_and_plotted_when_the_plate_cannot_follow
 
 def test_a_sudden_press_over_the_cap_is_recorded_counted_and_plotted(tmp_path: Path) -> None:
     """A swipe asking for the least friction that presses from 0 to 2 N at once on SLG_0.4 under a cap that binds
-    (the drive sits at it): the recording's plate_w shows
-    the plate over the cap in the blocks after the press and only there, its drive power stays within the cap, the
-    summary counts the blocks, and the plot draws them."""
+    (the drive sits at it): the recording's plate_w shows the plate over the cap from the block after the press,
+    its drive power stays within the cap, the summary counts the blocks, and the plot draws them."""
     rows = "\n".join(f"{k / 1000:.3f},{10 + 0.1 * k:.2f},30,{2.0 if k >= 150 else 0.0}" for k in range(300))
     (tmp_path / "press.csv").write_text("t,x_mm,y_mm,force_n\n" + rows + "\n")
     (tmp_path / "smooth.yaml").write_text("description: the least friction everywhere\nkind: grating\n"
