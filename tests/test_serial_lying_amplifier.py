@@ -409,6 +409,22 @@ def test_play_ends_a_backwards_play_index_in_one_line_with_stop() -> None:
     assert frames[-1].type == wire.Type.STOP
 
 
+@pytest.mark.parametrize("lie", [{"play_index": "jump"}, {"play_index": "back"}, {"play_index": "stuck"},
+                                 {"envelope_mv": 40_001}])
+def test_a_tone_refuses_a_status_out_of_range_and_stops(lie: dict[str, int | str]) -> None:
+    """``calibrate sweep``'s tone (a Python loop, not the streamer) checks STATUS the same way, STOP and all."""
+    amp = ScriptedAmp(Script({0: [Answer(HONEST)]}, lies={12: lie}))
+    link = serial_amp.AmpLink.open(serial_amp.parse_serial_url(f"serial://{amp.port}"), carrier_hz=DEVICE.carrier_hz)
+    try:
+        with pytest.raises(TpadError) as failure:
+            link.tone(1.0, 1.0)
+    finally:
+        link.stop(5.0)
+        frames = amp.finish()
+    assert str(failure.value).startswith(f"serial: the amplifier on {amp.port} sent a STATUS with "), failure.value
+    assert frames[-1].type == wire.Type.STOP
+
+
 # --- any sequence ----------------------------------------------------------------------------------------------
 
 MV = st.integers(0, U32)

@@ -7,7 +7,7 @@ stream(table, link, buffers) -> int
     and write them to the port's file descriptor at the amplifier's pace, reading its
     STATUS and ACK frames, until ``link[LINK_STOP]`` is set or the link fails, then send
     STOP unless the port is lost (H8); returns the EXIT_* reason (also in ``link[LINK_EXIT]``)
-carrier_echo_ok(link, asked_mhz, achieved_mhz) / status_problem(link, body)
+carrier_echo_ok(link, asked_mhz, achieved_mhz) / check_status(link, body, now_ns) / start_checks(link)
     the checks of what the amplifier reports (H2, H10), shared with the Python side
 LINK_*, EXIT_*, EXIT_NAMES, BUF_*
     the layout of the int64 ``link`` array it shares with the Python side, the exit
@@ -378,12 +378,19 @@ def _play_problem(link: np.ndarray, body: np.ndarray, now_ns: int) -> int:
 
 
 @njit(**_KERNEL)
+def check_status(link: np.ndarray, body: np.ndarray, now_ns: int) -> int:
+    """Check the STATUS ``body`` received at ``now_ns`` (H10): :func:`status_problem`, then the play index against
+    the last START (:func:`start_checks`) and the stream's next index LINK_WRITTEN; 0, or the REPORT_* code of a
+    value out of range, noted in the link."""
+    problem = status_problem(link, body)
+    return problem if problem != 0 else _play_problem(link, body, now_ns)
+
+
+@njit(**_KERNEL)
 def _take_status(link: np.ndarray, body: np.ndarray, now_ns: int) -> int:
     """Check a STATUS payload (docs/amp-protocol.md 3.2, H10) and copy it into the link; 0, or the REPORT_* code
     of a value out of range (nothing copied then)."""
-    problem = status_problem(link, body)
-    if problem == 0:
-        problem = _play_problem(link, body, now_ns)
+    problem = check_status(link, body, now_ns)
     if problem != 0:
         return problem
     p = PAYLOAD
@@ -546,8 +553,8 @@ def _queue(link: np.ndarray, buffers: np.ndarray, payload_length: int, msg_type:
 
 
 @njit(**_KERNEL)
-def _start_checks(link: np.ndarray) -> None:
-    """A new START (LINK_START_INDEX): the play index checks (H10) begin again from it."""
+def start_checks(link: np.ndarray) -> None:
+    """A new START (LINK_START_INDEX, sent after LINK_START_NS): the play index checks (H10) begin again from it."""
     link[LINK_CHECK_INDEX] = link[LINK_START_INDEX]
     link[LINK_CHECK_TIME_US] = -1
     link[LINK_CHECK_RUN_INDEX] = link[LINK_START_INDEX]
@@ -561,7 +568,7 @@ def _queue_start(link: np.ndarray, buffers: np.ndarray, end: int) -> int:
     codec.put_u32(frame, PAYLOAD + START_INDEX, link[LINK_WRITTEN])
     link[LINK_START_INDEX] = link[LINK_WRITTEN]
     link[LINK_START_NS] = monotonic_ns()  # before it can go out: no sample of it plays earlier
-    _start_checks(link)
+    start_checks(link)
     codec.put_u16(frame, PAYLOAD + START_PREFILL, min(link[LINK_TARGET_FILL], link[LINK_BUFFER_SAMPLES]))
     return _queue(link, buffers, START_BYTES, MSG_START, end)
 
@@ -702,7 +709,7 @@ def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: n
     offset_ns = np.int64(1) << 62  # no STATUS yet
     synced_ns = now_ns
     trips_at_start = link[LINK_AMP_WATCHDOG_TRIPS]
-    _start_checks(link)
+    start_checks(link)
     rx_length = 0
     first, end = 0, 0
     moved_ns = now_ns  # the last time the port took bytes

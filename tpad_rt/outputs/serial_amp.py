@@ -519,6 +519,11 @@ class AmpLink:
         payload = (rate.to_bytes(4, "little") + (start_index & 0xFFFFFFFF).to_bytes(4, "little")
                    + min(fill, info.buffer_samples).to_bytes(2, "little"))
         self._start_sent = True
+        link = self.link
+        link[amp_stream.LINK_START_NS] = time.monotonic_ns()  # no sample can play before this (H10)
+        link[amp_stream.LINK_START_INDEX] = start_index & 0xFFFFFFFF
+        link[amp_stream.LINK_ENVELOPE_HZ] = rate
+        amp_stream.start_checks(link)
         self._check_start_ack(start_index, self._command(payload, codec.MSG_START, f"START at {rate} Hz"))
         self._tone_started = time.monotonic()
         self._tone_index = start_index & 0xFFFFFFFF
@@ -532,10 +537,11 @@ class AmpLink:
 
     def _status(self, body: np.ndarray) -> AmpStatus | None:
         """The STATUS ``body`` measured, or None while it plays nothing; BackendError for a fault or a value out
-        of range (H10)."""
+        of range (H10: the play index too, against the tone's START)."""
         info = self.info
         assert info is not None
-        if amp_stream.status_problem(self.link, body):
+        self.link[amp_stream.LINK_WRITTEN] = self._tone_index
+        if amp_stream.check_status(self.link, body, time.monotonic_ns()):
             raise BackendError(self._report_error())
         at = codec.PAYLOAD
         faults = int(body[at + codec.STATUS_FAULTS])
