@@ -43,11 +43,11 @@ def hog(stop: threading.Event) -> None:
 def main(url: str, seconds: float, gil_threads: int) -> None:
     device = Device.default()
     target = parse_serial_url(url)
-    link = AmpLink.open(target, carrier_hz=device.carrier_hz)
-    info = link.info
-    assert info is not None
+    link = AmpLink.open(target, carrier_hz=device.carrier_hz, max_voltage_v=device.max_voltage_v)
+    scale = link.scale  # the streamer's scale (H3), decided by the link
+    assert scale is not None
     pipeline = Pipeline(device, load_compiled(GRATING), target.envelope_hz, envelope_output=True)
-    pipeline.set_drive_scale(info.full_scale_v, info.max_v, link.carrier_hz)
+    pipeline.set_drive_scale(scale.full_scale_v, scale.max_v, link.carrier_hz)
     pipeline.start()
     frame = np.zeros(link.frame_samples, dtype=np.float32)
     pipeline.render(frame)  # compiled before the clock starts

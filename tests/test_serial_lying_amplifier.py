@@ -7,7 +7,8 @@ pty pair, which answers each frame the host sends as its :class:`Script` says, w
 frame arrives (never after a sleep): a late answer to a HELLO is sent when the next
 HELLO arrives, an INFO "after the carrier" right after SET_CARRIER's ACK, a lying STATUS
 after the N-th ENVELOPE frame. Between those it sends honest STATUS frames every 5 ms on
-its own clock (H7's silence would otherwise end the run). Every frame the host sent is
+its own clock (H7's silence would otherwise end the run), each consistent with its own
+clock whenever it is sent. Every frame the host sent is
 decoded with the emulator's codec (:mod:`tpad_rt.amp.wire`, not the host's) and judged:
 each ENVELOPE sample, read with the full scale of every INFO that answered the host's
 last HELLO, stays within min(max_voltage_v, that INFO's max_mv); a run that sent START
@@ -41,8 +42,11 @@ GRATING = REPO / "textures" / "grating.yaml"
 DEVICE = Device.default()
 CARRIER_MHZ = round(DEVICE.carrier_hz * 1000)
 U32 = 0xFFFFFFFF
-#: The scripted amplifier's STATUS period (ms), and its INFO's other fields (the emulator's, no measurements).
-STATUS_PERIOD_MS = 5
+#: How often (ms) the scripted amplifier sends STATUS, and the period its INFO declares (the most it may take: H7
+#: ends a run after 4 periods and 100 ms without one, 0.5 s, which a loaded machine's scheduling does not reach);
+#: its INFO's other fields are the emulator's, without measurements.
+STATUS_EVERY_MS = 5
+STATUS_PERIOD_MS = 100
 HONEST = wire.Info(firmware="liar 1.0", serial="L-1", envelope_rates_hz=(8000, 16000, 0, 0),
                    carrier_min_mhz=10_000_000, carrier_max_mhz=80_000_000, carrier_step_mhz=10,
                    full_scale_mv=50_000, max_mv=40_000, slew_mv_per_ms=100_000, buffer_samples=1024,
@@ -69,7 +73,7 @@ class Answer:
 @dataclass
 class Script:
     """What the scripted amplifier answers: INFOs per HELLO (by the HELLO's number), SET_CARRIER's achieved
-    carrier (None: the nearest it makes), STATUS payload fields that replace the honest ones after the N-th
+    carrier (None: the nearest it makes), START's ACK value, STATUS payload fields that replace the honest ones after the N-th
     ENVELOPE frame (``play_index`` as an int, or "jump" / "back" relative to the honest index, "stuck" at the last
 STATUS's), an INFO
     sent after the N-th ENVELOPE frame."""
@@ -78,6 +82,7 @@ STATUS's), an INFO
     carrier_mhz: int | None = None
     lies: dict[int, dict[str, int | str]] = field(default_factory=dict)
     info_at: dict[int, Answer] = field(default_factory=dict)
+    start_ack: int | None = None  # START's ACK value (None: the index it named)
 
 
 class ScriptedAmp:
@@ -126,7 +131,7 @@ class ScriptedAmp:
             if time.monotonic() >= next_status:
                 if self.hello_nonces:
                     self._send(wire.Type.STATUS, self._status({}))
-                next_status += STATUS_PERIOD_MS / 1000
+                next_status += STATUS_EVERY_MS / 1000
 
     def finish(self) -> list[wire.Frame]:
         """Stop serving (the host closed its end) and close the pty; every frame the host sent."""
@@ -175,7 +180,7 @@ class ScriptedAmp:
         elif frame.type == wire.Type.START:
             start = wire.Start.unpack(frame.payload)
             self._start = (time.monotonic(), start.start_index, start.envelope_hz)
-            self._ack(frame, start.start_index)
+            self._ack(frame, start.start_index if self.script.start_ack is None else self.script.start_ack)
         elif frame.type == wire.Type.ENVELOPE:
             self._envelopes += 1
             if self._envelopes in self.script.lies:
@@ -354,6 +359,14 @@ def test_an_achieved_carrier_out_of_range_ends_in_one_line_naming_the_amplifier(
     assert_within_limits(outcome)
 
 
+def test_a_start_acknowledged_for_another_index_ends_in_one_line_with_stop() -> None:
+    outcome = run(Script({0: [Answer(HONEST)]}, start_ack=2**31))
+    assert outcome.error is not None and f"on {outcome.amp.port} acknowledged START at index" in outcome.error
+    assert "with index 2147483648" in outcome.error and wire.Type.ENVELOPE not in outcome.types()
+    assert outcome.types()[-1] == wire.Type.STOP
+    assert_within_limits(outcome)
+
+
 @pytest.mark.parametrize("offset_mhz", [-round(CARRIER_MHZ * 1e-3), 10, round(CARRIER_MHZ * 1e-3)])
 def test_an_achieved_carrier_near_the_one_asked_plays(offset_mhz: int) -> None:
     outcome = run(Script({0: [Answer(HONEST)]}, carrier_mhz=CARRIER_MHZ + offset_mhz))
@@ -431,11 +444,18 @@ MV = st.integers(0, U32)
 PLAUSIBLE_MV = st.integers(1_000, 500_000)
 
 
+U16 = st.integers(0, 0xFFFF)
+
+
 @st.composite
 def infos(draw: st.DrawFn) -> wire.Info:
-    """An INFO's full scale and clamp: a plausible pair, or (one time in four) anything the fields hold."""
+    """An INFO's full scale and clamp: a plausible pair, or (one time in four) anything the fields hold, its other
+    fields too."""
     if draw(st.integers(0, 3)) == 0:
-        return info(draw(MV), draw(MV))
+        return replace(info(draw(MV), draw(MV)), **draw(st.fixed_dictionaries({}, optional={
+            "envelope_rates_hz": st.tuples(MV, MV, MV, MV), "carrier_min_mhz": MV, "carrier_max_mhz": MV,
+            "carrier_step_mhz": MV, "slew_mv_per_ms": MV, "buffer_samples": U16, "max_frame_samples": U16,
+            "watchdog_ms": U16, "status_period_ms": U16, "measures": st.integers(0, 255), "max_current_ma": MV})))
     full_scale = draw(PLAUSIBLE_MV)
     return info(full_scale, draw(st.integers(1, full_scale)))
 
@@ -470,8 +490,11 @@ LIES = st.one_of(*(st.fixed_dictionaries({name: values}) for name, values in LIE
 @given(answers=answer_lists(),
        carrier=st.integers(0, 3).flatmap(lambda lie: st.integers(0, U32) | st.sampled_from(
            [0, U32, CARRIER_MHZ + 10, CARRIER_MHZ - 10**5]) if lie == 0 else st.none()),
-       lies=st.dictionaries(st.integers(1, 150), LIES, max_size=3))
+       lies=st.dictionaries(st.integers(1, 150), LIES, max_size=3),
+       info_at=st.dictionaries(st.integers(1, 150), ANSWERS, max_size=1),
+       start_ack=st.integers(0, 7).flatmap(lambda lie: st.integers(0, U32) if lie == 0 else st.none()))
 def test_any_sequence_of_answers_keeps_the_envelope_within_the_limits(
-        answers: dict[int, list[Answer]], carrier: int | None, lies: dict[int, dict[str, int | str]]) -> None:
-    assert_within_limits(run(Script(answers, carrier, lies), seconds=0.15))
+        answers: dict[int, list[Answer]], carrier: int | None, lies: dict[int, dict[str, int | str]],
+        info_at: dict[int, Answer], start_ack: int | None) -> None:
+    assert_within_limits(run(Script(answers, carrier, lies, info_at, start_ack), seconds=0.15))
 
