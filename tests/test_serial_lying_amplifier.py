@@ -345,6 +345,21 @@ def test_a_stale_or_repeated_info_during_the_stream_is_passed_over() -> None:
     assert_within_limits(outcome)
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.integers(1, U32), st.integers(1, U32), st.floats(0.001, 10_000.0) | st.just(float("inf")))
+def test_the_envelope_scale_never_lets_a_sample_past_the_cap(full_scale_mv: int, max_mv: int,
+                                                            max_voltage_v: float) -> None:
+    """envelope_scale, the one place the scale is decided (H3): the largest sample, read back with the full scale,
+    is within the lower of the clamp and the device's cap, and one more would not be (unless it is 32767)."""
+    max_mv = min(max_mv, full_scale_mv)
+    scale = serial_amp.envelope_scale(full_scale_mv, max_mv, max_voltage_v)
+    cap_mv = min(max_mv, max_voltage_v * 1000)
+    assert scale.max_v * 1000 == pytest.approx(cap_mv) and scale.full_scale_v * 1000 == pytest.approx(full_scale_mv)
+    assert 0 <= scale.level_limit <= 32767
+    assert scale.level_limit * full_scale_mv / 32767 <= cap_mv * (1 + 1e-12)
+    assert scale.level_limit == 32767 or (scale.level_limit + 1) * full_scale_mv / 32767 > cap_mv
+
+
 # --- SET_CARRIER's echo ----------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("achieved_mhz", [
