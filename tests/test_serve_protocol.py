@@ -219,6 +219,13 @@ def test_texture_requests_outside_the_rules_are_refused(library: TextureLibrary,
     assert (refused, fragment in message) == (code, True), message
 
 
+def test_a_library_of_no_folders_has_the_shipped_one_for_inline_textures() -> None:
+    library = TextureLibrary([])  # Settings() names none (the API's default); the command line always does
+    assert library.folders == [Path(os.path.realpath(TEXTURES_DIR))]
+    assert _set(library, yaml="description: inline\nkind: bitmap\nimage: assets/logo.png\nsize_mm: [130, 60]\n"
+                "friction: {low: 0.5, high: 1}\n") == ("ok", "inline")
+
+
 def test_what_the_server_sends_is_json_a_browser_reads() -> None:
     """NaN and infinities (a statistic with nothing measured yet) go out as null; numpy numbers as numbers."""
     import numpy as np

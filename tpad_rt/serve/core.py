@@ -132,11 +132,12 @@ class TokenBucket:
 
 
 class TextureLibrary:
-    """The textures clients may set: the shipped ones by name, files by path within ``folders`` (resolved,
-    links followed), inline YAML whose images lie within them (relative image paths from the first)."""
+    """The textures clients may set: the shipped ones by name, files by path within the shipped textures' folder
+    and ``folders`` (resolved, links followed), inline YAML whose images lie within them (relative image paths
+    from the shipped folder)."""
 
     def __init__(self, folders: list[Path]):
-        self.folders = list(dict.fromkeys(Path(os.path.realpath(folder)) for folder in folders))
+        self.folders = list(dict.fromkeys(Path(os.path.realpath(folder)) for folder in [TEXTURES_DIR, *folders]))
 
     def load(self, request: SetTexture) -> tuple[CompiledTexture, str]:
         """``(compiled texture, what it came from)``; ProtocolError ``texture`` (its breadcrumb errors, one per
