@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import hmac
 import itertools
 import logging
 import math
 import sys
+import threading
 import time
 from collections import Counter, OrderedDict
 from collections.abc import Iterator
@@ -510,7 +512,8 @@ class Server:
     def _prepare_texture(self, request: protocol.SetTexture) -> tuple[CompiledTexture, str, bytes]:
         """``(compiled texture, its label, its friction map as PNG)`` of ``request`` (run in a worker thread:
         parsing 1 MiB of YAML takes seconds)."""
-        compiled, label = self.library.load(request)
+        with _collector_paused():
+            compiled, label = self.library.load(request)
         return compiled, label, friction_map_png(compiled, self.renderer.device)
 
     def _texture_message(self) -> dict[str, Any]:
@@ -585,6 +588,31 @@ class _OneLine(logging.Handler):
         why = f": {record.exc_info[1]!r}" if record.exc_info and record.exc_info[1] is not None else ""
         text = printable(f"{record.getMessage()}{why}")
         print(f"tpad-rt serve: {record.name}: {text[:300]} (please report it)", file=sys.stderr, flush=True)
+
+
+_parsing = 0  # texture parses running, and whether the collector ran before the first of them began
+_collecting = True
+_parsing_lock = threading.Lock()
+
+
+@contextlib.contextmanager
+def _collector_paused() -> Iterator[None]:
+    """Python's cyclic garbage collector paused while any texture is parsed: a 1 MiB texture makes about a
+    million objects that live until its parse ends, and each full collection meanwhile scans them all holding
+    the GIL (up to 0.2 s: every client's messages wait); reference counting frees them at the end anyway."""
+    global _parsing, _collecting
+    with _parsing_lock:
+        _parsing += 1
+        if _parsing == 1:
+            _collecting = gc.isenabled()
+            gc.disable()
+    try:
+        yield
+    finally:
+        with _parsing_lock:
+            _parsing -= 1
+            if _parsing == 0 and _collecting:
+                gc.enable()
 
 
 @contextlib.contextmanager
