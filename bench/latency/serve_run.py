@@ -1,8 +1,9 @@
-"""tpad-rt serve's push-to-output latency through a WebSocket on loopback, next to the in-process push_finger.
+"""tpad-rt serve's push-to-output latency through a WebSocket on loopback, next to the in-process push_finger;
+and a WebSocket client's ping round trip while another client or sender loads the server, next to an idle one.
 
-    python bench/latency/serve_run.py               # 6 rounds of 3 s per phase (about 1 min)
-    python bench/latency/serve_run.py --quick       # 2 rounds of 1 s
-    python bench/latency/serve_run.py --rounds 10 --seconds 5 --out DIR
+    python bench/latency/serve_run.py               # 6 rounds of 3 s per phase, 3 ping rounds of 4 x 3 s (about 2 min)
+    python bench/latency/serve_run.py --quick       # 2 rounds of 1 s, 1 ping round of 4 x 2 s
+    python bench/latency/serve_run.py --rounds 10 --seconds 5 --ping-rounds 5 --ping-seconds 5 --out DIR
 
 Writes bench/results/latency_serve.json and latency_serve.md and prints the table.
 Starts a JACK dummy server (192 kHz, 64-frame periods, synchronous mode: jack.py) and
@@ -40,14 +41,20 @@ WORKER = HERE / "serve_worker.py"
 RATE_HZ = 192000
 PHASES = {"in-process": "Renderer.push_finger in the renderer's process (baseline)",
           "websocket": "a finger message from another process, over a WebSocket on loopback"}
+PING_PHASES = {"idle": "nothing else (baseline)",
+               "texture": "another client sending ~1 MiB inline textures of unknown keys, one after another",
+               "osc-20": "bad OSC bundles, 20 a second",
+               "osc-flood": "bad OSC bundles, as fast as one process sends"}
 
 
-def measure(seconds: float, rounds: int, block: int) -> dict[str, Any]:
+def measure(seconds: float, rounds: int, block: int, ping_seconds: float, ping_rounds: int) -> dict[str, Any]:
     """Run the worker on a fresh dummy server; its RESULT."""
     with tempfile.TemporaryDirectory() as folder, jack_server(RATE_HZ, block, Path(folder) / "jackd.log") as env:
         done = subprocess.run([sys.executable, str(WORKER), "--seconds", str(seconds), "--rounds", str(rounds),
-                               "--block", str(block)], cwd=ROOT, env=env, capture_output=True, text=True,
-                              timeout=120 + 4 * rounds * seconds)
+                               "--block", str(block), "--ping-seconds", str(ping_seconds), "--ping-rounds",
+                               str(ping_rounds)], cwd=ROOT, env=env, capture_output=True, text=True,
+                              timeout=120 + 4 * rounds * seconds + ping_rounds * len(PING_PHASES) * (
+                                  ping_seconds + 120))
     lines = done.stdout.strip().splitlines()
     if done.returncode != 0 or not lines or not lines[-1].startswith("RESULT "):
         raise SystemExit(f"serve_worker failed ({done.returncode}): {done.stderr.strip()[-2000:]}")
@@ -65,6 +72,24 @@ def summarise(result: dict[str, Any]) -> dict[str, Any]:
                    for ws, local in zip(result["websocket"]["per_round"], result["in-process"]["per_round"])]
     summary["p50_difference_ms"] = {"per_round": differences, "median": float(np.median(differences))}
     summary["pooled_p50_difference_ms"] = summary["websocket"]["p50_ms"] - summary["in-process"]["p50_ms"]
+    summary["ping"] = summarise_pings(result["ping"])
+    return summary
+
+
+def summarise_pings(pings: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
+    """Per ping phase: its round trips pooled over the rounds (n, p50, p99, max in ms), their ratios to the idle
+    phase's, and what the load sent and the server counted."""
+    summary: dict[str, Any] = {}
+    for name in PING_PHASES:
+        rtt = np.concatenate([run["rtt_ms"] for run in pings[name]])
+        summary[name] = {"n": int(len(rtt)), "p50_ms": float(np.percentile(rtt, 50)),
+                         "p99_ms": float(np.percentile(rtt, 99)), "max_ms": float(rtt.max()),
+                         "load": [run.get("load") for run in pings[name]],
+                         "server": [run["server"] for run in pings[name]]}
+    idle = summary["idle"]
+    for name in PING_PHASES:
+        summary[name]["ratio_to_idle"] = {key: summary[name][f"{key}_ms"] / idle[f"{key}_ms"]
+                                          for key in ("p50", "p99", "max")}
     return summary
 
 
@@ -83,6 +108,22 @@ def markdown(report: dict[str, Any]) -> str:
     lines += ["", f"WebSocket p50 - in-process p50: {s['pooled_p50_difference_ms']:+.3f} ms pooled; per round "
               f"{rounds} ms (median {s['p50_difference_ms']['median']:+.3f} ms). Underflows in the run: "
               f"{report['result']['underflows']}; server counters: {report['result']['server']}."]
+    pings = s["ping"]
+    lines += ["", f"A WebSocket client's ping round trip (a ping every 10 ms, each after the last pong) on the same server, "
+              f"{p['ping_rounds']} rounds of {p['ping_seconds']:g} s per phase, phases rotated:", "",
+              "| while the server also takes | pings | p50 | p99 | max | p50 / idle | p99 / idle | max / idle |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for name, title in PING_PHASES.items():
+        row, ratio = pings[name], pings[name]["ratio_to_idle"]
+        lines.append(f"| {title} | {row['n']} | {row['p50_ms']:.2f} ms | {row['p99_ms']:.2f} ms | "
+                     f"{row['max_ms']:.2f} ms | {ratio['p50']:.2f} | {ratio['p99']:.2f} | {ratio['max']:.2f} |")
+    texture = [load for load in pings["texture"]["load"] if load]
+    replies = [reply for load in texture for reply in load["reply_s"]]
+    flood = [load["rate_per_s"] for load in pings["osc-flood"]["load"] if load]
+    dropped = sum(server.get("osc_dropped", 0) for server in pings["osc-flood"]["server"])
+    lines += ["", f"Texture messages of {texture[0]['message_bytes']:,} bytes: {len(replies)} refused, each answered "
+              f"{min(replies):.2f}-{max(replies):.2f} s after its send (parse in a worker thread). OSC flood: "
+              f"{np.mean(flood):,.0f} datagrams a second sent, {dropped:,} dropped unread by the server-wide budget."]
     return "\n".join(lines) + "\n"
 
 
@@ -92,15 +133,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=3.0, help="seconds per phase (default 3)")
     parser.add_argument("--rounds", type=int, default=6, help="rounds (default 6)")
     parser.add_argument("--block", type=int, default=64, help="frames per period (default 64)")
+    parser.add_argument("--ping-seconds", type=float, default=3.0, help="seconds per ping phase (default 3)")
+    parser.add_argument("--ping-rounds", type=int, default=3, help="ping rounds (default 3)")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for the results")
     args = parser.parse_args(argv)
     seconds, rounds = (1.0, 2) if args.quick else (args.seconds, args.rounds)
-    result = measure(seconds, rounds, args.block)
+    ping_seconds, ping_rounds = (2.0, 1) if args.quick else (args.ping_seconds, args.ping_rounds)
+    result = measure(seconds, rounds, args.block, ping_seconds, ping_rounds)
     report = {
-        "parameters": {"seconds": seconds, "rounds": rounds, "block": args.block},
+        "parameters": {"seconds": seconds, "rounds": rounds, "block": args.block, "ping_seconds": ping_seconds,
+                       "ping_rounds": ping_rounds},
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
         "summary": summarise(result),
-        "result": {key: value for key, value in result.items() if key not in PHASES},
+        "result": {key: value for key, value in result.items() if key not in PHASES and key != "ping"},
+        "ping": result["ping"],
         "phases": {name: {"per_round": result[name]["per_round"], "pooled": result[name]["pooled"]}
                    for name in PHASES},
     }

@@ -1,12 +1,12 @@
 """The measuring process of the serve latency benchmark: one Renderer, pushed in process and through WebSocket.
 
-    python bench/latency/serve_worker.py --seconds S --rounds R [--block FRAMES]
+    python bench/latency/serve_worker.py --seconds S --rounds R [--block FRAMES] [--ping-seconds P --ping-rounds Q]
 
 Run by bench/latency/serve_run.py with ``JACK_DEFAULT_SERVER`` naming a running dummy
 server. Starts a :class:`tpad_rt.engine.Renderer` on ``audio://?rate=192000&block=FRAMES``
 rendering textures/grating.yaml and, on an asyncio loop in a thread of this process,
-``tpad-rt serve``'s :class:`~tpad_rt.serve.server.Server` in front of it (loopback, a
-free port, no OSC). Then R rounds, each with two phases of S seconds in an order that
+``tpad-rt serve``'s :class:`~tpad_rt.serve.server.Server` in front of it (loopback, free
+ports, OSC on). Then R rounds, each with two phases of S seconds in an order that
 alternates from round to round:
 
 - ``in-process``: the main thread calls ``Renderer.push_finger`` every 2 ms (worker.py's
@@ -20,6 +20,12 @@ sample's index, plus the DAC delay PortAudio reports). The finger ring's count a
 start of a WebSocket phase and the client's send order give each message its index
 (the phase is refused if the count moved by another number than the messages sent, and
 the lift the server pushes when the client leaves).
+
+Then Q ping rounds, each with PING_PHASES of P seconds in an order rotated from round to
+round: a WebSocket client in its own process (serve_client.py ``ping``) pings every 10 ms
+and notes each round trip, while another process (serve_load.py) loads the server, or
+nothing does (``idle``, the baseline).
+
 Prints one line ``RESULT {json}`` last.
 """
 
@@ -43,7 +49,11 @@ sys.path.insert(0, str(HERE))
 from worker import GRATING, RATE_HZ, RecordRing, _app_loop, _finger_x_mm, _latency, _result, read_by  # noqa: E402
 
 CLIENT = HERE / "serve_client.py"
+LOAD = HERE / "serve_load.py"
 POLL_PERIOD_S = 0.05
+#: The ping phases: name -> serve_load.py's arguments after its kind's target (None: no load).
+PING_PHASES: dict[str, tuple[str, ...] | None] = {"idle": None, "texture": ("texture",), "osc-20": ("osc", "20"),
+                                                  "osc-flood": ("osc", "0")}
 
 
 class ServerThread:
@@ -52,7 +62,7 @@ class ServerThread:
     def __init__(self, renderer: Any):
         from tpad_rt.serve.server import Server, Settings
 
-        self.server = Server(renderer, Settings(port=0, osc_port=None))
+        self.server = Server(renderer, Settings(port=0, osc_port=0))
         self.loop = asyncio.new_event_loop()
         self.listening = threading.Event()
         self.failure: BaseException | None = None
@@ -122,11 +132,45 @@ def websocket(renderer: Any, ring: RecordRing, port: int, seconds: float) -> lis
     return [(ns, first + k) for k, ns in enumerate(send_ns)]
 
 
+def _child_result(process: subprocess.Popen[str], what: str, timeout_s: float) -> dict[str, Any]:
+    """The ``RESULT`` of a child process once it exits; SystemExit with its stderr when it fails."""
+    out, err = process.communicate(timeout=timeout_s)
+    lines = out.strip().splitlines()
+    if process.returncode != 0 or not lines or not lines[-1].startswith("RESULT "):
+        raise SystemExit(f"serve_worker: the {what} failed ({process.returncode}): {err.strip()[-2000:]}")
+    result: dict[str, Any] = json.loads(lines[-1][len("RESULT "):])
+    return result
+
+
+def ping_phase(serve: ServerThread, load: tuple[str, ...] | None, seconds: float) -> dict[str, Any]:
+    """One ping phase: the round trips (ms) of a client pinging for ``seconds`` while ``load`` runs (its
+    RESULT under ``load``), and the server's counters it changed."""
+    before = dict(serve.server.counters)
+    loader = None
+    if load is not None:
+        target = f"ws://127.0.0.1:{serve.port}/ws" if load[0] == "texture" else str(serve.server.osc_port)
+        loader = subprocess.Popen([sys.executable, str(LOAD), load[0], target, str(seconds), *load[1:]],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert loader.stdout is not None
+        if loader.stdout.readline().strip() != "READY":
+            raise SystemExit(f"serve_worker: the load {load} did not start: {_child_result(loader, 'load', 60)}")
+    pinger = subprocess.Popen([sys.executable, str(CLIENT), f"ws://127.0.0.1:{serve.port}/ws", str(seconds), "ping"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    result = _child_result(pinger, "ping client", 300 + seconds)
+    if loader is not None:
+        result["load"] = _child_result(loader, "load", 600 + seconds)
+    after = serve.server.counters
+    result["server"] = {key: after[key] - before.get(key, 0) for key in after if after[key] != before.get(key, 0)}
+    return result
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--rounds", type=int, default=6)
     parser.add_argument("--block", type=int, default=64)
+    parser.add_argument("--ping-seconds", type=float, default=3.0)
+    parser.add_argument("--ping-rounds", type=int, default=3)
     args = parser.parse_args(argv)
 
     from tpad_rt.engine import Renderer
@@ -149,12 +193,18 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 phases[name].append(websocket(renderer, ring, serve.port, args.seconds))
             renderer.lift()
+    pings: dict[str, list[dict[str, Any]]] = {name: [] for name in PING_PHASES}
+    names = list(PING_PHASES)
+    for round_number in range(args.ping_rounds):
+        for name in names[round_number % len(names):] + names[:round_number % len(names)]:
+            pings[name].append(ping_phase(serve, PING_PHASES[name], args.ping_seconds))
     serve.close()
     rows = ring.rows()
     stats = renderer.stats()
     renderer.stop()
     result: dict[str, Any] = {"rounds": order, "records": int(len(rows)), "records_lost": ring.lost,
-                              "underflows": stats["underflows"], "server": dict(serve.server.counters)}
+                              "underflows": stats["underflows"], "server": dict(serve.server.counters),
+                              "ping": pings}
     for name, runs in phases.items():
         per_round = [_latency(rows, pushes, cb) for pushes in runs]
         everything = _latency(rows, [push for pushes in runs for push in pushes], cb)
