@@ -124,3 +124,19 @@ def test_schema_bad_choice() -> None:
     result = _run("schema", "sound")
     assert result.returncode == 1
     assert "invalid choice: 'sound'" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_a_file_of_20000_unknown_keys_lists_the_first_100_and_counts_the_rest(tmp_path: Path,
+                                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 20: 20,000 unknown keys took check 30-75 s (each error's line was a scan of the mapping)."""
+    from tpad_rt.config.messages import MAX_LISTED_ERRORS
+
+    path = tmp_path / "keys.yaml"
+    path.write_text("description: x\nkind: grating\nperiod_mm: 4\nfriction: {low: 0.6, high: 1}\n"
+                    + "".join(f"k{index}: 1\n" for index in range(20_000)))
+    assert main(["check", str(path)]) == 1
+    out, err = capsys.readouterr()
+    lines = err.splitlines()
+    assert out == "" and len(lines) == MAX_LISTED_ERRORS + 1 and lines[0] == f"{path}: k0: unknown key (line 5)"
+    assert lines[-1] == f"{path}: and {20_000 - MAX_LISTED_ERRORS:,} more problems (the first {MAX_LISTED_ERRORS} are " \
+        "listed)"
