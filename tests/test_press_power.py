@@ -4,8 +4,8 @@ harder press, must not dissipate more than the cap for longer than the physics f
 The plate is the device's whole circuit solved directly (a naive reference, not the
 runtime's plate model): the shunt R0, C0 and the motional L, C, R at the finger's
 force, a three-state linear system held over each DAC sample (zero-order hold), its
-state carried across force changes. The power is the motional branch's, ``i^2 R``,
-averaged over whole carrier periods.
+state carried across force changes. The power is the motional branch's, ``R |i|^2 / 2``
+with the current's amplitude taken sample by sample (from the current and the charge).
 
 The floor a sudden press is judged against is full reverse braking: the same run up to
 the first control step that sees the new force, then the drive at ``-max_voltage_v``
@@ -41,9 +41,9 @@ OVER = 1.02  # "back under the cap": within 2 % of it (the press guard's thresho
 FLOOR_FACTOR = 1.2  # the drive must be back within this many times the full-reverse floor
 
 
-def _held_system(device: Device, force_n: float) -> tuple[np.ndarray, np.ndarray, float]:
+def _held_system(device: Device, force_n: float) -> tuple[np.ndarray, np.ndarray, float, float]:
     """The circuit over one sample of held source volts: ``x' = A x + B u`` sampled, states (C0's volts, the
-    motional current, C's charge); and R at ``force_n``."""
+    motional current, C's charge); and R and the motional branch's own resonance (rad/s) at ``force_n``."""
     l_h, c_f, r_ohm = (float(value) for value in device.motional(force_n))
     r0, c0 = device.shunt_ohm, device.c0_f
     a = np.array([[-1 / (r0 * c0), -1 / c0, 0.0], [1 / l_h, -r_ohm / l_h, -1 / (l_h * c_f)], [0.0, 1.0, 0.0]])
@@ -51,22 +51,22 @@ def _held_system(device: Device, force_n: float) -> tuple[np.ndarray, np.ndarray
     augmented = np.zeros((4, 4))
     augmented[:3, :3], augmented[:3, 3] = a, b
     step = expm(augmented / FS_HZ)
-    return step[:3, :3], step[:3, 3], r_ohm
+    return step[:3, :3], step[:3, 3], r_ohm, 1 / np.sqrt(l_h * c_f)
 
 
 def _circuit_power_w(device: Device, volts: np.ndarray, forces_n: np.ndarray) -> np.ndarray:
-    """Motional power (W) per sample of the circuit driven by ``volts`` at ``forces_n``, averaged over six carrier
-    periods."""
+    """Motional power (W) per sample of the circuit driven by ``volts`` at ``forces_n``: ``R |i|^2 / 2``, the
+    current's amplitude from the current and the charge in quadrature, ``|i|^2 = i^2 + (w q)^2`` (exact for a
+    sinusoid at ``w``, the branch's resonance: no averaging window, so no time smeared)."""
     state, systems = np.zeros(3), {}
-    current, resistance = np.empty(len(volts)), np.empty(len(volts))
+    power_w = np.empty(len(volts))
     for k, (source_v, force_n) in enumerate(zip(volts, forces_n)):
         if force_n not in systems:
             systems[force_n] = _held_system(device, force_n)
-        step, gain, resistance[k] = systems[force_n]
-        current[k] = state[1]
+        step, gain, r_ohm, w_rad_s = systems[force_n]
+        power_w[k] = r_ohm * (state[1] ** 2 + (w_rad_s * state[2]) ** 2) / 2
         state = step @ state + gain * source_v
-    window = round(6 * FS_HZ / device.carrier_hz)
-    return np.convolve(current**2 * resistance, np.ones(window) / window, "same")
+    return power_w
 
 
 @pytest.fixture(scope="module")
@@ -85,10 +85,11 @@ def _cap_w(device: Device) -> float:
 class Run:
     """A swipe at 100 mm/s pressing with ``force_n(t)``, rendered in blocks of ``block`` frames (one finger
     sample a block, pushed before it renders, as a DAC's callback or ``sim://``'s paced driver take them), with
-    the simulated plate of ``sim://`` fed the same blocks."""
+    the simulated plate of ``sim://`` fed the same blocks; the sample of the block at ``bad_finger_at_s``, if
+    given, written into the ring with an absurd position (as a producer that skipped the checks would)."""
 
     def __init__(self, device: Device, texture: Path, force_n: Callable[[float], float], track: bool = False,
-                 block: int = STEP, preemphasis: bool | None = None):
+                 block: int = STEP, preemphasis: bool | None = None, bad_finger_at_s: float | None = None):
         self.device, self.cap_w, self.block = device, _cap_w(device), block
         options = RenderOptions(power_budget_w=self.cap_w, power_avg_w=self.cap_w, track=track,
                                 preemphasis=preemphasis)
@@ -99,7 +100,12 @@ class Run:
         blocks, forces = [], []
         for _ in range(int(2 * PRESS_AT_S * FS_HZ / block)):
             t_s = pipeline.time_s
-            pipeline.push_finger(t_s, 5.0 + 100.0 * t_s, 30.0, force_n(t_s))
+            if bad_finger_at_s is not None and abs(t_s - bad_finger_at_s) < 0.5 * block / FS_HZ:
+                finger, count = pipeline.arrays.finger, pipeline.arrays.finger_count
+                finger[count[0] % len(finger)] = (t_s, 1e12, 30.0, force_n(t_s), 1.0)
+                count[0] += 1
+            else:
+                pipeline.push_finger(t_s, 5.0 + 100.0 * t_s, 30.0, force_n(t_s))
             pipeline.render(samples)
             self.sim.write(samples, pipeline.last_telemetry_row())
             blocks.append(samples.astype(np.float64) * device.volts_per_full_scale)
@@ -108,6 +114,7 @@ class Run:
         self.forces_n = np.repeat(forces, block)
         self.telemetry = pipeline.drain_telemetry()
         self.over_cap_blocks = pipeline.over_cap_blocks
+        self.fault_causes = pipeline.faults()["fault_causes"]
         self.power_w = _circuit_power_w(device, self.volts, self.forces_n)
         self.pressed = int(np.argmax(self.forces_n != self.forces_n[0]))  # the first step that sees the new force
 
@@ -116,6 +123,12 @@ class Run:
         runs past the end)."""
         over = np.nonzero(power_w[self.pressed:-self.block] > OVER * self.cap_w)[0]
         return (over[-1] + 1) / FS_HZ if len(over) else 0.0
+
+    def longest_excursion_s(self) -> float:
+        """The longest run of samples over the cap from the press's first step on (s), the last block left out."""
+        over = np.r_[False, self.power_w[self.pressed:-self.block] > OVER * self.cap_w, False].astype(np.int8)
+        edges = np.flatnonzero(np.diff(over))
+        return float(np.max(edges[1::2] - edges[::2], initial=0)) / FS_HZ
 
     def reverse_floor_s(self, carrier_hz: float) -> float:
         """Full reverse braking from the press's first step, the carrier at ``carrier_hz`` from there on: the
@@ -166,6 +179,40 @@ def test_a_sudden_press_is_braked_back_under_the_cap_near_the_full_reverse_floor
     assert amplitude_um[settled_block] < amplitude_um[pressed_block - 1]
 
 
+@pytest.mark.parametrize("steps_from_press", [-1, 0, 1])
+@pytest.mark.parametrize("name", ["SLG_0.56", "SLG_0.4"])
+def test_a_bad_finger_sample_at_the_press_does_not_blind_the_guard(texture: Path, name: str,
+                                                                    steps_from_press: int) -> None:
+    """A finger sample with an absurd position a step before, at or after the press: that step is a fault (the
+    gate closes for it), but the plate's model follows the plate through it, so the press is still seen, counted
+    and braked: back under the cap within the floor's bound plus the two steps the fault takes (its own, and the
+    ramp back)."""
+    device = Device.from_file(DEVICES_DIR / f"{name}.yaml")
+    floor_s = Run(device, texture, _sudden(2.0)).reverse_floor_s(device.carrier_hz)
+    run = Run(device, texture, _sudden(2.0), bad_finger_at_s=PRESS_AT_S + steps_from_press * STEP / FS_HZ)
+    assert run.fault_causes == ["finger"]
+    assert run.over_cap_blocks >= 1 and np.max(run.telemetry["plate_w"]) > 1.3 * run.cap_w
+    assert run.seconds_over(run.power_w) <= FLOOR_FACTOR * floor_s + 2 * STEP / FS_HZ, \
+        (run.seconds_over(run.power_w), floor_s)
+
+
+@pytest.mark.parametrize("preemphasis", [None, False], ids=["preemphasis", "no-preemphasis"])
+@pytest.mark.parametrize("name", ["SLG_0.56", "SLG_0.4"])
+def test_a_finger_wobbling_at_the_cap_is_no_press(texture: Path, name: str, preemphasis: bool | None) -> None:
+    """A force wobbling by 1.5 % around 1 N while the drive sits at the cap: nothing is counted over the cap, the
+    plate's modelled power stays within the guard's 2 %, and so does the circuit's."""
+    device = Device.from_file(DEVICES_DIR / f"{name}.yaml")
+
+    def force_n(t_s: float) -> float:
+        return round(1.0 + 0.01 * math.sin(2 * math.pi * 37 * t_s) + 0.005 * math.sin(2 * math.pi * 211 * t_s), 4)
+
+    run = Run(device, texture, force_n, preemphasis=preemphasis)
+    settled = slice(int(0.05 * FS_HZ), -STEP)
+    assert run.power_w[settled].max() <= OVER * run.cap_w
+    assert np.max(run.telemetry["power_w"]) > 0.99 * run.cap_w  # the drive sits at the cap
+    assert run.over_cap_blocks == 0 and np.max(run.telemetry["plate_w"]) <= OVER * run.cap_w
+
+
 def test_a_press_over_10_ms_keeps_the_plate_under_the_cap(texture: Path) -> None:
     """Pressed from 0 to 2 N in 10 ms (R doubles): the shaper brakes the plate down as the cap falls, instead of
     driving on as if the plate held only what the cap allows at the new force."""
@@ -180,15 +227,16 @@ def test_a_press_over_10_ms_keeps_the_plate_under_the_cap(texture: Path) -> None
     assert run.power_w[int(0.05 * FS_HZ):-STEP].max() <= run.cap_w * OVER
 
 
-def _scaled_device(folder: Path, rise: float, press_ms: float, preemphasis: bool) -> Device:
-    """SLG_0.56 with its motional R rising ``rise`` times from 0 to 2 N (L and C as shipped), checked as a file."""
+def _scaled_device(folder: Path, rise: float, l_change: float, c_change: float, preemphasis: bool) -> Device:
+    """SLG_0.56 with its motional R rising ``rise`` times from 0 to 2 N, and L and C changing by the fractions
+    ``l_change`` and ``c_change`` (their values at 0 N as shipped), checked as a file."""
     tree: dict[str, Any] = yaml.safe_load((DEVICES_DIR / "SLG_0.56.yaml").read_text())
     tree["preemphasis"] = preemphasis
     circuit = tree["circuit"]
-    forces = np.array(circuit["force_n"])
-    r0 = circuit["motional_r_ohm"][0]
-    circuit["motional_r_ohm"] = [float(r0 * (1 + (rise - 1) * f / forces[-1])) for f in forces]
-    path = folder / f"rise_{rise:.3f}_{press_ms:.2f}_{preemphasis}.yaml"
+    share = np.array(circuit["force_n"]) / circuit["force_n"][-1]
+    for key, change in (("motional_r_ohm", rise - 1), ("motional_l_h", l_change), ("motional_c_pf", c_change)):
+        circuit[key] = [float(circuit[key][0] * (1 + change * x)) for x in share]
+    path = folder / f"{rise:.4f}_{l_change:.4f}_{c_change:.4f}_{preemphasis}.yaml"
     path.write_text(yaml.safe_dump(tree))
     assert check_file(path) == [], path.read_text()
     return Device.from_file(path)
@@ -196,14 +244,18 @@ def _scaled_device(folder: Path, rise: float, press_ms: float, preemphasis: bool
 
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                 HealthCheck.function_scoped_fixture])
-@given(rise=st.floats(1.5, 10.0), press_ms=st.sampled_from([0.0, 1.0, 2.0, 10.0]), preemphasis=st.booleans())
+@given(rise=st.floats(1.5, 10.0), l_change=st.floats(-0.1, 0.1), c_change=st.floats(-0.1, 0.1),
+       press_ms=st.sampled_from([0.0, 1.0, 2.0, 10.0]), preemphasis=st.booleans())
 def test_presses_on_devices_whose_damping_rises_up_to_tenfold_are_braked_near_the_floor(
-        tmp_path: Path, texture: Path, rise: float, press_ms: float, preemphasis: bool) -> None:
-    """Devices `check` accepts whose motional R rises up to ten times from 0 to 2 N, pressed at once or over up to
+        tmp_path: Path, texture: Path, rise: float, l_change: float, c_change: float, press_ms: float,
+        preemphasis: bool) -> None:
+    """Devices `check` accepts whose motional R rises up to ten times from 0 to 2 N (L and C moving by up to 10 %,
+    the shipped plates' 5 % and more), pressed at once or over up to
     10 ms (R rising 90 % between two 1 kHz finger samples), with pre-emphasis or without: the kernel handles any
-    such change, whatever its rate; the plate spends no longer over the cap than 1.2 times the full-reverse floor
-    of a sudden press on the same device."""
-    device = _scaled_device(tmp_path, rise, press_ms, preemphasis)
+    such change, whatever its rate. A gradual press is a run of smaller sudden ones (one a finger sample): no
+    excursion over the cap after any of them lasts longer than 1.2 times the full-reverse floor of the whole press
+    made at once on the same device."""
+    device = _scaled_device(tmp_path, rise, l_change, c_change, preemphasis)
 
     def force_n(t_s: float) -> float:
         if press_ms == 0.0:
@@ -215,4 +267,4 @@ def test_presses_on_devices_whose_damping_rises_up_to_tenfold_are_braked_near_th
     sudden = run if press_ms == 0.0 else Run(device, texture, _sudden(2.0))
     assert np.max(sudden.power_w[sudden.pressed:]) > OVER * run.cap_w  # a sudden press takes the plate over
     floor_s = sudden.reverse_floor_s(device.carrier_hz)
-    assert run.seconds_over(run.power_w) <= FLOOR_FACTOR * floor_s, (run.seconds_over(run.power_w), floor_s)
+    assert run.longest_excursion_s() <= FLOOR_FACTOR * floor_s, (run.longest_excursion_s(), floor_s)

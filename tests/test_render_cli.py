@@ -280,7 +280,7 @@ def test_a_sudden_press_over_the_cap_is_recorded_counted_and_plotted(tmp_path: P
                     f"file://{tmp_path}/press.csv", "--power-budget", "0.1", "--out", str(out))
     assert done.returncode == 0, done.stderr
     blocks = read_recording(out).blocks
-    over = blocks["plate_w"] > 0.1
+    over = blocks["plate_w"] > 0.1 * 1.02  # over the cap by more than the guard's 2 %, as the kernel counts
     pressed = np.flatnonzero(blocks["force_n"] == 2.0)[0]
     assert np.flatnonzero(over)[0] == pressed and blocks["plate_w"][pressed] > 2 * 0.1
     assert np.count_nonzero(over) < 40  # braked back within a few ms of 64-frame blocks (1 / 3 ms each)

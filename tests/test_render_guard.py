@@ -131,6 +131,8 @@ STATE_SLOTS = (
     layout.STATE_CARRIER_COS, layout.STATE_STEP_FLAGS, layout.STATE_FAULT_CAUSES, layout.STATE_POWER_PER_V2,
     layout.STATE_VX_MM_S, layout.STATE_FIRST_SEGMENT_SAMPLES,
     layout.STATE_MODEL_V, layout.STATE_MODEL_STEP, layout.STATE_DRIVE_LOW_V, layout.STATE_MODEL_ON_REF,
+    layout.STATE_MODEL_GAIN_M_PER_V, layout.STATE_MODEL_SLIP_V, layout.STATE_PLATE_W, layout.STATE_PRESS_BRAKING,
+    layout.STATE_OVER_CAP_BLOCKS,
 )
 
 
@@ -144,6 +146,32 @@ def test_state_overwritten_with_garbage_never_reaches_the_output(slot: int, valu
     after, after_rows = render(p, 4)
     assert_safe(p, np.r_[samples, after], np.r_[rows, after_rows])
     assert_recovers(p, before_v)
+
+
+@pytest.mark.parametrize("value", BAD_VALUES + (0.0, 0.5, 2e6))
+def test_a_gain_span_out_of_range_never_reaches_the_output(value: float) -> None:
+    """CFG_GAIN_SPAN outside [1, MAX_GAIN_SPAN] counts as MAX_GAIN_SPAN: a finite bound on the plate model."""
+    p = pipeline()
+    samples, rows = render(p, SETTLE_BLOCKS)
+    p.arrays.cfg[layout.CFG_GAIN_SPAN] = value
+    p.arrays.state[layout.STATE_MODEL_V] = 1e308  # a model no span may let through
+    p.arrays.state[layout.STATE_MODEL_ON_REF] = 0.0
+    after, after_rows = render(p, 4)
+    assert_safe(p, np.r_[samples, after], np.r_[rows, after_rows])
+    assert p.faults()["fault_causes"] == ["state"]
+    assert_recovers(p, rows[-4:, 0].max())
+
+
+def test_a_last_gain_the_device_cannot_have_is_a_state_fault_not_a_press() -> None:
+    """A record of the last step's gain far outside the device's span would make a press of nothing (the model
+    scaled up to its bound, braking at the full volts): it is a state fault instead, and nothing is braked."""
+    p = pipeline()
+    samples, rows = render(p, SETTLE_BLOCKS)
+    p.arrays.state[layout.STATE_MODEL_GAIN_M_PER_V] *= 1e3
+    after, after_rows = render(p, 4)
+    assert_safe(p, np.r_[samples, after], np.r_[rows, after_rows])
+    assert p.faults()["fault_causes"] == ["state"] and p.over_cap_blocks == 0
+    assert_recovers(p, rows[-4:, 0].max())
 
 
 def test_tables_and_power_ring_overwritten_are_rebuilt() -> None:

@@ -306,10 +306,11 @@ def device_tables(device: Device, track: bool = False, band_hz: float = 0.0) -> 
 
 
 def gain_span(dev: np.ndarray) -> float:
-    """The largest over the smallest plate amplitude per volt in ``dev`` (>= 1): how many times its volts at
-    the lightest-loaded force the amplitude a plate holds is worth at the heaviest (the plate model's bound)."""
+    """The largest over the smallest plate amplitude per volt in ``dev``, in ``[1, layout.MAX_GAIN_SPAN]``: how many
+    times its volts at the lightest-loaded force the amplitude a plate holds is worth at the heaviest (the plate
+    model's bound)."""
     gains = dev[layout.DEV_AMP_M_PER_V]
-    return float(gains.max() / gains.min())
+    return float(min(gains.max() / gains.min(), layout.MAX_GAIN_SPAN))
 
 
 def mode_step_mm(device: Device, dev: np.ndarray) -> float:

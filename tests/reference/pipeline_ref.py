@@ -27,7 +27,7 @@ from reference.texture_ref import reference_friction
 
 from tpad_rt.device import Device
 from tpad_rt.physics.friction import amplitude_for
-from tpad_rt.pipeline import RenderOptions, force_grid
+from tpad_rt.pipeline import RenderOptions
 
 #: docs/kernel.md: every limit is kept with this relative margin against rounding.
 SAFETY_MARGIN = 1e-6
@@ -109,9 +109,10 @@ class _Stream:
         self.model_v = 0.0  # the shaper's first-order model of the plate envelope (volts of drive)
         self.model_gain_m_per_v = 0.0  # the plate amplitude per volt those volts were worth (0: none yet)
         self.slip_v = 0.0  # the volts the plate holds beyond the model (force changes the guard let pass)
-        start_n, step_n, intervals = force_grid(device)
-        gains = device.amplitude_m_per_v(start_n + step_n * np.arange(intervals + 1))
-        self.model_bound_v = device.max_voltage_v * float(gains.max() / gains.min())  # the most a press makes it
+        self.press_braking = False  # braking a pressed plate until the model is back down on the command
+        # the most volts a press can make the plate model hold: the volts limit times the gain's span over the forces
+        gains = device.amplitude_m_per_v(np.linspace(device.force_table_n[0], device.force_table_n[-1], 4097))
+        self.model_bound_v = device.max_voltage_v * min(float(gains.max() / gains.min()), 1e6)
         self.ramp = 0
 
     def control_step(self, n: int, fingers: np.ndarray, texture: Any, t0_s: float, run: bool) -> dict[str, float]:
@@ -158,9 +159,11 @@ class _Stream:
         self.plate_w = self.p1_w * (self.model_v + self.slip_v) ** 2  # the plate's power, as modelled
         tau_s = float(device.envelope_time_constant_s(force_n))
         self.model_step = 1 - math.exp(-1 / (tau_s * self.fs_hz))
-        # braking: to -cap, or to the full volts while the plate holds more than the cap (then with the shaper,
-        # pre-emphasis or not)
-        pressed = self.plate_w > self.cap_w and options.braking
+        # braking: to -cap, or to the full volts from a step whose plate holds more than the cap until the model is
+        # back down on the command (then with the shaper, pre-emphasis or not)
+        landing = self.press_braking and self.model_v + self.slip_v > self.smoothed_v
+        pressed = (self.plate_w > self.cap_w * (1 + MODEL_GUARD_FRACTION) or landing) and options.braking
+        self.press_braking = pressed
         self.follow_gain = 1 / self.model_step if self.preemphasis or pressed else 0.0
         brake_v = device.max_voltage_v * keep if pressed else self.cap_v
         self.low_v = -brake_v if options.braking and self.follow_gain else 0.0

@@ -23,7 +23,7 @@ from tpad_rt.cli.arguments import Subparsers, decimal
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.figures import figure_target, pyplot, save
 from tpad_rt.files import ensure_regular
-from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
+from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION
 from tpad_rt.recording import Recording, read_recording
 
 _TARGET, _ACHIEVED, _LIMIT, _AVERAGE = "#1f5fa8", "#e07b00", "#c0392b", "#6a3d9a"
@@ -114,10 +114,11 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
     power.plot(axis, blocks["power_w"], color=_TARGET, lw=0.8, alpha=0.8, label="drive (per block)")
     power.plot(axis, power_average, color=_AVERAGE, lw=1.6, label=f"average over {meta['power_window_s']:g} s")
     plate_w = blocks.get("plate_w", np.zeros(0))  # absent from recordings made before it was added
-    over = plate_w > meta["power_budget_w"]
+    over = plate_w > meta["power_budget_w"] * (1 + MODEL_GUARD_FRACTION)  # as the kernel counts them
     if over.any():  # a press took the plate's vibration over the cap: show the excursion and its braking
         power.plot(axis, np.where(over, plate_w, np.nan), color=_ACHIEVED, lw=1.4,
-                   label=f"plate over the cap, as the model has it ({np.count_nonzero(over)} blocks)")
+                   label=f"plate over the cap by more than {MODEL_GUARD_FRACTION:.0%}, as the model has it "
+                         f"({np.count_nonzero(over)} blocks)")
     cap_w, average_w = meta["power_budget_w"], meta["power_avg_w"]
     if average_w == cap_w:
         power.axhline(cap_w, color=_LIMIT, ls="--", lw=1.2, label=f"cap and average budget {cap_w:g} W")

@@ -39,7 +39,7 @@ from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures
 from tpad_rt.files import check_writable_target
 from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
-    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG,
+    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION,
 )
 from tpad_rt.kernel.batch import render_blocks
 from tpad_rt.kernel.render import render_block
@@ -292,7 +292,7 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
         f"saturated: {_percent(saturated)} of blocks (voltage {_percent((flags & FLAG_VOLTAGE) != 0)}, "
         f"power {_percent((flags & FLAG_POWER) != 0)}); finger touching in {_percent(touching)}",
     ]
-    over_cap = blocks["plate_w"] > metadata["power_budget_w"]
+    over_cap = blocks["plate_w"] > metadata["power_budget_w"] * (1 + MODEL_GUARD_FRACTION)  # as the kernel counts
     if over_cap.any():
         lines.append(over_cap_line(int(np.count_nonzero(over_cap)), float(blocks["plate_w"].max())))
     faults = (flags & FLAG_FAULT) != 0

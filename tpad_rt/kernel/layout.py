@@ -36,7 +36,7 @@ CFG_TRACK = 26                # 1.0: each control step drives at dev[DEV_CARRIER
 CFG_MODE_STEP_MM = 27         # > 0: x step (mm) of dev[DEV_MODE_GAIN]'s grid from x = 0, and the command compensates it
 CFG_C0_F = 28                 # the device's static capacitance (a serial amplifier's lock)
 CFG_SHUNT_OHM = 29            # the device's series shunt
-CFG_GAIN_SPAN = 30            # largest / smallest dev[DEV_AMP_M_PER_V] (>= 1): bounds the plate model after a press
+CFG_GAIN_SPAN = 30            # largest / smallest dev[DEV_AMP_M_PER_V], in [1, MAX_GAIN_SPAN]: bounds the model after a press
 CFG_SIZE = 31
 
 # --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
@@ -66,12 +66,18 @@ TEL_FORCE_N = 4
 TEL_TARGET_MU = 5
 TEL_AMPLITUDE_UM = 6          # commanded plate amplitude after the limits
 TEL_VOLTAGE_V = 7             # peak drive envelope in the block
-TEL_POWER_W = 8               # mean estimated power of the drive in the block (braking at the full volts: the cap)
+TEL_POWER_W = 8               # mean estimated power of the drive in the block (braking at the full volts: at the step's cap)
 TEL_FLAGS = 9                 # OR of the FLAG_* bits over the block
 TEL_PLATE_W = 10              # the most power the plate held in the block as the model has it (a press: over the cap)
 TEL_COLS = 11
 TEL_NAMES = ("t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu",
              "amplitude_um", "voltage_v", "power_w", "saturated", "plate_w")
+
+#: The most the plate's amplitude per volt may vary over a device's forces that the press guard follows (CFG_GAIN_SPAN).
+MAX_GAIN_SPAN = 1e6
+#: A plate whose power, as the model has it, is over the power cap times 1 + this (a press) is braked at up to the full
+#: volts, and the block is reported over the cap (STATE_OVER_CAP_BLOCKS); smaller excursions are a finger's wobble.
+MODEL_GUARD_FRACTION = 0.02
 
 # --- flags -------------------------------------------------------------------
 FLAG_VOLTAGE = 1              # drive limited by max_voltage_v
@@ -193,11 +199,12 @@ STATE_PHASE_INDEX = 43
 STATE_STEP_CARRIER_HZ = 44
 STATE_MODEL_GAIN_M_PER_V = 45  # plate amplitude per volt (m/V) the model's volts were worth at the last step (0: none)
 STATE_PLATE_W = 46            # the plate's power as the model has it at the open step's start, p1 * model^2 (W)
-STATE_OVER_CAP_BLOCKS = 47    # rendered blocks whose plate power (TEL_PLATE_W) exceeded CFG_POWER_CAP_W
+STATE_OVER_CAP_BLOCKS = 47    # rendered blocks whose plate power (TEL_PLATE_W) exceeded the cap (MODEL_GUARD_FRACTION)
 STATE_MODEL_SLIP_V = 48       # volts the plate holds beyond the model (force changes the guard let pass), decaying
+STATE_PRESS_BRAKING = 49      # 1.0: the open step brakes a pressed plate (at the full volts, with the shaper), 0.0: not
 # Per-sample tables, indexed by j, the sample's offset in its control step:
 MAX_CONTROL_INTERVAL = 256    # longest control interval (samples)
-STATE_COS_TABLE = 49          # cos(j w), w the carrier's phase step (rad)
+STATE_COS_TABLE = 50          # cos(j w), w the carrier's phase step (rad)
 STATE_SIN_TABLE = STATE_COS_TABLE + MAX_CONTROL_INTERVAL       # sin(j w)
 STATE_DECAY_TABLE = STATE_SIN_TABLE + MAX_CONTROL_INTERVAL     # d^j (0 <= j <= MAX_CONTROL_INTERVAL), d the smoothing decay
 STATE_ENVELOPE = STATE_DECAY_TABLE + MAX_CONTROL_INTERVAL + 1  # the open step's envelope e_j (V)

@@ -96,6 +96,8 @@ from tpad_rt.kernel.layout import (
     FLAG_SPEED_FLOOR,
     FLAG_VOLTAGE,
     FLAG_WATCHDOG,
+    MAX_GAIN_SPAN,
+    MODEL_GUARD_FRACTION,
     MAX_CARRIER_FRACTION,
     MAX_CONTROL_INTERVAL,
     MAX_SPEED_MM_S,
@@ -131,6 +133,7 @@ from tpad_rt.kernel.layout import (
     STATE_PHASE_INDEX,
     STATE_PHASE_LO,
     STATE_PLATE_W,
+    STATE_PRESS_BRAKING,
     STATE_POWER_PER_V2,
     STATE_FOLLOW_GAIN,
     STATE_RING_SLOT,
@@ -173,9 +176,6 @@ from tpad_rt.physics.friction import amplitude_for_core
 #: and the budgets times ``1 - SAFETY_MARGIN``, so float32 output rounding (2**-24
 #: relative) and sums of rounded powers stay under the true limits.
 SAFETY_MARGIN = 1e-6
-#: A plate whose amplitude, at a new step's force, would dissipate more than the power cap times 1 + this is braked
-#: down to the command (_guard_model).
-MODEL_GUARD_FRACTION = 0.02
 #: Carrier phase resolution: phases are integers in units of 2**-PHASE_BITS cycles.
 PHASE_BITS = 60
 _HALF_BITS = PHASE_BITS // 2
@@ -640,6 +640,9 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     if not abs(state[STATE_MODEL_SLIP_V]) <= 2.0 * _model_bound_v(cfg):
         state[STATE_MODEL_SLIP_V] = 0.0
         fault = FAULT_STATE
+    if not (state[STATE_PRESS_BRAKING] == 0.0 or state[STATE_PRESS_BRAKING] == 1.0):
+        state[STATE_PRESS_BRAKING] = 0.0
+        fault = FAULT_STATE
     if not (state[STATE_MODEL_ON_REF] == 0.0 or state[STATE_MODEL_ON_REF] == 1.0):
         state[STATE_MODEL_ON_REF] = 0.0
         fault = FAULT_STATE
@@ -655,21 +658,35 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
 
 
 @_inline
+def _gain_span(cfg: np.ndarray) -> float:
+    """The device's largest over its smallest plate amplitude per volt (CFG_GAIN_SPAN; one that is not a number in
+    ``[1, MAX_GAIN_SPAN]`` counts as MAX_GAIN_SPAN)."""
+    span = cfg[CFG_GAIN_SPAN]
+    return span if 1.0 <= span <= MAX_GAIN_SPAN else MAX_GAIN_SPAN
+
+
+@_inline
 def _model_bound_v(cfg: np.ndarray) -> float:
-    """The most volts of drive the plate model may hold: ``max_voltage_v`` times the device's gain span
-    (CFG_GAIN_SPAN, a span that is not a finite number >= 1 counts as 1).
+    """The most volts of drive the plate model may hold: ``max_voltage_v`` times the device's gain span (0 if that
+    is not a finite number).
 
     A drive within ``max_voltage_v`` brings the plate to at most ``max_voltage_v`` times the largest gain; a press
     then makes that amplitude worth up to the span times as many volts at the smallest gain.
     """
-    span = cfg[CFG_GAIN_SPAN]
-    return cfg[CFG_MAX_VOLTAGE_V] * (span if 1.0 <= span < math.inf else 1.0)
+    bound_v = cfg[CFG_MAX_VOLTAGE_V] * _gain_span(cfg)
+    return bound_v if 0.0 < bound_v < math.inf else 0.0
 
 
 @_inline
-def _guard_model(cfg: np.ndarray, state: np.ndarray, gain_m_per_v: float, p1_w: float) -> None:
+def _model_volts(state: np.ndarray) -> float:
+    """The shaper's model of the plate (volts of drive): the smoothed volts while it sits on them."""
+    return state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
+
+
+@_inline
+def _guard_model(cfg: np.ndarray, state: np.ndarray, gain_m_per_v: float, p1_w: float) -> int:
     """Brake a plate that holds more than the power cap allows at the step's gain ``gain_m_per_v`` (m/V) and
-    power bound ``p1_w`` (W/V^2).
+    power bound ``p1_w`` (W/V^2); FAULT_STATE if the last step's gain cannot be one of the device's.
 
     The shaper's model is the plate's envelope in volts of drive (docs/kernel.md "Per
     sample"). A finger that presses harder lowers the gain and raises the damping: the
@@ -682,22 +699,32 @@ def _guard_model(cfg: np.ndarray, state: np.ndarray, gain_m_per_v: float, p1_w: 
     model as it is (the shaper does not answer every wobble of a finger's force with a full-volt correction)
     and are kept as its slip (STATE_MODEL_SLIP_V): the volts the plate holds beyond the model, which the next
     changes add to and which decays as the plate settles (_close_step), so a press made of many small
-    changes is braked once they add up to the guard's fraction. No gain, or one that is not a finite
-    number > 0 (a fresh stream, a fault step), leaves the model and its slip as they are.
+    changes is braked once they add up to the guard's fraction. A gain that is not a finite number > 0 (a
+    device fault) leaves the model, its slip and the last valid gain as they are: the next valid step compares
+    with that one. Two gains further apart than the device's gain span (a corrupt record of the last one) make
+    the step a state fault, its slip reset.
     """
     previous = state[STATE_MODEL_GAIN_M_PER_V]
+    if not 0.0 < gain_m_per_v < math.inf:
+        return 0
     state[STATE_MODEL_GAIN_M_PER_V] = gain_m_per_v
-    if not (previous > 0.0 and gain_m_per_v > 0.0 and previous < math.inf and p1_w > 0.0):
-        return
-    model_v = state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
+    if not (previous > 0.0 and p1_w > 0.0):
+        return 0
+    ratio = previous / gain_m_per_v
+    span = _gain_span(cfg) * (1.0 + SAFETY_MARGIN)
+    if not (1.0 <= ratio * span and ratio <= span):
+        state[STATE_MODEL_SLIP_V] = 0.0
+        return FAULT_STATE
+    model_v = _model_volts(state)
     bound_v = _model_bound_v(cfg)
-    held_v = min(max((model_v + state[STATE_MODEL_SLIP_V]) * (previous / gain_m_per_v), -bound_v), bound_v)
+    held_v = min(max((model_v + state[STATE_MODEL_SLIP_V]) * ratio, -bound_v), bound_v)
     if held_v > 0.0 and held_v * held_v * p1_w > cfg[CFG_POWER_CAP_W] * (1.0 + MODEL_GUARD_FRACTION):
         state[STATE_MODEL_V] = held_v
         state[STATE_MODEL_ON_REF] = 0.0
         state[STATE_MODEL_SLIP_V] = 0.0
     else:
         state[STATE_MODEL_SLIP_V] = held_v - model_v
+    return 0
 
 
 @_kernel
@@ -821,26 +848,33 @@ def _control_step(
     follow_gain = 1.0 / model_step if cfg[CFG_PREEMPHASIS] != 0.0 else 0.0
     if not (0.0 < model_step <= 1.0 and 0.0 <= follow_gain < math.inf):
         fault |= FAULT_DEVICE
+    # The plate model follows the plate through a fault too (a press then is still seen).
+    fault |= _guard_model(cfg, state, amplitude_m_per_v, p1_w)
+    held_v = _model_volts(state) + state[STATE_MODEL_SLIP_V]
+    plate_w = p1_w * held_v * held_v  # the plate's power as the model has it (a press may take it over the cap)
+    if not 0.0 <= plate_w < math.inf:  # only a corrupt model or slip: forgotten
+        state[STATE_MODEL_V] = state[STATE_MODEL_SLIP_V] = state[STATE_MODEL_ON_REF] = plate_w = 0.0
+        fault |= FAULT_STATE
+    state[STATE_PLATE_W] = plate_w
     if fault:
         command_v = 0.0
         follow_gain = 0.0
-        model_step = 1.0
+        if not 0.0 < model_step <= 1.0:
+            model_step = 1.0
         flags |= FLAG_FAULT
         _note_fault(state, fault, True)
     else:
         state[STATE_FAULT_PREVIOUS] = 0.0
-    _guard_model(cfg, state, amplitude_m_per_v if fault == 0 else 0.0, p1_w)
-    held_v = (state[STATE_SMOOTH_START_V] if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]) \
-        + state[STATE_MODEL_SLIP_V]
-    plate_w = p1_w * held_v * held_v  # the plate's power as the model has it (a press may take it over the cap)
-    state[STATE_PLATE_W] = plate_w if 0.0 <= plate_w < math.inf else 0.0
     state[STATE_COMMAND_V] = command_v
     state[STATE_CAP_V] = cap_v
     state[STATE_AMPLITUDE_M] = command_v * amplitude_m_per_v if fault == 0 else 0.0
     state[STATE_POWER_PER_V2] = p1_w
-    # Braking: down to -cap, or to the full volts while the plate holds more than the power cap (a press; the
-    # shaper then brakes it even without pre-emphasis).
-    pressed = state[STATE_PLATE_W] > cfg[CFG_POWER_CAP_W] and cfg[CFG_BRAKING] != 0.0 and fault == 0
+    # Braking: down to -cap, or to the full volts from a step whose plate holds more than the power cap (a press)
+    # until the model is back down on the command; the shaper then brakes it even without pre-emphasis.
+    over_cap = state[STATE_PLATE_W] > cfg[CFG_POWER_CAP_W] * (1.0 + MODEL_GUARD_FRACTION)
+    landing = state[STATE_PRESS_BRAKING] != 0.0 and held_v > state[STATE_SMOOTH_START_V]
+    pressed = (over_cap or landing) and cfg[CFG_BRAKING] != 0.0 and fault == 0
+    state[STATE_PRESS_BRAKING] = 1.0 if pressed else 0.0
     if pressed:
         follow_gain = 1.0 / model_step
     state[STATE_FOLLOW_GAIN] = follow_gain
@@ -1011,6 +1045,7 @@ def _output_fault(state: np.ndarray, rejected: int) -> None:
     state[STATE_MODEL_V] = 0.0
     state[STATE_MODEL_ON_REF] = 0.0
     state[STATE_MODEL_SLIP_V] = 0.0
+    state[STATE_PRESS_BRAKING] = 0.0
     state[STATE_RAMP_START] = 0.0
     state[STATE_GATE] = 0.0
     state[STATE_TABLE_FS_HZ] = math.nan
@@ -1105,7 +1140,7 @@ def render_block(
         i = stop
     state[STATE_NEXT_INDEX] = start_index + total
     state[STATE_NEXT_PHASE] = phase
-    if plate_w > cfg[CFG_POWER_CAP_W]:
+    if plate_w > cfg[CFG_POWER_CAP_W] * (1.0 + MODEL_GUARD_FRACTION):
         state[STATE_OVER_CAP_BLOCKS] += 1.0
     _write_telemetry(telem, telem_count, start_index / cfg[CFG_FS_HZ], state, peak_v, energy_w / max(total, 1),
                      plate_w, flags)
