@@ -302,6 +302,21 @@ def test_a_late_answer_to_a_first_hello_does_not_set_the_envelope_scale() -> Non
     assert_within_limits(outcome)
 
 
+def test_play_on_the_issue_s_amplifier_keeps_within_the_device_s_cap() -> None:
+    """The same amplifier under ``tpad-rt play`` (its own process, H1's full 0.5 s per HELLO): it plays, within 40 V
+    read with the 400 V full scale the amplifier runs by, and ends with STOP."""
+    amp = ScriptedAmp(Script({0: [Answer(info(40_000, 40_000), when="next_hello")],
+                              1: [Answer(info(400_000, 400_000))]}))
+    try:
+        done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}", "--duration", "1")
+    finally:
+        frames = amp.finish()
+    assert done.returncode == 0, done.stderr
+    outcome = Outcome(None, frames, amp)
+    assert np.abs(outcome.envelope()).max() / 32767 * 400 > 10, "the swipe must drive the plate"
+    assert_within_limits(outcome)
+
+
 @pytest.mark.parametrize("answers", [
     [Answer(info(50_000, 40_000)), Answer(info(400_000, 400_000))],
     [Answer(info(50_000, 40_000)), Answer(info(50_000, 30_000), when="after_carrier")],
