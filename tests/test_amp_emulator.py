@@ -46,7 +46,7 @@ from tpad_rt.amp.emulator import (
 )
 from tpad_rt.cli.amp import REALTIME_PRIORITY
 from tpad_rt.device import Device
-from tpad_rt.errors import BackendError
+from tpad_rt.errors import ConfigError
 
 REPO = Path(__file__).resolve().parents[1]
 DEVICE = Device.default()
@@ -1039,8 +1039,12 @@ def test_recording_keeps_at_most_its_limit(capsys: pytest.CaptureFixture[str], t
         assert (data["t_s"] == np.concatenate([np.arange(60), np.arange(40)])).all()
         assert data["index"].dtype == np.int64 and data["frames_ok"] == 3 and data["truncated"]
     assert sorted(path.name for path in tmp_path.iterdir()) == ["r.npz"]
-    with pytest.raises(BackendError, match="cannot write the recording"):
+    with pytest.raises(ConfigError, match="cannot write recordings there: no folder"):
         write_recording(str(tmp_path / "missing" / "r.npz"), recorder, {})
+    (tmp_path / "link.npz").symlink_to(tmp_path / "victim")  # a link planted at the target: replaced, not followed
+    (tmp_path / "victim").write_bytes(b"kept")
+    write_recording(str(tmp_path / "link.npz"), recorder, {})
+    assert (tmp_path / "victim").read_bytes() == b"kept" and not (tmp_path / "link.npz").is_symlink()
 
 
 # --- the command line -------------------------------------------------------------------------------------------

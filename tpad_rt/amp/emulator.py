@@ -51,7 +51,6 @@ import math
 import os
 import select
 import sys
-import tempfile
 import termios
 import time
 import tty
@@ -68,7 +67,7 @@ from tpad_rt.amp import wire
 from tpad_rt.amp.wire import Code, Fault, State, Type
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, printable
-from tpad_rt.files import check_writable_target
+from tpad_rt.files import NewFile, check_writable_target
 from tpad_rt.kernel.sim import COEF_SIZE, SIM_STATE_SIZE, resonate
 from tpad_rt.outputs.sim import plate_resonator
 from tpad_rt.physics import electromech
@@ -651,42 +650,27 @@ class Recorder:
 
 
 def check_record_path(path: str) -> None:
-    """ConfigError unless a recording can be written at ``path``: a regular file (or none) in a writable folder."""
+    """ConfigError unless a recording can be written at ``path``: a file name (a regular file, or none) in a
+    writable folder (:func:`tpad_rt.files.check_writable_target`)."""
     check_writable_target(path, "recordings")
     if not Path(path).name:
         raise ConfigError(f"{printable(path)}: not a file name")
-    try:
-        handle, probe = tempfile.mkstemp(dir=Path(path).absolute().parent, prefix=".tpad-rt-probe.")
-    except OSError as error:
-        raise ConfigError(f"{printable(path)}: cannot write the recording there ({error.strerror or error})") from None
-    os.close(handle)
-    os.unlink(probe)
 
 
 def write_recording(path: str, recorder: Recorder, scalars: dict[str, float | int | list[float]]) -> None:
     """Write the recorded columns and ``scalars`` (numbers, or lists written as float64 arrays) to ``path`` (.npz)
-    through a temporary file in its folder.
+    through :class:`tpad_rt.files.NewFile` (whole or not at all).
 
     The archive is np.savez's (one ``NAME.npy`` per entry), written a column at a time so
-    that a full recording is not copied whole. Raises BackendError (nothing written at
-    ``path``) when it cannot be written.
+    that a full recording is not copied whole. Raises ConfigError or BackendError (nothing
+    written at ``path``) when it cannot be written.
     """
-    target = Path(path).absolute()
-    try:
-        handle, temporary = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    except OSError as error:
-        raise BackendError(f"{printable(path)}: cannot write the recording ({error.strerror or error})") from None
-    try:
-        with os.fdopen(handle, "wb") as file, zipfile.ZipFile(file, "w", allowZip64=True) as archive:
-            for name in (*RECORDED_COLUMNS, *scalars):
-                array = recorder.column(name) if name in RECORDED_COLUMNS else np.array(
-                    scalars[name], dtype=np.float64 if isinstance(scalars[name], list) else None)
-                with archive.open(f"{name}.npy", "w", force_zip64=True) as member:
-                    np.lib.format.write_array(member, array, allow_pickle=False)
-        os.replace(temporary, path)
-    except OSError as error:
-        os.unlink(temporary)
-        raise BackendError(f"{printable(path)}: cannot write the recording ({error.strerror or error})") from None
+    with NewFile(path, "recordings") as new, zipfile.ZipFile(new.file, "w", allowZip64=True) as archive:
+        for name in (*RECORDED_COLUMNS, *scalars):
+            array = recorder.column(name) if name in RECORDED_COLUMNS else np.array(
+                scalars[name], dtype=np.float64 if isinstance(scalars[name], list) else None)
+            with archive.open(f"{name}.npy", "w", force_zip64=True) as member:
+                np.lib.format.write_array(member, array, allow_pickle=False)
 
 
 # --- the line ------------------------------------------------------------------------------------------------

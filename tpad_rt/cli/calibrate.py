@@ -336,7 +336,7 @@ def run_sweep(args: argparse.Namespace) -> int:
         raise ConfigError(f"--from-hz ({low:g}) must be below --to-hz ({high:g})")
     dwell_s = sweep.default_dwell_s(device) if args.dwell_ms is None else args.dwell_ms * 1e-3
     target = parse_serial_url(args.url)
-    link = AmpLink.open(target, carrier_hz=low)
+    link = AmpLink.open(target, carrier_hz=low, max_voltage_v=device.max_voltage_v)  # the tone within both caps
     started = time.monotonic()
     try:
         assert link.info is not None
