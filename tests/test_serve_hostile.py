@@ -11,6 +11,7 @@ import json
 import socket
 import struct
 import threading
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -185,39 +186,50 @@ def test_each_malformed_datagram_gets_one_error_and_python_osc_never_sees_it(ser
         assert replies == ["/tpad/error", "/tpad/pong", "/tpad/pong"]  # nested, well formed: each message handled
 
 
+#: Bad datagrams the server must have received while one client's pings were answered.
+FLOOD_SEEN = 2000
+
+
 def test_pings_are_answered_while_bad_bundles_stream_in() -> None:
     """A sender floods the OSC port with bad bundles (of the kinds that hung or slowed the loop) as fast as it
-    can; meanwhile a WebSocket client's pings are each answered, and the server's counters show the flood
-    arriving between them. Then the flood is over budget, dropped unread, and counted."""
+    can; meanwhile a WebSocket client's pings are each answered, until the server's counters show FLOOD_SEEN
+    datagrams arrived between the first and the last, and the flood gone over the server-wide budget (dropped
+    unread, counted)."""
     flood = [datagram for _, datagram, _ in BAD_DATAGRAMS] + \
         [bundle(*[osc_message("/tpad/warp", (1.0, "f"))] * osc_limits.MAX_DATAGRAM_MESSAGES)]
     serve = Serve("--output", "null://")
     with serve, osc_socket() as sock, Client(serve.ws_url) as client:
         assert serve.osc_port is not None
         stop = threading.Event()
-        sent = 0
 
         def send() -> None:
-            nonlocal sent
+            sent = 0
             while not stop.is_set():
-                sock.sendto(flood[sent % len(flood)], ("127.0.0.1", serve.osc_port))
+                try:
+                    sock.sendto(flood[sent % len(flood)], ("127.0.0.1", serve.osc_port))
+                except OSError:  # ENOBUFS, or a refusal of the server's replies (ICMP): a flooder goes on
+                    pass
                 sent += 1
 
         sender = threading.Thread(target=send, daemon=True)
         sender.start()
+        seen: list[int] = []  # osc_datagrams after each ping
+        counters: dict[str, Any] = {}
+        deadline = time.monotonic() + REPLY_TIMEOUT_S
         try:
-            seen = [client.request({"type": "stats"}, "stats")["server"].get("osc_datagrams", 0)]
-            for _ in range(12):  # the stats requests' budget: a burst of 20
+            while len(seen) < 12 or seen[-1] - seen[0] < FLOOD_SEEN or not counters.get("osc_dropped"):
+                assert time.monotonic() < deadline, f"the flood was not dropped: {counters}"
                 assert client.request({"type": "ping", "t": 1.5}, "pong")["t"] == 1.5
-                seen.append(client.request({"type": "stats"}, "stats")["server"].get("osc_datagrams", 0))
+                stats = client.request({"type": "stats"}, "stats")  # or rate_limited: 20 a second
+                if stats["type"] == "stats":
+                    counters = stats["server"]
+                    seen.append(counters.get("osc_datagrams", 0))
         finally:
             stop.set()
             sender.join(REPLY_TIMEOUT_S)
-        counters = client.request({"type": "stats"}, "stats")["server"]
         client.close()
         out = stopped_clean(serve)
-    assert seen[-1] > seen[0] and sum(later > earlier for earlier, later in zip(seen, seen[1:])) >= 6, seen
-    assert counters["error_bad_message"] > 0 and counters.get("osc_dropped", 0) > 0, counters
+    assert counters["error_bad_message"] > 0, counters
     assert "OSC messages" in out
 
 
