@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 import json
+import re
 import socket
 import struct
 import threading
@@ -46,7 +47,8 @@ def server() -> Iterator[Serve]:
     serve = Serve("--output", "null://", "--token", TOKEN)
     with serve:
         yield serve
-        stopped_clean(serve)
+        out = stopped_clean(serve)
+    assert re.search(r"^HTTP: \d+ requests, [1-9]\d* refused \(\d+ malformed, \d+ origin, \d+ token\)$", out, re.M), out
 
 
 # --- handshakes -----------------------------------------------------------------------------------------------
