@@ -122,7 +122,7 @@ def markdown(report: dict[str, Any]) -> str:
     flood = [load["rate_per_s"] for load in pings["osc-flood"]["load"] if load]
     dropped = sum(server.get("osc_dropped", 0) for server in pings["osc-flood"]["server"])
     lines += ["", f"Texture messages of {texture[0]['message_bytes']:,} bytes: {len(replies)} refused, each answered "
-              f"{min(replies):.2f}-{max(replies):.2f} s after its send (parse in a worker thread). OSC flood: "
+              f"{min(replies):.2f}-{max(replies):.2f} s after its send (read in a parser process). OSC flood: "
               f"{np.mean(flood):,.0f} datagrams a second sent, {dropped:,} dropped unread by the server-wide budget."]
     return "\n".join(lines) + "\n"
 

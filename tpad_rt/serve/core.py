@@ -10,9 +10,11 @@ FingerOwner(idle_s)
     ``holder_at(now_s)``: one client's finger at a time
 TokenBucket(rate_per_s, burst)
     ``take(amount, now_s) -> bool``: the rate limits
-TextureLibrary(folders)
+TextureLibrary(folders, parse=parse_inline)
     ``load(request) -> (CompiledTexture, label)``: a SetTexture's name, path or YAML, compiled;
     ProtocolError ``texture`` or ``forbidden_path``
+parse_inline(text, base_dir, folders) -> (TextureFile | None, errors)
+    an inline texture's text read (picklable both ways: the server runs it in a worker process)
 TelemetryFeed(renderer)
     ``pump()`` (drain the renderer's telemetry), ``summary(since_t) -> dict`` (one ``telemetry`` message)
 device_info(renderer) -> dict
@@ -30,11 +32,12 @@ import math
 import os
 from collections import deque
 from pathlib import Path
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from tpad_rt.config import load_texture, parse_texture
+from tpad_rt.config import TextureFile, load_texture, parse_texture
 from tpad_rt.config.messages import did_you_mean
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
@@ -131,13 +134,27 @@ class TokenBucket:
         return True
 
 
+#: How an inline texture's text is read: ``(text, base_dir, folders) -> (model | None, error lines)``.
+InlineParse = Callable[[str, Path, list[Path]], "tuple[TextureFile | None, list[str]]"]
+
+
+def parse_inline(text: str, base_dir: Path, folders: list[Path]) -> tuple[TextureFile | None, list[str]]:
+    """The texture file whose text is ``text`` (relative images from ``base_dir``, every image within
+    ``folders``): ``(model, [])``, or ``(None, its breadcrumb errors)``."""
+    try:
+        return parse_texture(text.encode(), "yaml", base_dir, folders), []
+    except ConfigError as problem:
+        return None, problem.errors
+
+
 class TextureLibrary:
     """The textures clients may set: the shipped ones by name, files by path within the shipped textures' folder
     and ``folders`` (resolved, links followed), inline YAML whose images lie within them (relative image paths
     from the shipped folder)."""
 
-    def __init__(self, folders: list[Path]):
+    def __init__(self, folders: list[Path], parse: InlineParse = parse_inline):
         self.folders = list(dict.fromkeys(Path(os.path.realpath(folder)) for folder in [TEXTURES_DIR, *folders]))
+        self._parse = parse
 
     def load(self, request: SetTexture) -> tuple[CompiledTexture, str]:
         """``(compiled texture, what it came from)``; ProtocolError ``texture`` (its breadcrumb errors, one per
@@ -153,7 +170,9 @@ class TextureLibrary:
             if request.path is not None:
                 return compile_texture(load_texture(self._allowed(request), self.folders)), request.path
             assert request.yaml is not None
-            model = parse_texture(request.yaml.encode(), "yaml", self.folders[0], self.folders)
+            model, errors = self._parse(request.yaml, self.folders[0], self.folders)
+            if model is None:
+                raise ConfigError(errors)
             return compile_texture(model), "inline YAML"
         except ConfigError as problem:
             raise ProtocolError("texture", str(problem), request.id, "texture") from None

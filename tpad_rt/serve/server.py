@@ -11,10 +11,11 @@ Server(renderer, settings, texture_label)
 
 docs/serve.md is the contract. One loop thread runs everything: a message is read,
 checked (:mod:`tpad_rt.serve.protocol`), limited (:class:`~tpad_rt.serve.core.TokenBucket`)
-and acted on before the next; the renderer's own threads render. Loading a texture (parsing,
-compiling, drawing its map: 1 MiB of YAML takes seconds) runs in a worker thread, up to
-MAX_TEXTURE_LOADS at once, and only the swap into the renderer holds the texture lock, so
-one client's texture holds up nobody else's messages; the one requested last wins. Errors go back as
+and acted on before the next; the renderer's own threads render. Loading a texture
+(compiling it, drawing its map) runs in a worker thread, up to MAX_TEXTURE_LOADS at once,
+an inline texture's text read in a parser process (1 MiB of YAML takes seconds), and only
+the swap into the renderer holds the texture lock, so one client's texture holds up
+nobody else's messages; the one requested last wins. Errors go back as
 ``error`` messages and the connection stays open; only a message past MAX_FRAME_BYTES
 (the WebSocket layer closes with 1009) or a failed handshake ends one.
 """
@@ -23,16 +24,19 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import gc
 import hmac
 import itertools
 import logging
 import math
+import multiprocessing
+import signal
 import sys
 import threading
 import time
 from collections import Counter, OrderedDict
 from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from http import HTTPStatus
 from importlib import resources
@@ -52,12 +56,14 @@ from tpad_rt.serve import protocol
 from tpad_rt.json_text import json_safe, json_text
 from tpad_rt.serve.core import (
     ClockMap, FingerOwner, TelemetryFeed, TextureLibrary, TokenBucket, colorbar_png, device_info, friction_map_png,
+    parse_inline,
 )
 from tpad_rt.serve.osc import OscEndpoint
 from tpad_rt.serve.protocol import ProtocolError, Request, Sample
 from tpad_rt.shipped import texture_names
 
 if TYPE_CHECKING:
+    from tpad_rt.config import TextureFile
     from tpad_rt.engine import Renderer
     from tpad_rt.texture import CompiledTexture
 
@@ -75,6 +81,9 @@ MAX_CLIENTS = 32
 MAX_UNREAD_BYTES = 1 << 20
 #: Texture loads running or waiting at once, server-wide (more are refused as rate_limited).
 MAX_TEXTURE_LOADS = 4
+#: Processes reading inline textures' text (a 1 MiB text takes seconds of CPU: in a process of its own, it
+#: shares no GIL with the loop that serves every client).
+PARSER_PROCESSES = 2
 #: At most one ``rate_limited`` error per this many seconds to a client (the count of dropped messages in it).
 LIMIT_NOTICE_S = 0.25
 #: Seconds a closing connection waits for the client's side of the close (Ctrl-C waits at most about this).
@@ -139,7 +148,9 @@ class Server:
     def __init__(self, renderer: Renderer, settings: Settings, texture_label: str | None = None):
         self.renderer = renderer
         self.settings = settings
-        self.library = TextureLibrary(list(settings.texture_dirs))
+        self.library = TextureLibrary(list(settings.texture_dirs), self._parse_inline)
+        self._parsers: ProcessPoolExecutor | None = None
+        self._parsers_lock = threading.Lock()
         self.owner = FingerOwner(OWNER_IDLE_S)
         self.feed = TelemetryFeed(renderer)
         self.counters: Counter[str] = Counter()
@@ -194,6 +205,9 @@ class Server:
                     if client.subscription is not None:
                         client.subscription.cancel()
                 server.close(close_connections=True)
+                with self._parsers_lock:
+                    if self._parsers is not None:
+                        self._parsers.shutdown(wait=False, cancel_futures=True)
         for task in tasks:
             if task.done() and not task.cancelled() and task.exception() is not None:
                 raise task.exception()  # type: ignore[misc]
@@ -512,9 +526,26 @@ class Server:
     def _prepare_texture(self, request: protocol.SetTexture) -> tuple[CompiledTexture, str, bytes]:
         """``(compiled texture, its label, its friction map as PNG)`` of ``request`` (run in a worker thread:
         parsing 1 MiB of YAML takes seconds)."""
-        with _collector_paused():
-            compiled, label = self.library.load(request)
+        compiled, label = self.library.load(request)
         return compiled, label, friction_map_png(compiled, self.renderer.device)
+
+    def _parse_inline(self, text: str, base_dir: Path, folders: list[Path]) -> tuple[TextureFile | None, list[str]]:
+        """:func:`~tpad_rt.serve.core.parse_inline` in a parser process (started on first use): called from a
+        worker thread, which it blocks, while the process's CPU time shares no GIL with the loop."""
+        with self._parsers_lock:
+            if self._parsers is None:
+                self._parsers = ProcessPoolExecutor(PARSER_PROCESSES, mp_context=multiprocessing.get_context("spawn"),
+                                                    initializer=_parser_started)
+            parsers = self._parsers
+        try:
+            return parsers.submit(parse_inline, text, base_dir, folders).result()
+        except BrokenProcessPool:  # a parser process died (killed, out of memory): new ones for the next text
+            with self._parsers_lock:
+                if self._parsers is parsers:
+                    self._parsers = None
+            return None, ["yaml: not read: the process reading it ended (out of memory?)"]
+        except RuntimeError:  # shut down: the server is stopping
+            return None, ["yaml: not read: the server is stopping"]
 
     def _texture_message(self) -> dict[str, Any]:
         texture = self.renderer.texture
@@ -590,29 +621,9 @@ class _OneLine(logging.Handler):
         print(f"tpad-rt serve: {record.name}: {text[:300]} (please report it)", file=sys.stderr, flush=True)
 
 
-_parsing = 0  # texture parses running, and whether the collector ran before the first of them began
-_collecting = True
-_parsing_lock = threading.Lock()
-
-
-@contextlib.contextmanager
-def _collector_paused() -> Iterator[None]:
-    """Python's cyclic garbage collector paused while any texture is parsed: a 1 MiB texture makes about a
-    million objects that live until its parse ends, and each full collection meanwhile scans them all holding
-    the GIL (up to 0.2 s: every client's messages wait); reference counting frees them at the end anyway."""
-    global _parsing, _collecting
-    with _parsing_lock:
-        _parsing += 1
-        if _parsing == 1:
-            _collecting = gc.isenabled()
-            gc.disable()
-    try:
-        yield
-    finally:
-        with _parsing_lock:
-            _parsing -= 1
-            if _parsing == 0 and _collecting:
-                gc.enable()
+def _parser_started() -> None:
+    """In a parser process: Ctrl-C (SIGINT to the terminal's process group) is the server's to handle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 @contextlib.contextmanager
