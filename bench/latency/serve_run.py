@@ -84,6 +84,7 @@ def summarise_pings(pings: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
         rtt = np.concatenate([run["rtt_ms"] for run in pings[name]])
         summary[name] = {"n": int(len(rtt)), "p50_ms": float(np.percentile(rtt, 50)),
                          "p99_ms": float(np.percentile(rtt, 99)), "max_ms": float(rtt.max()),
+                         "underflows": sum(run["underflows"] for run in pings[name]),
                          "load": [run.get("load") for run in pings[name]],
                          "server": [run["server"] for run in pings[name]]}
     idle = summary["idle"]
@@ -111,12 +112,13 @@ def markdown(report: dict[str, Any]) -> str:
     pings = s["ping"]
     lines += ["", f"A WebSocket client's ping round trip (a ping every 10 ms, each after the last pong) on the same server, "
               f"{p['ping_rounds']} rounds of {p['ping_seconds']:g} s per phase, phases rotated:", "",
-              "| while the server also takes | pings | p50 | p99 | max | p50 / idle | p99 / idle | max / idle |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|"]
+              "| while the server also takes | pings | p50 | p99 | max | p50 / idle | p99 / idle | max / idle | "
+              "underflows |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, title in PING_PHASES.items():
         row, ratio = pings[name], pings[name]["ratio_to_idle"]
         lines.append(f"| {title} | {row['n']} | {row['p50_ms']:.2f} ms | {row['p99_ms']:.2f} ms | "
-                     f"{row['max_ms']:.2f} ms | {ratio['p50']:.2f} | {ratio['p99']:.2f} | {ratio['max']:.2f} |")
+                     f"{row['max_ms']:.2f} ms | {ratio['p50']:.2f} | {ratio['p99']:.2f} | {ratio['max']:.2f} | "
+                     f"{row['underflows']} |")
     texture = [load for load in pings["texture"]["load"] if load]
     replies = [reply for load in texture for reply in load["reply_s"]]
     flood = [load["rate_per_s"] for load in pings["osc-flood"]["load"] if load]

@@ -144,8 +144,9 @@ def _child_result(process: subprocess.Popen[str], what: str, timeout_s: float) -
 
 def ping_phase(serve: ServerThread, load: tuple[str, ...] | None, seconds: float) -> dict[str, Any]:
     """One ping phase: the round trips (ms) of a client pinging for ``seconds`` while ``load`` runs (its
-    RESULT under ``load``), and the server's counters it changed."""
+    RESULT under ``load``), the server's counters it changed, and the renderer's underflows meanwhile."""
     before = dict(serve.server.counters)
+    underflows = serve.server.renderer.stats()["underflows"]
     loader = None
     if load is not None:
         target = f"ws://127.0.0.1:{serve.port}/ws" if load[0] == "texture" else str(serve.server.osc_port)
@@ -159,6 +160,7 @@ def ping_phase(serve: ServerThread, load: tuple[str, ...] | None, seconds: float
     result = _child_result(pinger, "ping client", 300 + seconds)
     if loader is not None:
         result["load"] = _child_result(loader, "load", 600 + seconds)
+    result["underflows"] = serve.server.renderer.stats()["underflows"] - underflows
     after = serve.server.counters
     result["server"] = {key: after[key] - before.get(key, 0) for key in after if after[key] != before.get(key, 0)}
     return result

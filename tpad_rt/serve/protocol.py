@@ -4,10 +4,11 @@ API map
 -------
 PROTOCOL_VERSION
     the version the server's ``hello`` states (an app checks it before anything else)
-MAX_MESSAGE_BYTES, MAX_FRAME_BYTES, MAX_BATCH, MAX_ID_CHARS, MAX_SUBSCRIBE_HZ
+MAX_MESSAGE_BYTES, MAX_FRAME_BYTES, MAX_BATCH, MAX_ID_CHARS, MAX_SUBSCRIBE_HZ, MAX_CLIENT_T_S
     a message's largest size (larger ones up to MAX_FRAME_BYTES get an error reply;
     past it the connection closes with 1009), the most samples in one ``fingers``,
-    the longest request id, the fastest telemetry subscription
+    the longest request id, the fastest telemetry subscription, the largest client
+    time (s, either sign)
 parse(raw) -> Request
     one client message (text) checked and typed; ProtocolError (its ``code``, the
     message, the request's ``id`` when it had one) for anything else
