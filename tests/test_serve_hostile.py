@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import base64
 import json
+import os
 import re
 import socket
 import struct
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -342,3 +344,39 @@ def test_a_library_log_record_while_serving_is_one_counted_line(capfd: pytest.Ca
     err = capfd.readouterr().err
     assert err.splitlines() == ["tpad-rt serve: websockets.server: connection handler failed: ValueError('boom') "
                                 "(please report it)"], err
+
+
+def parser_processes() -> set[int]:
+    """PIDs of this process's children that are multiprocessing's spawned workers (the servers' parsers)."""
+    found = set()
+    for task in Path("/proc/self/task").iterdir():
+        try:
+            for pid in (task / "children").read_text().split():
+                if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                    found.add(int(pid))
+        except FileNotFoundError:  # a thread or a child that has just ended
+            pass
+    return found
+
+
+def test_a_parser_process_that_dies_costs_its_texture_one_line_and_the_next_is_read(
+        capfd: pytest.CaptureFixture[str]) -> None:
+    """The inline texture's reader is killed (as the kernel's OOM killer would) while it reads a large text:
+    that texture is refused in one line naming what happened, nothing is printed, and new processes read the
+    next texture."""
+    import signal
+
+    with ServeThread() as serve, Client(serve.ws_url) as client:
+        others = parser_processes()  # earlier servers' (in this process), on their way out
+        client.send({"type": "texture", "yaml": BIG_YAML, "id": "big"})
+        deadline = time.monotonic() + REPLY_TIMEOUT_S
+        while not (parsers := parser_processes() - others):
+            assert time.monotonic() < deadline, "no parser process started"
+            time.sleep(0.01)
+        for pid in parsers:
+            os.kill(pid, signal.SIGKILL)
+        refused = client.expect("error")
+        assert (refused["id"], refused["code"]) == ("big", "texture") and "ended" in refused["message"], refused
+        assert client.request({"type": "texture", "yaml": INLINE_YAML}, "texture")["source"] == "inline YAML"
+        assert serve.server.counters.get("internal_logged", 0) == 0
+    assert capfd.readouterr().err == ""

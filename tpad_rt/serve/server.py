@@ -15,7 +15,10 @@ and acted on before the next; the renderer's own threads render. Loading a textu
 (compiling it, drawing its map) runs in a worker thread, up to MAX_TEXTURE_LOADS at once,
 an inline texture's text read in a parser process (1 MiB of YAML takes seconds), and only
 the swap into the renderer holds the texture lock, so one client's texture holds up
-nobody else's messages; the one requested last wins. Errors go back as
+nobody else's messages; the one requested last wins. The parser processes are started
+with multiprocessing's ``spawn``, which imports the main script in each: a script that
+runs a Server keeps its top level under ``if __name__ == "__main__":`` (``tpad-rt serve``
+and ``python -m tpad_rt`` do). Errors go back as
 ``error`` messages and the connection stays open; only a message past MAX_FRAME_BYTES
 (the WebSocket layer closes with 1009) or a failed handshake ends one.
 """
