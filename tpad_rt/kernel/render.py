@@ -409,8 +409,10 @@ def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> N
     power_ring[slot] = power_w
     if slot == power_ring.shape[0] - 1:
         state[STATE_WINDOW_SUM_W] = _ring_sum(power_ring)
-    # The plate and the model follow the same drive with the same step: what one holds beyond the other decays.
-    state[STATE_MODEL_SLIP_V] *= math.exp(samples * math.log1p(-state[STATE_MODEL_STEP]))
+    # The plate and the model follow the same drive with the same step: what one holds beyond the other decays
+    # (all of it when the step is corrupt).
+    keep = 1.0 - state[STATE_MODEL_STEP]
+    state[STATE_MODEL_SLIP_V] *= keep ** samples if 0.0 <= keep < 1.0 else 0.0
     command_v = state[STATE_COMMAND_V]
     decay = state[STATE_DECAY_TABLE + samples]
     state[STATE_SMOOTH_START_V] = command_v + (state[STATE_SMOOTH_START_V] - command_v) * decay
