@@ -96,11 +96,11 @@ from tpad_rt.kernel.layout import (
     FLAG_SPEED_FLOOR,
     FLAG_VOLTAGE,
     FLAG_WATCHDOG,
-    MAX_GAIN_SPAN,
-    MODEL_GUARD_FRACTION,
     MAX_CARRIER_FRACTION,
     MAX_CONTROL_INTERVAL,
+    MAX_GAIN_SPAN,
     MAX_SPEED_MM_S,
+    MODEL_GUARD_FRACTION,
     TRACKED_CARRIER_FACTOR,
     STATE_AMPLITUDE_M,
     STATE_CAP_V,
@@ -627,7 +627,8 @@ def _repaired_state(cfg: np.ndarray, state: np.ndarray) -> int:
     """Reset the carried values that are out of their ranges; FAULT_STATE if one was.
 
     The smoothed volts must lie in ``[0, max_voltage_v]``, the plate model's within ``max_voltage_v`` times
-    the device's gain span (:func:`_model_bound_v`) and its gain (m/V) a finite number >= 0, the gain ramp position in
+    the device's gain span (:func:`_model_bound_v`), its slip within twice that, the press-braking mark 0 or 1
+    and the model's gain (m/V) a finite number >= 0, the gain ramp position in
     ``[0, ramp samples]`` (both 0 for a fresh stream); a reset one restarts from 0 (no
     ramp can start from a value that is not finite). The per-sample tables are then
     rebuilt, in case they were overwritten too.
