@@ -16,6 +16,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
+from tpad_rt.physics._ufunc import ufunc
 from tpad_rt.physics._validate import FloatOrArray, checked
 
 # The paper (model: Section III; values: start of Section IV, with U = 50 mm/s) takes
@@ -49,12 +50,12 @@ def amplitude_for_core(
     return speed_m_s / (freq_hz * mu0 * (1.0 + poisson) * psi_star * -math.log1p(-mu_rel))
 
 
-@numba.vectorize(cache=True)
+@ufunc
 def _relative_friction_ufunc(amplitude_m, freq_hz, speed_m_s, mu0, poisson, psi_star):  # type: ignore[no-untyped-def]
     return relative_friction_core(amplitude_m, freq_hz, speed_m_s, mu0, poisson, psi_star)
 
 
-@numba.vectorize(cache=True)
+@ufunc
 def _amplitude_for_ufunc(mu_rel, freq_hz, speed_m_s, mu0, poisson, psi_star):  # type: ignore[no-untyped-def]
     return amplitude_for_core(mu_rel, freq_hz, speed_m_s, mu0, poisson, psi_star)
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numba
 import numpy.typing as npt
 
+from tpad_rt.physics._ufunc import ufunc
 from tpad_rt.physics._validate import FloatOrArray, positive
 
 
@@ -116,27 +117,27 @@ def power_ratio_core(n_1: float, n_2: float) -> float:
     return (n_1 / n_2) ** 2
 
 
-@numba.vectorize(cache=True)
+@ufunc
 def _bending_wavenumber_ufunc(freq_hz, mass_per_length_kg_m, stiffness_n_m2):  # type: ignore[no-untyped-def]
     return bending_wavenumber_core(freq_hz, mass_per_length_kg_m, stiffness_n_m2)
 
 
-@numba.vectorize(cache=True)
+@ufunc
 def _mode_resonance_hz_ufunc(thickness_m, density_kg_m3, youngs_pa, length_m, mode_m):  # type: ignore[no-untyped-def]
     return mode_resonance_hz_core(thickness_m, density_kg_m3, youngs_pa, length_m, mode_m)
 
 
-@numba.vectorize(cache=True)
+@ufunc
 def _sandwich_stiffness_per_width_ufunc(h_p, e_p, h_a, e_a):  # type: ignore[no-untyped-def]
     return sandwich_stiffness_per_width_core(h_p, e_p, h_a, e_a)
 
 
-@numba.vectorize(cache=True)
+@ufunc
 def _amplification_number_ufunc(h_p, rho_p, e_p, h_a, rho_a, e_a):  # type: ignore[no-untyped-def]
     return amplification_number_core(h_p, rho_p, e_p, h_a, rho_a, e_a)
 
 
-@numba.vectorize(cache=True)
+@ufunc
 def _power_ratio_ufunc(n_1, n_2):  # type: ignore[no-untyped-def]
     return power_ratio_core(n_1, n_2)
 
