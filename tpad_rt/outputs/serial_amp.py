@@ -23,6 +23,8 @@ AmpLink.set_carrier(carrier_hz) / .tone(envelope_v, seconds) -> AmpStatus
     constant envelope from Python and read the amplifier's measured voltage, current, phase
 warm_up(table)
     compile the streamer before a port opens
+warm_checks()
+    compile the codec and the report checks the Python side calls (AmpLink.open does, before its port)
 
 docs/amp-protocol.md is the protocol, docs/amplifiers.md how to connect one. The
 handshake runs in Python with the same codec the streamer uses
@@ -263,6 +265,7 @@ class AmpLink:
         carrier to ``carrier_hz`` (H2); errors as the module says."""
         import serial  # pyserial
 
+        warm_checks()
         try:
             port = serial.Serial(target.port, target.baud, timeout=0, write_timeout=0, exclusive=True)
         except (serial.SerialException, OSError, ValueError) as error:
@@ -769,6 +772,25 @@ def _realtime_thread() -> bool:
     except (OSError, AttributeError):
         return False
     return True
+
+
+def warm_checks() -> None:
+    """Compile (or load from numba's cache) the codec and the checks of the amplifier's reports that this module
+    calls from Python, on scratch arrays of the types it passes: before a port is opened, so that no timed wait (the
+    handshake's, a tone's dwell) waits for a compile (check_status alone took 1.5 s cold, 0.3 s from the cache:
+    more than a tone may wait, and far more than the amplifier's watchdog)."""
+    link = np.zeros(amp_stream.LINK_SIZE, dtype=np.int64)
+    body, frame = np.zeros(codec.MAX_BODY, dtype=np.uint8), np.zeros(codec.MAX_BODY, dtype=np.uint8)
+    out = np.zeros(codec.MAX_ENCODED, dtype=np.uint8)
+    size = codec.seal(frame, 0, codec.MSG_HELLO, 0, out)
+    decoded = codec.cobs_decode(np.frombuffer(bytes(out[:size - 1]), dtype=np.uint8), size - 1, body)
+    codec.open_body(body, decoded)
+    codec.get_u16(body, 0)
+    codec.get_u32(body, 0)
+    amp_stream.start_checks(link)
+    amp_stream.check_status(link, body, time.monotonic_ns())
+    amp_stream.carrier_echo_ok(link, 1, 1)
+    amp_stream.carrier_echo_tolerance_mhz(link, 1)
 
 
 def warm_up(table: object) -> None:
