@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from tpad_rt import __version__
+from tpad_rt.version import __version__
 from tpad_rt.compiling import compile_notice
 from tpad_rt.device import Device
 from tpad_rt.drivers import Driver, open_driver

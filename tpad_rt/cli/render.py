@@ -30,7 +30,7 @@ import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
 
-from tpad_rt import __version__
+from tpad_rt.version import __version__
 from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device

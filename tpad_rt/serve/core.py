@@ -257,7 +257,7 @@ def friction_map_png(texture: CompiledTexture, device: Device) -> bytes:
     0.5 N, at t = 0; viridis from 0 to 1, row 0 at y = 0), one pixel per grid cell, as PNG bytes."""
     from matplotlib import colormaps
 
-    from tpad_rt.cli.show import Finger, plate_maps
+    from tpad_rt.plate_maps import Finger, plate_maps
 
     length_mm, width_mm = device.plate.length_m * 1e3, device.plate.width_m * 1e3
     resolution_mm = max(0.25, math.sqrt(length_mm * width_mm / MAP_POINTS))
