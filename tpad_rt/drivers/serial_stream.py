@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+from tpad_rt.clock import Clock
 from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
 from tpad_rt.outputs import serial_amp
@@ -32,13 +33,15 @@ class SerialStreamDriver(Driver):
 
     consumes = Consumes.ENVELOPE
 
-    def __init__(self, url: Url, *, device: Device, rate_hz: int, block_frames: int, options: RenderOptions):
+    def __init__(self, url: Url, *, device: Device, rate_hz: int, block_frames: int, options: RenderOptions,
+                 stall_timeout_s: float = 0.5, clock: Clock | None = None):
         target = serial_amp.parse_serial_url(url)
         rate_hz = target.envelope_hz
         if options.control_interval == RenderOptions.control_interval:
             options = replace(options, control_interval=max(1, round(
                 RenderOptions.control_interval * rate_hz / DEFAULT_CONTROL_RATE_HZ)))
-        super().__init__(url, device=device, rate_hz=rate_hz, options=options,
+        super().__init__(url, device=device, rate_hz=rate_hz, options=options, stall_timeout_s=stall_timeout_s,
+                         clock=clock,
                          block_frames=max(1, round(target.frame_ms * 1e-3 * rate_hz)))
         self.target = target
         self.link: serial_amp.AmpLink | None = None  # open between open() and close()
@@ -58,7 +61,9 @@ class SerialStreamDriver(Driver):
                                                                     max_voltage_v=self.device.max_voltage_v)
         scale = link.scale  # decided once, from the INFO the handshake took (H1, H3); the streamer clamps to it
         assert scale is not None
-        pipeline.set_drive_scale(scale.full_scale_v, scale.max_v, link.carrier_hz)
+        pipeline.set_drive(pipeline.drive.from_hardware(
+            volts_per_full_scale=scale.full_scale_v, max_voltage_v=scale.max_v, carrier_hz=link.carrier_hz,
+            source=f"amplifier {link.info.firmware!r} on {self.target.port}" if link.info else self.target.port))
         self.block_frames = link.frame_samples
 
     def start(self, table: CallbackTable) -> None:
