@@ -9,9 +9,13 @@ tpad-rt changes.
 
 from __future__ import annotations
 
+import os
+import re
+import subprocess
 import sys
 import types
 from collections.abc import Iterator, Mapping
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -59,7 +63,8 @@ def open_url(url: Url, *, device: Device, fs_hz: int) -> MemoryOutput:
 
 # --- the tests ------------------------------------------------------------------------------------
 
-GRATING = "textures/grating.yaml"
+REPO = Path(__file__).resolve().parents[1]
+GRATING = str(REPO / "textures" / "grating.yaml")
 
 
 @pytest.fixture
@@ -164,3 +169,17 @@ def test_a_kind_naming_something_other_than_a_driver_fails_to_open(registered: N
             Renderer(output="notadriver://")
     finally:
         unregister_output("notadriver")
+
+
+def test_the_worked_example_in_docs_architecture_runs_as_written(tmp_path: Path) -> None:
+    """docs/architecture.md "Adding an output kind": its module, saved as memory_output.py, and its program run
+    in a fresh interpreter from the repository's root, as a reader would run them."""
+    text = (REPO / "docs" / "architecture.md").read_text()
+    module, program = re.findall(r"```python\n(.*?)```", text[text.index("### Adding an output kind"):], re.S)[:2]
+    (tmp_path / "memory_output.py").write_text(module)
+    (tmp_path / "program.py").write_text(program)
+    done = subprocess.run([sys.executable, str(tmp_path / "program.py")], cwd=REPO, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{REPO}"}, timeout=300)
+    assert done.returncode == 0, done.stderr
+    blocks = int(done.stdout.split()[0])
+    assert blocks > 0 and "source='device file'" in done.stdout
