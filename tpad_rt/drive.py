@@ -83,7 +83,7 @@ class DriveSpec:
                        max_voltage_v=min(max_voltage_v, self.max_voltage_v), carrier_hz=carrier_hz, source=source)
 
     def metadata(self) -> dict[str, Any]:
-        """Its keys in a recording's metadata (docs/formats.md "Recordings")."""
+        """Its keys in a recording's metadata (:mod:`tpad_rt.recording`)."""
         return {"carrier_hz": float(self.carrier_hz), "volts_per_full_scale": float(self.volts_per_full_scale),
                 "max_voltage_v": float(self.max_voltage_v), "output_consumes": self.consumes.value,
                 "drive_rate_hz": float(self.rate_hz), "drive_source": self.source}
