@@ -1,8 +1,7 @@
 """A software serial amplifier that follows docs/amp-protocol.md (version 2); ``tpad-rt amp emulate`` runs it.
 
 The :class:`Amplifier` is the protocol's amplifier side as a discrete-event machine on
-given times (s): host frames arrive at given times, envelope
-samples play at their due times (``t_run + (k - start_index) / envelope_hz`` while
+times (s) it is given: host frames arrive at given times, envelope samples play at their due times (``t_run + (k - start_index) / envelope_hz`` while
 RUNNING), STATUS goes out every ``status_period_ms`` on a microsecond schedule. It
 enforces the document's rules where the code says A1..A8. Each applied sample drives
 the device's simulated plate (the carrier it modulates, made at SIM_RATE_HZ, through the
@@ -716,7 +715,8 @@ class Line(Protocol):
         """Drop the bytes sent but not read by the host yet (a new session starts: they are stale)."""
 
     def wait(self, until_ns: int) -> None:
-        """Return when bytes are waiting, or at ``until_ns`` (ns) at the latest."""
+        """Return when bytes may be waiting (a Port: when they arrive; a MemoryLine: at its clock's next event, the
+        host's), or at ``until_ns`` (ns) at the latest."""
 
     def close(self) -> None:
         """End the line (the host's reads end)."""
@@ -917,7 +917,7 @@ class FaultPlan:
     seed: int = 0
 
 
-def at_or_after_ns(t_s: float) -> int:
+def _at_or_after_ns(t_s: float) -> int:
     """The first whole ns that, read back in s (``ns / 1e9``), is not before ``t_s`` (finite, s)."""
     t_ns = math.ceil(t_s * 1e9)
     while t_ns / 1e9 < t_s:
@@ -982,7 +982,7 @@ class Emulator:
         self._send()
         deadline = now + (RAMP_MS + 50) / 1000
         while not self.amplifier.at_rest and now < deadline:
-            self.clock.sleep_until_ns(at_or_after_ns(now + TICK_S))
+            self.clock.sleep_until_ns(_at_or_after_ns(now + TICK_S))
             now = self.now_s()
             self.amplifier.advance(now)
             self._send()
@@ -1052,7 +1052,7 @@ class Emulator:
             wake_s = min(wake_s, self._delayed[0][0])
         if self._overcurrents:
             wake_s = min(wake_s, self._overcurrents[0])
-        wake_ns = at_or_after_ns(wake_s)
+        wake_ns = _at_or_after_ns(wake_s)
         if self._reading(now):
             self.line.wait(wake_ns)
         else:
