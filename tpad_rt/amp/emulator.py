@@ -1,8 +1,9 @@
 """A software serial amplifier that follows docs/amp-protocol.md (version 2); ``tpad-rt amp emulate`` runs it.
 
 The :class:`Amplifier` is the protocol's amplifier side as a discrete-event machine on
-times (s) it is given: host frames arrive at given times, envelope samples play at their due times (``t_run + (k - start_index) / envelope_hz`` while
-RUNNING), STATUS goes out every ``status_period_ms`` on a microsecond schedule. It
+times (s) it is given: host frames arrive at given times, envelope samples play at their
+due times (``t_run + (k - start_index) / envelope_hz`` while RUNNING), STATUS goes out
+every ``status_period_ms`` on a microsecond schedule. It
 enforces the document's rules where the code says A1..A8. Each applied sample drives
 the device's simulated plate (the carrier it modulates, made at SIM_RATE_HZ, through the
 resonator of :mod:`tpad_rt.kernel.sim`) and the device's circuit gives the measured
