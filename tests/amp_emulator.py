@@ -1,8 +1,9 @@
 """The amplifier emulator as a test component: ``tpad-rt amp emulate`` in its own process, on a new pty.
 
-``Emulator(tmp_path, *flags)`` starts it, reads its first line for the port, and
-``.finish()`` ends it with SIGTERM (by PID) and returns its recording (a dict of
-arrays). Used as a context manager it is killed on the way out whatever happened.
+``Emulator(folder, *flags)`` starts it (recording into ``folder``, made if missing),
+reads its first line for the port, and ``.finish()`` ends it with SIGTERM (by PID) and
+returns its recording (a dict of arrays). Used as a context manager it is killed on the
+way out whatever happened.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ class Emulator:
     """``tpad-rt amp emulate --record DIR/amp.npz FLAGS``; ``.port`` is the pty to give the host."""
 
     def __init__(self, folder: Path, *flags: str):
+        folder.mkdir(parents=True, exist_ok=True)
         self.record = folder / "amp.npz"
         self.process = subprocess.Popen([sys.executable, "-m", "tpad_rt", "amp", "emulate", "--record",
                                          str(self.record), *flags], cwd=REPO, stdin=subprocess.DEVNULL,

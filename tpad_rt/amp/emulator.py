@@ -1,15 +1,17 @@
 """A software serial amplifier that follows docs/amp-protocol.md (version 2); ``tpad-rt amp emulate`` runs it.
 
 The :class:`Amplifier` is the protocol's amplifier side as a discrete-event machine on
-the host's ``time.monotonic()`` clock: host frames arrive at given times, envelope
-samples play at their due times (``t_run + (k - start_index) / envelope_hz`` while
-RUNNING), STATUS goes out every ``status_period_ms`` on a microsecond schedule. It
+times (s) it is given: host frames arrive at given times, envelope samples play at their
+due times (``t_run + (k - start_index) / envelope_hz`` while RUNNING), STATUS goes out
+every ``status_period_ms`` on a microsecond schedule. It
 enforces the document's rules where the code says A1..A8. Each applied sample drives
 the device's simulated plate (the carrier it modulates, made at SIM_RATE_HZ, through the
 resonator of :mod:`tpad_rt.kernel.sim`) and the device's circuit gives the measured
-current and phase. The :class:`Emulator` runs it in real time on a :class:`Port` (a new
-pty, or an existing serial device), applies the :class:`FaultPlan`, and stops on request
-with the output ramped to 0.
+current and phase. The :class:`Emulator` runs it on a :class:`Line` and a
+:class:`tpad_rt.clock.Clock`, applies the :class:`FaultPlan`, and stops on request with
+the output ramped to 0: in real time on a :class:`Port` (a new pty, or an existing serial
+device) with the monotonic clock, or on a :class:`MemoryLine` with a virtual clock, where a
+test is the host and every time is exact.
 
 Choices the document leaves open (each said again where it is made):
 
@@ -40,9 +42,12 @@ amplifier_info(device, circuit) -> Info         what this amplifier says in INFO
 Circuit(device, force_n), Plate(device, force_n, sim_rate_hz)   the load
 Amplifier(info, circuit, plate, origin_s, recorder=None, on_hello=None)   the protocol machine
 Recorder(limit), write_recording(path, recorder, scalars), check_record_path(path)
-Port.open_pty(), Port.open_device(path)        the line
+counters(amplifier), recording_scalars(amplifier, recorder)   the summary's and the recording's numbers
+Line                                           the protocol the Emulator serves: read, write, wait, ...
+Port.open_pty(), Port.open_device(path)        a real line (CLOCK_MONOTONIC)
+MemoryLine(virtual_clock, name, output_room)   a line in memory: feed(bytes), take() -> [(t_ns, bytes)]
 FaultPlan(...)                                 faults on demand (``--fault``)
-Emulator(amplifier, port, plan, origin_s, duration_s).run(stop_requested) -> reason
+Emulator(amplifier, line, plan, clock, duration_s).run(stop_requested) -> reason
 """
 
 from __future__ import annotations
@@ -59,12 +64,14 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.amp import wire
 from tpad_rt.amp.wire import Code, Fault, State, Type
+from tpad_rt.clock import Clock, VirtualClock
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, printable
 from tpad_rt.files import NewFile, check_writable_target
@@ -117,6 +124,8 @@ MAX_STATUS_LAG_S = 0.1
 #: Most received bytes a tick reads, and most held back by a delay fault (then dropped, as by a full UART).
 READ_LIMIT_BYTES = 1 << 16
 MAX_DELAYED_BYTES = 1 << 20
+#: How long (s) the emulator stops reading after it saw the host gone (end of file, an error): it does not spin.
+HOST_GONE_WAIT_S = 0.1
 #: Most unsent bytes kept for a host that does not read; past it they are dropped (a 0x00 ends a cut frame).
 MAX_UNSENT_BYTES = 1 << 16
 
@@ -284,7 +293,7 @@ class SampleClock:
 
 
 class Amplifier:
-    """The amplifier of docs/amp-protocol.md as a discrete-event machine on the monotonic clock (s).
+    """The amplifier of docs/amp-protocol.md as a discrete-event machine on given times (s, any clock's).
 
     Feed it candidate frames with :meth:`receive`, faults with :meth:`fault`, and the
     passing of time with :meth:`advance`; what it sends accumulates in ``out``. Times
@@ -673,15 +682,57 @@ def write_recording(path: str, recorder: Recorder, scalars: dict[str, float | in
                 np.lib.format.write_array(member, array, allow_pickle=False)
 
 
+def counters(amplifier: Amplifier) -> dict[str, int]:
+    """STATUS's counters since the last HELLO, and ``faults``: what the summary and the recording say."""
+    return {**vars(amplifier.counters), "faults": amplifier.faults}
+
+
+def recording_scalars(amplifier: Amplifier, recorder: Recorder) -> dict[str, float | int | list[float]]:
+    """The scalars a recording holds beside its columns (:mod:`tpad_rt.cli.amp` lists them)."""
+    info = amplifier.info
+    return {**counters(amplifier), "envelope_hz": amplifier.envelope_hz, "full_scale_mv": info.full_scale_mv,
+            "max_mv": info.max_mv, "slew_mv_per_ms": info.slew_mv_per_ms, "truncated": recorder.truncated,
+            "watchdog_trip_t_s": amplifier.watchdog_trip_t_s}
+
+
 # --- the line ------------------------------------------------------------------------------------------------
 
+class Line(Protocol):
+    """What the :class:`Emulator` serves: the amplifier's end of a serial line (the host holds the other end).
+
+    Times are ns on the clock the Emulator runs on.
+    """
+
+    name: str
+    closed: bool
+
+    def read(self, limit: int) -> bytes | None:
+        """Up to ``limit`` bytes waiting (b"" when none); None when the host is gone."""
+
+    def write(self, data: bytes | bytearray) -> int:
+        """How many bytes of ``data`` were taken now (the rest must wait); all of them when the host is gone."""
+
+    def discard_output(self) -> None:
+        """Drop the bytes sent but not read by the host yet (a new session starts: they are stale)."""
+
+    def wait(self, until_ns: int) -> None:
+        """Return when bytes may be waiting (a Port: when they arrive; a MemoryLine: at its clock's next event, the
+        host's), or at ``until_ns`` (ns) at the latest."""
+
+    def close(self) -> None:
+        """End the line (the host's reads end)."""
+
+
 class Port:
-    """The serial line: ``fd`` read and written without blocking; ``name`` is what a host opens."""
+    """A real serial line: ``fd`` read and written without blocking; ``name`` is what a host opens. Its times are
+    CLOCK_MONOTONIC's (ns): an Emulator on a Port runs on a :class:`tpad_rt.clock.MonotonicClock`."""
 
     def __init__(self, fd: int, name: str, flush: Callable[[], None], keep_fd: int | None = None):
         self.fd, self.name = fd, name
         self._flush = flush
         self._keep_fd = keep_fd
+        self._poller = select.poll()
+        self._poller.register(fd, select.POLLIN)
         self.closed = False
 
     @classmethod
@@ -753,6 +804,10 @@ class Port:
         except termios.error:  # a device that went away: nothing to drop
             pass
 
+    def wait(self, until_ns: int) -> None:
+        """Return when bytes are waiting, or when CLOCK_MONOTONIC reaches ``until_ns`` (ns) at the latest."""
+        self._poller.poll(max(0.0, (until_ns - time.monotonic_ns()) / 1e6))
+
     def close(self) -> None:
         if not self.closed:
             self.closed = True
@@ -761,7 +816,87 @@ class Port:
                     os.close(fd)
 
 
-# --- faults and the real-time loop ---------------------------------------------------------------------------
+class MemoryLine:
+    """A line in memory on a :class:`tpad_rt.clock.VirtualClock` (pyserial's ``loop://`` is the model): the seam
+    on which an Emulator runs deterministically, as fast as the host computes, with the test as its host.
+
+    The host writes with :meth:`feed` (from an event of the clock: the bytes arrive at its time) and reads what
+    the emulator sent with :meth:`take`, each write stamped with the clock's time. ``output_room`` (None: no
+    limit) is how many unread bytes the host's side holds: past it a write takes only what fits, as a full pty.
+    ``hung_up`` set: the host is gone (reads end, writes are swallowed), until it is cleared.
+    ``unread_bytes``: what waits for the host (FIONREAD on its end); ``reads``: the emulator's reads so far.
+    """
+
+    def __init__(self, clock: VirtualClock, name: str = "memory", output_room: int | None = None):
+        self.name = name
+        self.closed = False
+        self.hung_up = False
+        self.output_room = output_room
+        self.reads = 0
+        self._clock = clock
+        self._incoming: deque[bytes] = deque()
+        self._read_from = 0  # bytes of the first incoming chunk already read
+        self._outgoing: list[tuple[int, bytes]] = []
+        self.unread_bytes = 0
+
+    # --- the host's end ---
+
+    def feed(self, data: bytes) -> None:
+        """Bytes the host writes, arriving now (kept as they are, not copied)."""
+        if data:
+            self._incoming.append(data)
+
+    def take(self) -> list[tuple[int, bytes]]:
+        """What the emulator sent since the last take, as (clock time in ns of the write, bytes)."""
+        taken, self._outgoing, self.unread_bytes = self._outgoing, [], 0
+        return taken
+
+    # --- the emulator's end (Line) ---
+
+    def read(self, limit: int) -> bytes | None:
+        """Up to ``limit`` of the bytes fed so far; None while hung up. Each call counts in ``reads``."""
+        self.reads += 1
+        if self.hung_up:
+            return None
+        parts: list[bytes] = []
+        size = 0
+        while self._incoming and size < limit:
+            head = self._incoming[0]
+            part = head[self._read_from:self._read_from + limit - size]
+            self._read_from += len(part)
+            if self._read_from == len(head):
+                self._incoming.popleft()
+                self._read_from = 0
+            parts.append(part)
+            size += len(part)
+        return b"".join(parts)
+
+    def write(self, data: bytes | bytearray) -> int:
+        """Take as much of ``data`` as ``output_room`` allows (all of it while hung up, as on a real line)."""
+        if self.hung_up:
+            return len(data)
+        size = len(data) if self.output_room is None else min(len(data), self.output_room - self.unread_bytes)
+        if size > 0:
+            self._outgoing.append((self._clock.now_ns(), bytes(data[:size])))
+            self.unread_bytes += size
+        return max(size, 0)
+
+    def discard_output(self) -> None:
+        """Drop what the host has not taken."""
+        self.take()
+
+    def wait(self, until_ns: int) -> None:
+        """Advance the clock to its next event (the host's: a write, a stop request) or to ``until_ns`` (ns),
+        whichever comes first; not at all when bytes are waiting."""
+        if not self._incoming:
+            next_ns = self._clock.next_event_ns()
+            self._clock.advance_to(until_ns if next_ns is None else min(next_ns, until_ns))
+
+    def close(self) -> None:
+        self.closed = True
+
+
+# --- faults and the run loop ---------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class FaultPlan:
@@ -783,15 +918,30 @@ class FaultPlan:
     seed: int = 0
 
 
-class Emulator:
-    """Runs ``amplifier`` in real time on ``port`` with the faults of ``plan``, for ``duration_s`` (None: no end)."""
+def _at_or_after_ns(t_s: float) -> int:
+    """The first whole ns that, read back in s (``ns / 1e9``), is not before ``t_s`` (finite, s)."""
+    t_ns = math.ceil(t_s * 1e9)
+    while t_ns / 1e9 < t_s:
+        t_ns += 1
+    return t_ns
 
-    def __init__(self, amplifier: Amplifier, port: Port, plan: FaultPlan, origin_s: float,
+
+class Emulator:
+    """Runs ``amplifier`` on ``line`` with the faults of ``plan``, on ``clock``, for ``duration_s`` (None: no end).
+
+    In real time on a :class:`Port` with a :class:`tpad_rt.clock.MonotonicClock` (``tpad-rt amp
+    emulate``), or on a :class:`MemoryLine` with its :class:`tpad_rt.clock.VirtualClock` (the
+    tests: the host's writes are the clock's events). The plan's times count from the
+    amplifier's ``origin_s``; times in s are the clock's ns / 1e9.
+    """
+
+    def __init__(self, amplifier: Amplifier, line: Line, plan: FaultPlan, clock: Clock,
                  duration_s: float | None = None):
         self.amplifier = amplifier
-        self.port = port
+        self.line = line
         self.plan = plan
-        self.origin_s = origin_s
+        self.clock = clock
+        origin_s = amplifier.origin_s
         self.end_s = math.inf if duration_s is None else origin_s + duration_s
         self._rng = np.random.default_rng(plan.seed)
         self._splitter = wire.FrameSplitter()
@@ -802,17 +952,19 @@ class Emulator:
         self._disconnect_s = math.inf if plan.disconnect_at_s is None else origin_s + plan.disconnect_at_s
         self._deaf_until_s = -math.inf  # after the host was seen gone, poll again later
         self.dropped_out_bytes = 0
-        self._poller = select.poll()
-        self._poller.register(port.fd, select.POLLIN)
+
+    def now_s(self) -> float:
+        """The clock's time (s)."""
+        return self.clock.now_ns() / 1e9
 
     def run(self, stop_requested: Callable[[], bool]) -> str:
         """Serve the line until ``stop_requested()``, the duration or a disconnect fault; then ramp to 0.
 
         Returns why it ended: ``"stopped"``, ``"duration"`` or ``"disconnected"``.
         """
-        previous_s, noted_s = time.monotonic(), -math.inf
+        previous_s, noted_s = self.now_s(), -math.inf
         while True:
-            now = time.monotonic()
+            now = self.now_s()
             reason = ("stopped" if stop_requested() else "duration" if now >= self.end_s
                       else "disconnected" if now >= self._disconnect_s else "")
             if reason:
@@ -826,12 +978,13 @@ class Emulator:
             self._tick(now)
             self._wait(now)
         if reason == "disconnected":
-            self.port.close()
+            self.line.close()
         self.amplifier.stop_output(now)
+        self._send()
         deadline = now + (RAMP_MS + 50) / 1000
         while not self.amplifier.at_rest and now < deadline:
-            time.sleep(TICK_S)
-            now = time.monotonic()
+            self.clock.sleep_until_ns(_at_or_after_ns(now + TICK_S))
+            now = self.now_s()
             self.amplifier.advance(now)
             self._send()
         return reason
@@ -839,9 +992,9 @@ class Emulator:
     def _tick(self, now: float) -> None:
         events: list[tuple[float, bytes | None | Fault]] = []
         if self._reading(now):
-            data = self.port.read(READ_LIMIT_BYTES)
+            data = self.line.read(READ_LIMIT_BYTES)
             if data is None:
-                self._deaf_until_s = now + 0.1  # the host is gone: do not spin on end of file
+                self._deaf_until_s = now + HOST_GONE_WAIT_S  # the host is gone: do not spin on end of file
             elif data:
                 self._hold(self._line_faults(data), now)
         while self._delayed and self._delayed[0][0] <= now:
@@ -859,7 +1012,7 @@ class Emulator:
         self._send()
 
     def _reading(self, now: float) -> bool:
-        return (not self.port.closed and now >= self._deaf_until_s
+        return (not self.line.closed and now >= self._deaf_until_s
                 and not any(start <= now < end for start, end in self._stalls))
 
     def _line_faults(self, data: bytes) -> bytes:
@@ -882,17 +1035,17 @@ class Emulator:
 
     def _send(self) -> None:
         out = self.amplifier.out
-        if self.port.closed:
+        if self.line.closed:
             out.clear()
             return
         if out:
-            del out[:self.port.write(out)]
+            del out[:self.line.write(out)]
         if len(out) > MAX_UNSENT_BYTES:  # the host does not read: drop, ending any frame cut short
             self.dropped_out_bytes += len(out)
             out[:] = b"\x00"
 
     def _wait(self, now: float) -> None:
-        """Sleep until bytes arrive or the next thing is due: a tick while samples play, a STATUS, delayed bytes,
+        """Wait until bytes arrive or the next thing is due: a tick while samples play, a STATUS, delayed bytes,
         a planned fault, a stall's edge, the end."""
         wake_s = min(now + (TICK_S if self.amplifier.playing else IDLE_WAIT_S), self.amplifier.next_status_s,
                      self.end_s, self._disconnect_s, *(edge for span in self._stalls for edge in span if edge > now))
@@ -900,8 +1053,8 @@ class Emulator:
             wake_s = min(wake_s, self._delayed[0][0])
         if self._overcurrents:
             wake_s = min(wake_s, self._overcurrents[0])
-        timeout_ms = max(0.0, (wake_s - time.monotonic()) * 1000)
+        wake_ns = _at_or_after_ns(wake_s)
         if self._reading(now):
-            self._poller.poll(timeout_ms)
+            self.line.wait(wake_ns)
         else:
-            time.sleep(timeout_ms / 1000)
+            self.clock.sleep_until_ns(wake_ns)

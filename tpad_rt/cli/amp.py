@@ -49,15 +49,15 @@ import signal
 import sys
 import textwrap
 import threading
-import time
 from collections.abc import Callable, Iterator
 from types import FrameType
 
 from tpad_rt.amp.emulator import (
-    Amplifier, Circuit, Emulator, FaultPlan, Plate, Port, Recorder, amplifier_info, check_record_path, sim_rate_hz,
-    write_recording,
+    Amplifier, Circuit, Emulator, FaultPlan, Plate, Port, Recorder, amplifier_info, check_record_path, counters,
+    recording_scalars, sim_rate_hz, write_recording,
 )
 from tpad_rt.cli.arguments import Subparsers, number, whole
+from tpad_rt.clock import MonotonicClock
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.limits import MAX_FORCE_N, MAX_INPUT_S
@@ -209,9 +209,9 @@ def run(args: argparse.Namespace) -> int:
     with _stop_signals() as stop:  # to the end: a second signal must not cut the recording short
         port = Port.open_pty() if args.port is None else Port.open_device(args.port)
         try:
-            origin_s = time.monotonic()
-            amplifier = Amplifier(info, circuit, plate, origin_s, recorder, on_hello=port.discard_output)
-            emulator = Emulator(amplifier, port, plan, origin_s, args.duration)
+            clock = MonotonicClock()
+            amplifier = Amplifier(info, circuit, plate, clock.now_ns() / 1e9, recorder, on_hello=port.discard_output)
+            emulator = Emulator(amplifier, port, plan, clock, args.duration)
             # The ~150k objects of the imports would make each full collection a 70 ms stall of the real-time
             # loop, past A4's watchdog: frozen, a collection scans only what the emulator makes.
             gc.freeze()
@@ -220,14 +220,9 @@ def run(args: argparse.Namespace) -> int:
             ending = emulator.run(stop.is_set)
         finally:
             port.close()
-        counters = {**vars(amplifier.counters), "faults": amplifier.faults}
         if recorder is not None:
-            write_recording(args.record, recorder, {
-                **counters, "envelope_hz": amplifier.envelope_hz, "full_scale_mv": info.full_scale_mv,
-                "max_mv": info.max_mv, "slew_mv_per_ms": info.slew_mv_per_ms, "truncated": recorder.truncated,
-                "watchdog_trip_t_s": amplifier.watchdog_trip_t_s,
-            })
-        summary = " ".join(f"{name}={value}" for name, value in counters.items())
+            write_recording(args.record, recorder, recording_scalars(amplifier, recorder))
+        summary = " ".join(f"{name}={value}" for name, value in counters(amplifier).items())
         if emulator.dropped_out_bytes:
             summary += f" ({emulator.dropped_out_bytes} bytes for a host that did not read them were dropped)"
         print(f"amplifier emulator {_ENDINGS[ending]}: {summary}", flush=True)
