@@ -50,11 +50,17 @@ class VirtualRun:
         return self.driver.link
 
     def start(self) -> VirtualRun:
-        """Open the link (the handshake, on the clock) and start the stream."""
+        """Open the link (the handshake, on the clock) and start the stream; an error closes the driver (STOP if
+        START went out), as Renderer.start does, and is raised."""
         self.driver.warm(self.table.copy())
-        self.driver.open(self.pipeline)
-        self.pipeline.start()
-        self.driver.start(self.table)
+        try:
+            self.driver.open(self.pipeline)
+            self.pipeline.start()
+            self.driver.start(self.table)
+        except BaseException:
+            self.pipeline.stop()
+            self.driver.close(self.driver.options.ramp_ms)
+            raise
         return self
 
     def swipe(self, seconds: float, speed_mm_s: float = 50.0, force_n: float = 0.5, x0_mm: float = 20.0) -> None:

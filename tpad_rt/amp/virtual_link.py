@@ -10,7 +10,7 @@ API map
 -------
 VirtualLink(clock, amplifier, *, name="virtual", baud=921600, capacity_bytes=4096)
     a :class:`tpad_rt.outputs.serial_line.Line` to ``amplifier`` (a
-    :class:`tpad_rt.amp.emulator.Amplifier`); give it to ``AmpLink.open(..., line=)`` or a
+    :class:`tpad_rt.amp.emulator.Amplifier`, or any :class:`AmplifierSide`); give it to ``AmpLink.open(..., line=)`` or a
     ``SerialStreamDriver(..., open_line=)``. Its stream runs the steps of
     :mod:`tpad_rt.kernel.amp_stream` as events on the clock.
 VirtualLink.emulating(device, *, clock=None, force_n=0.5, **options) -> VirtualLink
@@ -36,8 +36,9 @@ import errno as _errno
 import math
 import os
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -60,6 +61,26 @@ from tpad_rt.kernel import amp_stream
 BITS_PER_BYTE = 10
 
 
+class AmplifierSide(Protocol):
+    """What the link needs of the amplifier at the other end: :class:`tpad_rt.amp.emulator.Amplifier`'s
+    discrete-event interface (times in s on its own clock; what it sends accumulates in ``out``)."""
+
+    out: bytearray
+    now_s: float
+    on_hello: Callable[[], None] | None
+    recorder: Recorder | None
+
+    @property
+    def next_status_s(self) -> float:
+        """When it sends its next STATUS unasked (s; inf: never)."""
+
+    def receive(self, encoded: bytes | None, t_s: float) -> None:
+        """Act on a candidate frame (None: an over-long run) at ``t_s``."""
+
+    def advance(self, t_s: float) -> None:
+        """Do what is due up to ``t_s``."""
+
+
 @dataclass(frozen=True)
 class LineFaults:
     """What the line does to the host's bytes on their way to the amplifier, seeded by ``seed``: each byte is
@@ -79,7 +100,7 @@ class VirtualLink:
     The amplifier's clock starts at 0 s when the link is made.
     """
 
-    def __init__(self, clock: VirtualClock, amplifier: Amplifier, *, name: str = "virtual", baud: int = 921600,
+    def __init__(self, clock: VirtualClock, amplifier: AmplifierSide, *, name: str = "virtual", baud: int = 921600,
                  capacity_bytes: int = 4096):
         self.name = name
         self.clock = clock
