@@ -88,7 +88,7 @@ def _missed_samples(link: AmpLink) -> int:
     writer's frames: its underruns, and the samples of the frames it refused (late ones, or any after its
     watchdog tripped); -1 if no STATUS came."""
     link._command((5).to_bytes(2, "little"), codec.MSG_STOP, "STOP")
-    body = link._receive(codec.MSG_STATUS, time.monotonic() + 1.0)
+    body = link._receive(codec.MSG_STATUS, link.clock.now_ns() + 1_000_000_000)
     if body is None:
         return -1
     rejected = int(codec.get_u32(body, codec.PAYLOAD + codec.STATUS_FRAMES_REJECTED))

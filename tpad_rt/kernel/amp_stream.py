@@ -1,32 +1,53 @@
-"""The serial amplifier's streamer: one numba call that streams the envelope for a whole run, without the GIL.
+"""The serial amplifier's streamer: a step that takes the time and the bytes read and returns the bytes to write and
+when to wake, and one numba call that runs it on a real port for a whole run, without the GIL.
 
 API map
 -------
-stream(table, link, buffers) -> int
-    render envelope frames with the pointer table's arrays (:mod:`tpad_rt.kernel.table`)
-    and write them to the port's file descriptor at the amplifier's pace, reading its
-    STATUS and ACK frames, until ``link[LINK_STOP]`` is set or the link fails, then send
-    STOP unless the port is lost (H8); returns the EXIT_* reason (also in ``link[LINK_EXIT]``)
+begin(table, link, now_ns)
+    set the step's state for a run starting at ``now_ns`` from the table's next sample
+reading(link) -> bool
+    whether the run reads the port now (not once it ends: STOP's ACK is the Python side's)
+on_received(link, buffers, count, now_ns) -> int
+    act on ``count`` bytes just read into ``BUF_RX`` at ``LINK_RX_LENGTH`` (negative:
+    ``-errno`` of a failed read), dated ``now_ns``; the EXIT_* reason the run now ends for
+step(table, link, buffers, envelope, times, now_ns) -> int
+    react to the STATUS frames taken, check the timeouts, queue the frames due (rendered
+    with the pointer table's arrays, :mod:`tpad_rt.kernel.table`) or, once the run ends,
+    STOP (H8); the bytes waiting in ``BUF_TX[LINK_TX_FIRST:LINK_TX_END]``
+on_written(link, count) -> int
+    the port took ``count`` of them (0: full; negative: ``-errno``); the bytes still waiting
+settle(link, now_ns) -> int
+    after the writes: the stall check, the prefill's end; when to wake (ns), or RUN_OVER
+    (``link[LINK_EXIT]`` says why)
+stream(table, link, buffers, envelope, times) -> int
+    the production loop: the steps above on CLOCK_MONOTONIC and the non-blocking
+    descriptor ``link[LINK_FD]`` (reads until EAGAIN, writes until EAGAIN, EINTR retried,
+    ``clock_nanosleep`` to the wake time), until the run is over; the EXIT_* reason
 carrier_echo_ok(link, asked_mhz, achieved_mhz) / check_status(link, body, now_ns) / start_checks(link)
     the checks of what the amplifier reports (H2, H10), shared with the Python side
-LINK_*, EXIT_*, EXIT_NAMES, BUF_*
-    the layout of the int64 ``link`` array it shares with the Python side, the exit
-    reasons, and the uint8 buffers it works in
+LINK_*, STAGE_*, EXIT_*, EXIT_NAMES, BUF_*
+    the layout of the int64 ``link`` array it shares with the Python side (the step's own
+    state between calls in its last block), the run's stages, the exit reasons, and the
+    uint8 buffers it works in
 
 docs/amp-protocol.md is the protocol (rules H3-H7 are the host's, here) and
-docs/realtime.md the design. The Python side (:mod:`tpad_rt.outputs.serial`) opens the
-port, makes the handshake (HELLO, SET_CARRIER, START) and calls :func:`stream` from a
-thread of its own; numba releases the GIL for the whole call, so the frames keep their
-cadence while the application's Python threads hold it. The loop wakes every
-``WAKE_NS`` (or sooner when a frame is due): it reads what the amplifier sent (never
-blocking: the descriptor is non-blocking), keeps the amplifier's buffer at the target
-fill from its own clock, corrected by each STATUS, renders one frame at a time by
+docs/realtime.md the design. The Python side (:mod:`tpad_rt.outputs.serial_amp`) makes
+the handshake (HELLO, SET_CARRIER, START) on its line, then the line runs the steps: on a
+real port (:class:`tpad_rt.outputs.serial_line.SerialLine`) :func:`stream`, in a thread of
+its own, one numba call that releases the GIL for the whole run, so the frames keep their
+cadence while the application's Python threads hold it; on the virtual link
+(:mod:`tpad_rt.amp.virtual_link`) the same compiled steps as events on a virtual clock,
+against the in-process amplifier emulator. Every timing decision (pacing, skip-ahead,
+restart after the watchdog, the STATUS timeout, a stalled port, the STOP tail) is the
+step's; the loop around it only reads the clock, moves bytes and sleeps. The step wakes
+every ``WAKE_NS`` (or sooner when a frame is due): it keeps the amplifier's buffer at the
+target fill from its own clock, corrected by each STATUS, renders one frame at a time by
 calling the audio driver's compiled callback on the same pointer table (the kernel
-renders the envelope: ``cfg[CFG_OUTPUT_ENVELOPE]``), and writes it; bytes a
-full port refuses wait in a pending buffer. It allocates nothing.
+renders the envelope: ``cfg[CFG_OUTPUT_ENVELOPE]``); bytes a full port refuses wait in
+BUF_TX. It allocates nothing.
 
 Play position: the host estimates the sample ``p`` the amplifier plays now as
-``ref_index + (now - ref_ns) * envelope_hz``, from when the prefill has been written
+``ref_index + (now - ref_ns) * envelope_hz`` (LINK_REF_INDEX, LINK_REF_NS), from when the prefill has been written
 until a RUNNING STATUS says which sample (``play_index``, unwrapped from 32 bits) it
 played at its own time ``time_us``. That time is put on the host's clock by the
 smallest offset (receive time - ``time_us``) seen so far: the STATUS the line and the

@@ -113,6 +113,9 @@ class SerialLine:
         return cls(name, port, fd)
 
     def read(self) -> bytes:
+        # A tty with VMIN = 0 reads b"" for "nothing now": only a readable port that reads nothing has closed.
+        if not select.select([self._fd], [], [], 0)[0]:
+            return b""
         try:
             chunk = os.read(self._fd, READ_BYTES)
         except BlockingIOError:
