@@ -272,3 +272,20 @@ def test_the_recording_columns_are_the_emulator_s() -> None:
     run.stop()
     recording = link.recording()
     assert set(recording) == set(RECORDED_COLUMNS) and len(recording["t_s"]) > 1600
+
+
+def test_a_stop_whose_stop_frame_cannot_go_out_ends_as_stalled_without_a_stop_seq() -> None:
+    """H8's tail: the run stops on request while the line is full (the amplifier stopped reading 100 ms ago, under
+    the stall timeout); STOP waits for the port a STATUS timeout, then the run ends as a failure, no STOP sent."""
+    link = VirtualLink.emulating(DEVICE)
+    run = swiped(link, 0.2)
+    link.stop_reading()
+    run.run_for(0.1)
+    assert run.driver.poll(run.table) is None and run.stats()["tx_blocked"] > 0
+    stopping_ns = link.clock.now_ns()
+    failure = run.driver.close(5.0)
+    assert failure is None  # nothing had failed when the stop was asked
+    stopped = run.driver._last_link.link  # type: ignore[union-attr]
+    assert stopped[amp_stream.LINK_EXIT] == amp_stream.EXIT_TX_STALLED and stopped[amp_stream.LINK_STOP_SEQ] == -1
+    assert link.clock.now_ns() - stopping_ns >= stopped[amp_stream.LINK_STATUS_TIMEOUT_NS]
+    assert "stopped reading" in str(run.driver._last_link.failure())  # type: ignore[union-attr]

@@ -119,7 +119,7 @@ from tpad_rt.kernel.amp_codec import (
 )
 from tpad_rt.kernel.atomics import load_acquire
 from tpad_rt.kernel.cache_stamp import stamp_cache
-from tpad_rt.kernel import device_lookup
+from tpad_rt.kernel import callback, device_lookup, layout
 from tpad_rt.kernel.layout import (
     CFG_C0_F,
     CFG_SHUNT_OHM,
@@ -144,7 +144,10 @@ from tpad_rt.kernel.libc import (
 )
 from tpad_rt.kernel.table import kernel_views
 
-stamp_cache(__file__, codec.__file__, libc.__file__, atomics.__file__, tab.__file__, device_lookup.__file__)
+# Compiled in: the codec, the libc calls, the atomics, the table's views, the device lookups, the layout's and the
+# callback's constants.
+stamp_cache(__file__, codec.__file__, libc.__file__, atomics.__file__, tab.__file__, device_lookup.__file__,
+            layout.__file__, callback.__file__)
 
 # --- link: int64[LINK_SIZE]; the Python side writes the first block before the run --------
 LINK_FD = 0                   # the port's file descriptor (non-blocking)
