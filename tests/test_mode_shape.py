@@ -16,7 +16,8 @@ from scipy.integrate import quad
 
 from cli_run import REPO, tpad_rt
 from test_track import _even
-from tpad_rt.cli.show import Finger, draw, plate_maps
+from tpad_rt.cli.show import draw
+from tpad_rt.plate_maps import Finger, plate_maps
 from tpad_rt.device import Device
 from tpad_rt.kernel import layout
 from tpad_rt.physics.mode_shape import deflection, free_free_beta_l, patch_mean

@@ -8,7 +8,7 @@ import pytest
 from tpad_rt.device import Device
 from tpad_rt.drivers import open_driver
 from tpad_rt.errors import ConfigError
-from tpad_rt.outputs import Consumes, Runs, open_output, output_forms, output_kind
+from tpad_rt.outputs import Capability, Consumes, open_output, output_forms, output_kind
 from tpad_rt.outputs.null import NullOutput
 from tpad_rt.outputs.sim import SimOutput
 from tpad_rt.pipeline import RenderOptions
@@ -56,19 +56,20 @@ def test_url_errors(url: str, expected: str) -> None:
 
 
 @pytest.mark.parametrize(
-    ("url", "consumes", "runs", "driver"),
+    ("url", "consumes", "capabilities", "driver"),
     [
-        ("audio://", Consumes.DAC, Runs.CALLBACK, "AudioCallbackDriver"),
-        ("serial:///dev/ttyACM0", Consumes.ENVELOPE, Runs.STREAM, "SerialStreamDriver"),
-        ("sim://", Consumes.DAC, Runs.PACED, "PacedDriver"),
-        ("wav:///tmp/x.wav", Consumes.DAC, Runs.PACED, "PacedDriver"),
-        ("null://", Consumes.DAC, Runs.PACED, "PacedDriver"),
+        ("audio://", Consumes.DAC, Capability.NONE, "AudioCallbackDriver"),
+        ("serial:///dev/ttyACM0", Consumes.ENVELOPE, Capability.NONE, "SerialStreamDriver"),
+        ("sim://", Consumes.DAC, Capability.OFFLINE, "PacedDriver"),
+        ("wav:///tmp/x.wav", Consumes.DAC, Capability.OFFLINE | Capability.WRITES_FILE, "PacedDriver"),
+        ("null://", Consumes.DAC, Capability.OFFLINE, "PacedDriver"),
     ],
 )
-def test_every_scheme_declares_what_it_consumes_and_gets_the_driver_for_it(
-        url: str, consumes: Consumes, runs: Runs, driver: str) -> None:
+def test_every_scheme_declares_what_it_consumes_and_gets_the_driver_it_names(
+        url: str, consumes: Consumes, capabilities: Capability, driver: str) -> None:
     _, kind = output_kind(url)
-    assert (kind.consumes, kind.runs) == (consumes, runs)
+    assert (kind.consumes, kind.capabilities) == (consumes, capabilities)
+    assert kind.driver.endswith(f":{driver}")
     made = open_driver(url, device=DEVICE, rate_hz=192000, block_frames=64, options=RenderOptions(),
                        stall_timeout_s=0.5)
     assert type(made).__name__ == driver and made.consumes is consumes

@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from tpad_rt.cli import main
-from tpad_rt.cli.show import Finger, plate_maps
+from tpad_rt.plate_maps import Finger, plate_maps
 from tpad_rt.device import Device
 from tpad_rt.physics.friction import relative_friction
 from tpad_rt.texture import load_compiled

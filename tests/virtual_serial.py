@@ -5,17 +5,17 @@ rendering the envelope, its CallbackTable, a SerialStreamDriver whose line is th
 :class:`tpad_rt.amp.virtual_link.VirtualLink`), and :meth:`VirtualRun.start`,
 :meth:`VirtualRun.swipe`, :meth:`VirtualRun.stop` do what the Renderer does, on the
 link's virtual clock: the finger's samples are events on it, stamped with the stream's
-time, and stop waits out the drive's ramp on it before the driver closes.
+time, and stop waits out the drive's ramp on it (the driver's own wait) before the driver closes.
 """
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 from tpad_rt.amp.virtual_link import VirtualLink
 from tpad_rt.device import Device
 from tpad_rt.drivers.serial_stream import SerialStreamDriver
-from tpad_rt.kernel.layout import STATE_GATE, STATE_RAMP_START
 from tpad_rt.outputs import output_kind
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.realtime import CallbackTable
@@ -37,7 +37,7 @@ class VirtualRun:
         self.clock = link.clock
         parsed, _ = output_kind(f"serial://{link.name}{'?' + query if query else ''}")
         self.driver = SerialStreamDriver(parsed, device=device, rate_hz=192000, block_frames=64, options=options,
-                                         open_line=lambda target: link)
+                                         clock=link.clock, open_line=lambda target: link)
         compiled = load_compiled(texture)
         self.pipeline = Pipeline(device, compiled, self.driver.rate_hz, options=self.driver.options,
                                  envelope_output=True)
@@ -85,23 +85,15 @@ class VirtualRun:
         """Advance the clock ``seconds`` (s)."""
         self.run_until(self.clock.now_ns() + round(seconds * 1e9))
 
-    def stop(self, limit_s: float = 1.0) -> BaseException | None:
-        """What Renderer.stop does: ramp the drive down, let the stream render the ramp and a block past it (at
-        most ``limit_s`` of the clock), then close the driver (STOP, its ACK); the driver's failure, if any."""
+    def stop(self) -> BaseException | None:
+        """What Renderer.stop does: ramp the drive down, let the stream render the ramp and a block past it (the
+        driver's own wait, on the link's clock; none once the stream failed), then close the driver (STOP, its
+        ACK); the driver's failure, if any."""
         self.pipeline.stop()
-        state = self.table.arrays.state
-        ramp_samples = max(1, round(self.driver.options.ramp_ms * 1e-3 * self.driver.rate_hz))
-        target = self.table.next_sample + self.driver.options.control_interval + ramp_samples + \
-            self.driver.block_frames
-        give_up_ns = self.clock.now_ns() + round(limit_s * 1e9)
-        silent_from = None
-        while self.clock.now_ns() < give_up_ns and self.driver.poll(self.table) is None:
-            index = self.table.next_sample
-            if silent_from is None and not (state[STATE_GATE] or state[STATE_RAMP_START]):
-                silent_from = index
-            if silent_from is not None and index >= max(silent_from + self.driver.block_frames, target):
-                break
-            self.run_for(0.001)
+        ended = threading.Event()
+        if self.driver.poll(self.table) is not None:
+            ended.set()
+        self.driver.wait_silent(self.table, ended)
         self.failure = self.driver.close(self.driver.options.ramp_ms)
         return self.failure
 

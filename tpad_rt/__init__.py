@@ -33,8 +33,7 @@ Physics (``tpad_rt.physics``, SI units, NumPy-vectorised, numba-callable)
 from typing import Any
 
 from tpad_rt.errors import BackendError, ConfigError, TpadError
-
-__version__ = "0.1.0"
+from tpad_rt.version import __version__
 
 __all__ = ["BackendError", "ConfigError", "Renderer", "TpadError", "__version__"]
 

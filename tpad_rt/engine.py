@@ -8,7 +8,7 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
     ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``iter_telemetry(period_s)``, ``record(path)``,
     ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``recent_fingers()``,
-    ``texture_t0_s()``, ``.texture``, ``.audio_device``, ``.callback_table``, ``.rate_hz``,
+    ``texture_t0_s()``, ``.texture``, ``.drive``, ``.callback_table``, ``.rate_hz``,
     ``.block_frames``, ``.running``, ``.driver`` (what runs the output: :mod:`tpad_rt.drivers`)
 
 Example::
@@ -41,38 +41,32 @@ from __future__ import annotations
 import math
 import numbers
 import threading
-import time
 from collections.abc import Iterator
-from dataclasses import asdict
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
 import numpy as np
 
-from tpad_rt import __version__
 from tpad_rt.compiling import compile_notice
 from tpad_rt.device import Device
+from tpad_rt.drive import DriveSpec
 from tpad_rt.drivers import Driver, open_driver
 from tpad_rt.errors import ConfigError
-from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.layout import (
-    CFG_CARRIER_HZ, CFG_MAX_VOLTAGE_V, CFG_POWER_AVG_W, CFG_POWER_CAP_W, CFG_VOLTS_PER_FS, FINGER_DOWN,
-    FINGER_FORCE_N, FINGER_T_S, FINGER_X_MM, FINGER_Y_MM, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEX_PROG_COLS,
+    CFG_POWER_AVG_W, CFG_POWER_CAP_W, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEX_PROG_COLS,
 )
 from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_STALL_TIMEOUT_S
 from tpad_rt.outputs import Consumes
-from tpad_rt.outputs.audio import AudioDevice
 from tpad_rt.pipeline import Pipeline, RenderOptions, shown
 from tpad_rt.realtime import CallbackTable, monotonic_ns
+from tpad_rt.recording import run_metadata
 from tpad_rt.telemetry import TelemetryLog
 from tpad_rt.texture import CompiledTexture, load_compiled
 
 #: Seconds between two passes of the watcher thread (telemetry drain, driver poll).
 WATCH_PERIOD_S = 0.02
-#: The stop waits at most this many times the ramp's duration (plus a second) for the drive to reach 0.
-STOP_TIMEOUT_FACTOR = 20
 
 #: Friction 1 everywhere: the drive stays silent (the texture before any is set).
 NO_TEXTURE = CompiledTexture(np.array([[OP_PUSH_ONE] + [0] * (TEX_PROG_COLS - 1)]), np.zeros(0), np.zeros(0), 1,
@@ -221,13 +215,10 @@ class Renderer:
     def stop(self) -> None:
         """Ramp the drive down to 0, then stop and close the output; again: nothing.
 
-        Waits (bounded) until the kernel's gain has reached 0 (the ramp rendered, from
-        the control step after the stop) and one block more has been rendered past
-        that (the block holding the ramp's end handed to the output). The gain is
-        read, not inferred from the stream's index: a serial stream held up skips its
-        index ahead, past samples it never rendered. A lost or stalled stream is
-        abandoned instead (returns promptly: within ``stall_timeout_s`` plus a second
-        of a stall). Re-raises an error the output or the engine's threads met, and
+        The driver waits (bounded, :meth:`tpad_rt.drivers.Driver.wait_silent`) until the
+        kernel's gain has reached 0 and the block holding the ramp's end went to the
+        output. A lost or stalled stream is abandoned instead (returns promptly: within
+        ``stall_timeout_s`` plus a second of a stall). Re-raises an error the output or the engine's threads met, and
         writes the recording :meth:`record` asked for.
         """
         table = self._table
@@ -235,19 +226,7 @@ class Renderer:
             self.check()
             return
         self._pipeline.stop()
-        state = table.arrays.state
-        ramp_samples = max(1, round(self.options.ramp_ms * 1e-3 * self.rate_hz))
-        target = table.next_sample + self.options.control_interval + ramp_samples + self.block_frames
-        deadline = (time.monotonic() + STOP_TIMEOUT_FACTOR * (target - table.next_sample) / self.rate_hz + 1.0
-                    + self._driver.stall_limit_s())  # a stall that begins now is reported (the watcher) before that
-        silent_from: int | None = None  # the index at which the gain was first seen at 0
-        while not self._ended.is_set() and time.monotonic() < deadline:
-            index = table.next_sample
-            if silent_from is None and not (state[STATE_GATE] or state[STATE_RAMP_START]):
-                silent_from = index
-            if silent_from is not None and index >= max(silent_from + self.block_frames, target):
-                break
-            time.sleep(0.001)
+        silent_by = self._driver.wait_silent(table, self._ended)
         self._halt.set()
         if self._watcher is not None:
             self._watcher.join()
@@ -265,7 +244,7 @@ class Renderer:
         finally:
             self._table = None
             self._ended.set()  # whatever failed: join() and iter_telemetry() return
-        if table.next_sample >= target and (table.arrays.state[STATE_GATE] or table.arrays.state[STATE_RAMP_START]):
+        if table.next_sample >= silent_by and (table.arrays.state[STATE_GATE] or table.arrays.state[STATE_RAMP_START]):
             self._error = self._error or RuntimeError("Renderer.stop: the drive was not ramped to 0")
         self.check()
 
@@ -329,10 +308,10 @@ class Renderer:
             self._pipeline.set_texture(compiled)
 
     @property
-    def audio_device(self) -> AudioDevice | None:
-        """The audio device of the current or last run (None before it, or on a non-audio output)."""
-        device = getattr(self._driver, "audio_device", None)
-        return device if isinstance(device, AudioDevice) else None
+    def drive(self) -> DriveSpec:
+        """The drive the run renders for (carrier, full scale, clamp, rate): the device file's, and from
+        :meth:`start` on what the output's hardware reported (a serial amplifier's INFO and carrier)."""
+        return self._pipeline.drive
 
     @property
     def texture(self) -> CompiledTexture:
@@ -349,15 +328,7 @@ class Renderer:
 
         Read without a lock while a producer may push: the ring's oldest row is left out.
         """
-        arrays = self._pipeline.arrays
-        count = int(arrays.finger_count[0])
-        rows = arrays.finger[np.arange(max(0, count - len(arrays.finger) + 2), count) % len(arrays.finger)]
-        samples = np.zeros(len(rows), dtype=FINGER_DTYPE)
-        for name, column in (("t_s", FINGER_T_S), ("x_mm", FINGER_X_MM), ("y_mm", FINGER_Y_MM),
-                             ("force_n", FINGER_FORCE_N)):
-            samples[name] = rows[:, column]
-        samples["down"] = rows[:, FINGER_DOWN] > 0.5
-        return samples
+        return self._pipeline.recent_fingers()
 
     def now_s(self) -> float:
         """The stream time (s) of the sample at the DAC now (0.0 before the stream runs)."""
@@ -500,15 +471,6 @@ class Renderer:
         self._log.record(path)
 
     def _metadata(self) -> dict[str, Any]:
-        """The recording's metadata: what ran, on what, with which settings (the carrier, full scale and
-        voltage cap the run had: on ``serial://`` the amplifier's, as the handshake set them)."""
-        cfg = self._pipeline.arrays.cfg
-        return {
-            "texture_path": self._texture_path, "texture_description": self._texture.description,
-            "device_label": self.device.label, "carrier_hz": float(cfg[CFG_CARRIER_HZ]),
-            "volts_per_full_scale": float(cfg[CFG_VOLTS_PER_FS]), "max_voltage_v": float(cfg[CFG_MAX_VOLTAGE_V]),
-            "power_budget_w": float(cfg[CFG_POWER_CAP_W]), "power_avg_w": float(cfg[CFG_POWER_AVG_W]),
-            "power_window_s": self.options.power_window_s, "block_frames": self.block_frames,
-            "input_url": "api", "output_url": self.output_url, "output_consumes": self._driver.consumes.value,
-            "render_options": asdict(self.options), "tpad_rt_version": __version__,
-        }
+        """The recording's metadata (:func:`tpad_rt.recording.run_metadata`)."""
+        return run_metadata(self._pipeline, self._texture, texture_path=self._texture_path,
+                            block_frames=self.block_frames, input_url="api", output_url=self.output_url)

@@ -12,6 +12,8 @@ Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
     ``.push_finger(t_s, x_mm, y_mm, force_n=None, down=True)``, ``.lift(t_s)``: validated (SampleError)
     ``.stream_time_s``, ``.last_time_s``, ``.position_range_mm``, ``.check_time(t_s, name)``, ``.faults() -> dict``
     ``.set_texture(texture, t_s=None)``, ``.start()``, ``.stop()``
+    ``.drive``, ``.set_drive(drive)``: the drive it renders for (:class:`tpad_rt.drive.DriveSpec`)
+    ``.recent_fingers()``: the newest samples of the finger ring, decoded
     ``.render(out)``: the next ``len(out)`` float32 samples (1.0 = ``volts_per_full_scale``)
     ``.drain_telemetry() -> dict[str, np.ndarray]``: rows since the last drain, keyed by TEL_NAMES
     ``.last_telemetry_row() -> dict[str, float]``: the newest row, not drained
@@ -41,7 +43,9 @@ import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.device import Device
+from tpad_rt.drive import Consumes, DriveSpec
 from tpad_rt.errors import ConfigError, SampleError, TpadError
+from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel import layout
 from tpad_rt.kernel.atomics import publish
 from tpad_rt.kernel.batch import render_blocks
@@ -349,8 +353,8 @@ class Pipeline:
     """One stream of drive samples for ``device`` rendering ``texture`` at ``fs_hz``; owns every array.
 
     The samples are the carrier (DAC samples), or with ``envelope_output`` its envelope,
-    for an amplifier that makes the carrier itself (:meth:`set_drive_scale` then sets its
-    full scale, clamp and achieved carrier). Created stopped (silent): :meth:`start` ramps
+    for an amplifier that makes the carrier itself; :attr:`drive` describes them (from the
+    device file; :meth:`set_drive` replaces it with what the output's hardware reported). Created stopped (silent): :meth:`start` ramps
     the drive up once a finger slides. Raises ConfigError for a sample rate not in
     ``(0, MAX_RATE_HZ]``, or (carrier samples) below ``resonance_hz / 0.45``.
     """
@@ -368,6 +372,7 @@ class Pipeline:
         dev, start_n, step_n = device_tables(device, options.track, band_hz)
         _check_rate(device, fs_hz, envelope_output, float(dev[layout.DEV_CARRIER_HZ].max()))
         self.envelope_output = envelope_output
+        self._drive = DriveSpec.from_device(device, Consumes.ENVELOPE if envelope_output else Consumes.DAC, fs_hz)
         self.device = device
         self.options = options
         self.fs_hz = fs_hz
@@ -403,9 +408,9 @@ class Pipeline:
         cfg = np.zeros(layout.CFG_SIZE)
         for index, value in {
             layout.CFG_FS_HZ: self.fs_hz,
-            layout.CFG_CARRIER_HZ: device.carrier_hz,
-            layout.CFG_VOLTS_PER_FS: device.volts_per_full_scale,
-            layout.CFG_MAX_VOLTAGE_V: device.max_voltage_v,
+            layout.CFG_CARRIER_HZ: self._drive.carrier_hz,
+            layout.CFG_VOLTS_PER_FS: self._drive.volts_per_full_scale,
+            layout.CFG_MAX_VOLTAGE_V: self._drive.max_voltage_v,
             layout.CFG_POWER_CAP_W: cap_w,
             layout.CFG_POWER_AVG_W: cap_w if options.power_avg_w is None else options.power_avg_w,
             layout.CFG_WINDOW_STEPS: window_steps,
@@ -456,23 +461,28 @@ class Pipeline:
         """True between :meth:`start` and :meth:`stop`."""
         return self._arrays.cfg[layout.CFG_RUN] != 0.0
 
-    def set_drive_scale(self, volts_per_full_scale: float, max_voltage_v: float, carrier_hz: float) -> None:
-        """For an amplifier found at start: sample 1.0 is ``volts_per_full_scale`` (V), the drive is capped at the
-        lower of ``max_voltage_v`` and the device's maximum, and the carrier made is ``carrier_hz`` (Hz).
+    @property
+    def drive(self) -> DriveSpec:
+        """The drive the kernel renders for (carrier, full scale, clamp, rate)."""
+        return self._drive
 
-        Raises ConfigError for a value that is not a finite number > 0, RuntimeError while running.
-        """
+    def set_drive(self, drive: DriveSpec) -> None:
+        """Render for ``drive`` from now on: the drive the output's hardware reported at start (its full scale,
+        clamp and carrier). Raises ConfigError for a drive of another kind or rate, or a clamp above the
+        device's maximum; RuntimeError while running."""
         if self.running:
-            raise RuntimeError("Pipeline.set_drive_scale: stop the pipeline first")
+            raise RuntimeError("Pipeline.set_drive: stop the pipeline first")
+        if drive.consumes is not self._drive.consumes or drive.rate_hz != self._drive.rate_hz:
+            raise ConfigError(f"drive: renders {drive.consumes.value} at {drive.rate_hz:g} Hz, but the pipeline "
+                              f"{self._drive.consumes.value} at {self._drive.rate_hz:g} Hz")
+        if drive.max_voltage_v > self.device.max_voltage_v:
+            raise ConfigError(f"drive: max_voltage_v: {drive.max_voltage_v:g} V is above the device's "
+                              f"{self.device.max_voltage_v:g} V")
         cfg = self._arrays.cfg
-        values = {"volts_per_full_scale": volts_per_full_scale, "max_voltage_v": max_voltage_v, "carrier_hz": carrier_hz}
-        for name, value in values.items():
-            problem = _number_problem(value, "> 0", lambda v: v > 0)
-            if problem:
-                raise ConfigError(f"{name}: {problem}")
-        cfg[layout.CFG_VOLTS_PER_FS] = volts_per_full_scale
-        cfg[layout.CFG_MAX_VOLTAGE_V] = min(max_voltage_v, self.device.max_voltage_v)
-        cfg[layout.CFG_CARRIER_HZ] = carrier_hz
+        cfg[layout.CFG_VOLTS_PER_FS] = drive.volts_per_full_scale
+        cfg[layout.CFG_MAX_VOLTAGE_V] = drive.max_voltage_v
+        cfg[layout.CFG_CARRIER_HZ] = drive.carrier_hz
+        self._drive = drive
 
     def start(self) -> None:
         """Let the drive ramp up (from the next control step) while a finger slides."""
@@ -553,6 +563,22 @@ class Pipeline:
         finger, count = self._arrays.finger, self._arrays.finger_count
         last = finger[(count[0] - 1) % finger.shape[0]]
         return float(last[layout.FINGER_X_MM]), float(last[layout.FINGER_Y_MM])
+
+    def recent_fingers(self) -> np.ndarray:
+        """The newest finger samples pushed (at most ``finger_ring - 2``), oldest first, as
+        :data:`tpad_rt.inputs.base.FINGER_DTYPE`.
+
+        Read without a lock while a producer may push: the ring's oldest row is left out.
+        """
+        count = int(self._arrays.finger_count[0])
+        ring = self._arrays.finger
+        rows = ring[np.arange(max(0, count - len(ring) + 2), count) % len(ring)]
+        samples = np.zeros(len(rows), dtype=FINGER_DTYPE)
+        for name, column in (("t_s", layout.FINGER_T_S), ("x_mm", layout.FINGER_X_MM), ("y_mm", layout.FINGER_Y_MM),
+                             ("force_n", layout.FINGER_FORCE_N)):
+            samples[name] = rows[:, column]
+        samples["down"] = rows[:, layout.FINGER_DOWN] > 0.5
+        return samples
 
     @property
     def over_cap_blocks(self) -> int:

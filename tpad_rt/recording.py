@@ -18,7 +18,8 @@ reads every one):
   ``departure_tolerance_mu`` from the texture under the finger) from ``tpad-rt render``;
 - ``metadata_json`` (0-d str): a JSON object with at least the keys in
   :data:`REQUIRED_METADATA` (texture path and description, device label, carrier,
-  volts per full scale, max voltage, power budgets, block size, tpad-rt version).
+  volts per full scale, max voltage, power budgets, block size, tpad-rt version); a run's
+  is made by :func:`run_metadata`, for ``tpad-rt render`` and the Renderer alike.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from __future__ import annotations
 import json
 import math
 import zipfile
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -36,8 +37,11 @@ import numpy.typing as npt
 from tpad_rt.drive_guard import bad_sample_message, first_bad_sample
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import NewFile
-from tpad_rt.kernel.layout import TEL_NAMES
+from tpad_rt.kernel.layout import CFG_POWER_AVG_W, CFG_POWER_CAP_W, TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_RENDER_BLOCKS
+from tpad_rt.pipeline import Pipeline
+from tpad_rt.texture import CompiledTexture
+from tpad_rt.version import __version__
 
 FORMAT = "tpad-rt recording"
 FORMAT_VERSION = 1
@@ -63,6 +67,23 @@ MAX_ENTRY_BYTES = 4 * MAX_RECORDING_SAMPLES + 2**16
 #: Largest recording (bytes, uncompressed): the drive and every per-block column at MAX_RENDER_BLOCKS.
 MAX_RECORDING_BYTES = MAX_ENTRY_BYTES + (len(TEL_NAMES) + len(SIM_NAMES) + len(JUDGED_NAMES) + 8) * (
     8 * MAX_RENDER_BLOCKS + 2**16)
+
+
+def run_metadata(pipeline: Pipeline, texture: CompiledTexture, *, texture_path: str | None, block_frames: int,
+                 input_url: str, output_url: str) -> dict[str, Any]:
+    """The metadata of a run of ``pipeline`` rendering ``texture`` (from ``texture_path``, None for one made in
+    memory) in blocks of ``block_frames``: what ran, on what, with which settings; the drive is the run's
+    (:attr:`tpad_rt.pipeline.Pipeline.drive`: on ``serial://`` the amplifier's, as its handshake set it) and
+    the power limits the kernel applied, defaults resolved."""
+    cfg = pipeline.arrays.cfg
+    return {
+        "texture_path": texture_path, "texture_description": texture.description,
+        "device_label": pipeline.device.label, **pipeline.drive.metadata(),
+        "power_budget_w": float(cfg[CFG_POWER_CAP_W]), "power_avg_w": float(cfg[CFG_POWER_AVG_W]),
+        "power_window_s": pipeline.options.power_window_s, "block_frames": block_frames,
+        "input_url": input_url, "output_url": output_url, "render_options": asdict(pipeline.options),
+        "tpad_rt_version": __version__,
+    }
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The full ``tpad-rt`` parser with every subcommand registered."""
-    from tpad_rt import __version__
+    from tpad_rt.version import __version__
 
     parser = _Parser(
         prog="tpad-rt",

@@ -375,11 +375,7 @@ class Session:
             lines.append(f"faults: {stats['faults']} ({stats['fault_steps']} control steps, "
                          f"{stats['fault_blocks']} blocks; {', '.join(stats['fault_causes'])}): the drive ramped to 0 "
                          "each time and came back with the next valid data (docs/kernel.md \"Faults\")")
-        period_ms = 1e3 * stats["block_frames"] / stats["rate_hz"]
-        device = self.renderer.audio_device
-        if device is not None and "JACK" in device.host_api and stats["dac_delay_ms"] > 1.5 * period_ms:
-            lines.append(f"the JACK server buffers {stats['dac_delay_ms'] / period_ms:.0f} periods before the DAC: "
-                         f"started with jackd -S (synchronous mode) it buffers one, {period_ms:.2f} ms less")
+        lines += self.renderer.driver.summary_lines(stats)
         if amplifier:
             lines.append(
                 f"amplifier: {amplifier['firmware']}, carrier {amplifier['carrier_hz']:.2f} Hz, envelope "

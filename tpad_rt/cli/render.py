@@ -22,7 +22,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +30,6 @@ import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
 
-from tpad_rt import __version__
 from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device
@@ -39,16 +38,16 @@ from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures
 from tpad_rt.files import check_writable_target
 from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
-    CFG_POWER_AVG_W, CFG_POWER_CAP_W, FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION,
+    FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION,
 )
 from tpad_rt.kernel.batch import render_blocks
 from tpad_rt.kernel.render import render_block
 from tpad_rt.limits import MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, MAX_RECORDING_SAMPLES, MAX_RENDER_S
 from tpad_rt.offline import OfflineRender, RenderResult, check_render_size, input_span_s, texture_under_finger
-from tpad_rt.outputs import open_output
+from tpad_rt.outputs import Capability, open_output, output_kind
 from tpad_rt.outputs.wav import WavOutput
 from tpad_rt.pipeline import Pipeline, RenderOptions
-from tpad_rt.recording import Recording, write_recording
+from tpad_rt.recording import Recording, run_metadata, write_recording
 from tpad_rt.texture import CompiledTexture, load_compiled
 
 DEFAULT_OUTPUT = "sim://"
@@ -153,31 +152,24 @@ def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_
     # one control interval plus the ramp, and a whole block more, end in silence.
     tail_s = options.ramp_ms * 1e-3 + (options.control_interval + args.block) / args.rate
     check_render_size(input_s, tail_s, args.rate, args.block, keep_drive,
-                      writes_wav=wav_path is not None or args.output.startswith("wav:"))
+                      writes_wav=wav_path is not None or _writes_file(args.output))
     pipeline = Pipeline(device, texture, fs_hz=args.rate, options=options)
     outputs = [stack.enter_context(open_output(args.output, device=device, fs_hz=args.rate))]
     if wav_path is not None:
         outputs.append(stack.enter_context(WavOutput(wav_path, args.rate)))
     render = OfflineRender(pipeline, source, outputs, block_frames=args.block, input_s=input_s,
                            tail_s=tail_s, force_n=args.force, keep_drive=keep_drive)
-    cfg = pipeline.arrays.cfg  # the limits the kernel applies, defaults resolved
-    metadata = {
-        "texture_path": str(args.texture),
-        "texture_description": texture.description,
-        "device_label": device.label,
-        "carrier_hz": device.carrier_hz,
-        "volts_per_full_scale": device.volts_per_full_scale,
-        "max_voltage_v": device.max_voltage_v,
-        "power_budget_w": float(cfg[CFG_POWER_CAP_W]),
-        "power_avg_w": float(cfg[CFG_POWER_AVG_W]),
-        "power_window_s": options.power_window_s,
-        "block_frames": args.block,
-        "input_url": args.input,
-        "output_url": args.output,
-        "render_options": asdict(options),
-        "tpad_rt_version": __version__,
-    }
+    metadata = run_metadata(pipeline, texture, texture_path=str(args.texture), block_frames=args.block,
+                            input_url=args.input, output_url=args.output)
     return Session(render, metadata)
+
+
+def _writes_file(url: str) -> bool:
+    """Whether the output ``url`` writes the file it names (False for a bad URL: opening it says what is wrong)."""
+    try:
+        return output_kind(url)[1].can(Capability.WRITES_FILE)
+    except ConfigError:
+        return False
 
 
 def run(args: argparse.Namespace) -> int:

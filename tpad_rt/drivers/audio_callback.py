@@ -12,7 +12,9 @@ from __future__ import annotations
 import math
 import threading
 import time
+from typing import Any
 
+from tpad_rt.clock import Clock
 from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
 from tpad_rt.errors import BackendError
@@ -36,13 +38,12 @@ class AudioCallbackDriver(Driver):
     (at least STALL_MIN_BLOCKS blocks' time)."""
 
     def __init__(self, url: Url, *, device: Device, rate_hz: int, block_frames: int, options: RenderOptions,
-                 stall_timeout_s: float):
+                 stall_timeout_s: float = 0.5, clock: Clock | None = None):
         target = audio.parse_audio_url(url)
-        super().__init__(url, device=device, options=options,
+        super().__init__(url, device=device, options=options, stall_timeout_s=stall_timeout_s, clock=clock,
                          rate_hz=target.rate_hz if "rate" in target.given else rate_hz,
                          block_frames=target.block_frames if "block" in target.given else block_frames)
         self.target = target
-        self.stall_timeout_s = stall_timeout_s
         self.audio_device: audio.AudioDevice | None = None  # found by prepare()
         self.stream: audio.AudioStream | None = None  # while started
         self._stalled = False
@@ -52,6 +53,16 @@ class AudioCallbackDriver(Driver):
     def stall_limit_s(self) -> float:
         """Seconds without a callback after which the stream counts as stalled."""
         return max(self.stall_timeout_s, STALL_MIN_BLOCKS * self.block_frames / self.rate_hz)
+
+    def summary_lines(self, stats: dict[str, Any]) -> list[str]:
+        """On a JACK server that buffers more than one period before the DAC (its asynchronous mode), how to
+        take that period off the latency."""
+        period_ms = 1e3 * stats["block_frames"] / stats["rate_hz"]
+        device = self.audio_device
+        if device is None or "JACK" not in device.host_api or not stats["dac_delay_ms"] > 1.5 * period_ms:
+            return []
+        return [f"the JACK server buffers {stats['dac_delay_ms'] / period_ms:.0f} periods before the DAC: "
+                f"started with jackd -S (synchronous mode) it buffers one, {period_ms:.2f} ms less"]
 
     def prepare(self) -> None:
         """Find the device; BackendError when it is missing or lacks the URL's channel."""

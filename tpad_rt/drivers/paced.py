@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 
+from tpad_rt.clock import Clock
 from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
 from tpad_rt.kernel import table as tab
@@ -29,8 +30,10 @@ PACED_MAX_BEHIND_S = 0.1
 class PacedDriver(Driver):
     """A paced output: the URL is opened (and checked) at :meth:`open`."""
 
-    def __init__(self, url: Url, *, device: Device, rate_hz: int, block_frames: int, options: RenderOptions):
-        super().__init__(url, device=device, rate_hz=rate_hz, block_frames=block_frames, options=options)
+    def __init__(self, url: Url, *, device: Device, rate_hz: int, block_frames: int, options: RenderOptions,
+                 stall_timeout_s: float = 0.5, clock: Clock | None = None):
+        super().__init__(url, device=device, rate_hz=rate_hz, block_frames=block_frames, options=options,
+                         stall_timeout_s=stall_timeout_s, clock=clock)
         self._output: Output | None = None
         self._pipeline: Pipeline | None = None
         self._thread: threading.Thread | None = None

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
+from tpad_rt.clock import Clock
 from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
 from tpad_rt.outputs import serial_amp
@@ -31,19 +32,21 @@ class SerialStreamDriver(Driver):
     """A ``serial://`` amplifier: ``envelope_hz`` replaces the renderer's rate, ``frame_ms`` its block (until
     the amplifier's INFO says how many samples a frame may hold); a default ``options.control_interval``
     is scaled to keep its control period. ``open_line`` opens the line to the amplifier for the URL's target
-    (default: its serial port; :class:`tpad_rt.amp.virtual_link.VirtualLink` runs the driver on a virtual
-    clock)."""
+    (default: its serial port); ``clock`` must be that line's (a :class:`tpad_rt.amp.virtual_link.VirtualLink`
+    and its VirtualClock run the driver on a virtual clock)."""
 
     consumes = Consumes.ENVELOPE
 
     def __init__(self, url: Url, *, device: Device, rate_hz: int, block_frames: int, options: RenderOptions,
+                 stall_timeout_s: float = 0.5, clock: Clock | None = None,
                  open_line: Callable[[serial_amp.SerialTarget], Line] | None = None):
         target = serial_amp.parse_serial_url(url)
         rate_hz = target.envelope_hz
         if options.control_interval == RenderOptions.control_interval:
             options = replace(options, control_interval=max(1, round(
                 RenderOptions.control_interval * rate_hz / DEFAULT_CONTROL_RATE_HZ)))
-        super().__init__(url, device=device, rate_hz=rate_hz, options=options,
+        super().__init__(url, device=device, rate_hz=rate_hz, options=options, stall_timeout_s=stall_timeout_s,
+                         clock=clock,
                          block_frames=max(1, round(target.frame_ms * 1e-3 * rate_hz)))
         self.target = target
         self._open_line = open_line
@@ -65,7 +68,9 @@ class SerialStreamDriver(Driver):
                                                                     max_voltage_v=self.device.max_voltage_v, line=line)
         scale = link.scale  # decided once, from the INFO the handshake took (H1, H3); the streamer clamps to it
         assert scale is not None
-        pipeline.set_drive_scale(scale.full_scale_v, scale.max_v, link.carrier_hz)
+        pipeline.set_drive(pipeline.drive.from_hardware(
+            volts_per_full_scale=scale.full_scale_v, max_voltage_v=scale.max_v, carrier_hz=link.carrier_hz,
+            source=f"amplifier {link.info.firmware!r} on {self.target.port}" if link.info else self.target.port))
         self.block_frames = link.frame_samples
 
     def start(self, table: CallbackTable) -> None:

@@ -37,7 +37,7 @@ from typing import Any
 
 from tpad_rt.errors import BackendError
 from tpad_rt.limits import MAX_BLOCK_FRAMES, MAX_RATE_HZ
-from tpad_rt.outputs.base import Consumes, OutputKind, Runs
+from tpad_rt.outputs.base import Consumes, OutputKind
 from tpad_rt.urls import Option, Url, UrlForm, count, parse_url
 
 #: The accepted URL.
@@ -45,7 +45,7 @@ FORMS = (UrlForm("audio", "[device name or index]", (
     Option("rate", 192000, count(1, MAX_RATE_HZ)), Option("block", 64, count(1, MAX_BLOCK_FRAMES)),
     Option("channel", 1, count(1, 1024)))),)
 #: DAC samples, rendered by the native callback PortAudio's audio thread calls (tpad_rt.drivers.audio_callback).
-KIND = OutputKind(Consumes.DAC, Runs.CALLBACK, realtime_only=True)
+KIND = OutputKind(Consumes.DAC, "tpad_rt.drivers.audio_callback:AudioCallbackDriver")
 #: Rates tried when listing what a device accepts (Hz).
 CANDIDATE_RATES = (44100, 48000, 96000, 176400, 192000, 384000)
 

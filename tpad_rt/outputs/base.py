@@ -1,8 +1,9 @@
 """What every output declares (:class:`OutputKind`), and what a paced backend implements (:class:`Output`).
 
-Every scheme's module states what it consumes and how it is run (``KIND``): the
-Renderer picks the driver from it (:mod:`tpad_rt.drivers`), and the Pipeline renders
-DAC samples or the envelope accordingly (docs/kernel.md "Two stages").
+Every scheme's module states what it consumes, which driver runs it and what else it
+can do (``KIND``, an :class:`OutputKind`): :mod:`tpad_rt.drivers` opens that driver, and
+the Pipeline renders DAC samples or the envelope accordingly (docs/kernel.md "Two
+stages"; docs/architecture.md "Adding an output kind").
 
 The rest of this module is the paced backends' interface: take the drive, one block at a time.
 
@@ -18,45 +19,39 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
-from enum import Enum
+from enum import Flag, auto
 from types import TracebackType
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-
-class Consumes(Enum):
-    """What an output takes from the render kernel."""
-
-    #: float32 DAC samples in [-1, 1] (1.0 = the device's volts_per_full_scale) at the output's sample rate,
-    #: which must exceed 2.2x the carrier: the kernel's modulation stage makes the carrier
-    DAC = "DAC samples"
-    #: the envelope, drive volts (signed: negative drives the carrier in anti-phase) at the output's envelope
-    #: rate, with the carrier's frequency given once: the output makes the carrier itself
-    ENVELOPE = "envelope"
+from tpad_rt.drive import Consumes
 
 
-class Runs(Enum):
-    """What runs the render callback for an output (docs/realtime.md)."""
+class Capability(Flag):
+    """What an output can do besides playing in real time; a scheme's ``KIND`` lists its flags."""
 
-    #: the output's own clock calls the native callback (PortAudio's audio thread): no Python per block
-    CALLBACK = "native callback"
-    #: a GIL-free native loop paces itself on the monotonic clock and pushes frames to the output
-    STREAM = "GIL-free streamer"
-    #: a Python thread calls the callback no faster than real time and hands each block to Output.write
-    #: (GIL-bound: simulators and files, not a real-time path)
-    PACED = "paced thread"
+    NONE = 0
+    #: it opens offline too (:func:`tpad_rt.outputs.open_output`, ``tpad-rt render``): a simulator or a file
+    OFFLINE = auto()
+    #: it writes the file its URL names
+    WRITES_FILE = auto()
 
 
 @dataclass(frozen=True)
 class OutputKind:
-    """What a scheme's output consumes, what runs it, and whether it plays in real time only (no offline
-    ``tpad-rt render``, no :func:`tpad_rt.outputs.open_output`)."""
+    """What a scheme's output consumes, the driver that runs it in real time (``"module:Class"``, a
+    :class:`tpad_rt.drivers.Driver`: named, not imported, since drivers sit a layer above outputs), and its
+    :class:`Capability` flags."""
 
     consumes: Consumes
-    runs: Runs
-    realtime_only: bool
+    driver: str
+    capabilities: Capability = Capability.NONE
+
+    def can(self, capability: Capability) -> bool:
+        """Whether the output has every flag of ``capability``."""
+        return capability in self.capabilities
 
 
 class Output(ABC):

@@ -9,13 +9,13 @@ import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.device import Device
-from tpad_rt.outputs.base import Consumes, Output, OutputKind, Runs
+from tpad_rt.outputs.base import Capability, Consumes, Output, OutputKind
 from tpad_rt.urls import Url, UrlForm
 
 #: The accepted URL.
 FORMS = (UrlForm("null"),)
 #: What it consumes and what runs it.
-KIND = OutputKind(Consumes.DAC, Runs.PACED, realtime_only=False)
+KIND = OutputKind(Consumes.DAC, "tpad_rt.drivers.paced:PacedDriver", Capability.OFFLINE)
 
 
 class NullOutput(Output):

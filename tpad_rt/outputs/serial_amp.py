@@ -47,7 +47,7 @@ from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.kernel import amp_codec as codec
 from tpad_rt.kernel import amp_stream
 from tpad_rt.kernel.atomics import publish
-from tpad_rt.outputs.base import Consumes, OutputKind, Runs
+from tpad_rt.outputs.base import Consumes, OutputKind
 from tpad_rt.outputs.serial_line import Line, SerialLine, Streamer
 from tpad_rt.pipeline import LOCK_RANGE
 from tpad_rt.urls import Option, Url, UrlForm, count, number, parse_url
@@ -56,7 +56,7 @@ FORMS = (UrlForm("serial", "/dev/ttyACM0", (
     Option("envelope_hz", 16000, count(1000, 100_000)), Option("buffer_ms", 2.0, number(0.1, high=1000.0)),
     Option("frame_ms", 0.5, number(0.05, high=20.0)), Option("baud", 921600, count(1200, 20_000_000)))),)
 #: The envelope (the amplifier makes the carrier), streamed by the GIL-free streamer (tpad_rt.drivers.serial_stream).
-KIND = OutputKind(Consumes.ENVELOPE, Runs.STREAM, realtime_only=True)
+KIND = OutputKind(Consumes.ENVELOPE, "tpad_rt.drivers.serial_stream:SerialStreamDriver")
 #: Seconds to wait for INFO after a HELLO (H1), and HELLOs sent before giving up.
 HELLO_TIMEOUT_S = 0.5
 HELLO_TRIES = 3

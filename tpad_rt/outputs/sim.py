@@ -34,7 +34,7 @@ from tpad_rt.kernel.sim import (
     resonator_coefficients,
 )
 from tpad_rt.physics.friction import relative_friction_core
-from tpad_rt.outputs.base import Consumes, Output, OutputKind, Runs
+from tpad_rt.outputs.base import Capability, Consumes, Output, OutputKind
 from tpad_rt.urls import Option, Url, UrlForm, number
 
 _Q_NUMBER = number(MIN_Q, low_closed=False, high=MAX_Q)
@@ -53,7 +53,7 @@ def _quality_factor(text: str) -> float | str:
 #: The accepted URL.
 FORMS = (UrlForm("sim", "", (Option("q", "device", _quality_factor),)),)
 #: What it consumes and what runs it.
-KIND = OutputKind(Consumes.DAC, Runs.PACED, realtime_only=False)
+KIND = OutputKind(Consumes.DAC, "tpad_rt.drivers.paced:PacedDriver", Capability.OFFLINE)
 
 
 def plate_resonator(device: Device, force_n: float, fs_hz: float, coef: np.ndarray, q: float | None = None) -> None:

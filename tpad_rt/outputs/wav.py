@@ -32,13 +32,13 @@ from tpad_rt.device import Device
 from tpad_rt.drive_guard import bad_sample_message, first_bad_sample
 from tpad_rt.errors import BackendError
 from tpad_rt.files import NewFile
-from tpad_rt.outputs.base import Consumes, Output, OutputKind, Runs
+from tpad_rt.outputs.base import Capability, Consumes, Output, OutputKind
 from tpad_rt.urls import Url, UrlForm
 
 #: The accepted URL.
 FORMS = (UrlForm("wav", "/path/out.wav"),)
 #: What it consumes and what runs it.
-KIND = OutputKind(Consumes.DAC, Runs.PACED, realtime_only=False)
+KIND = OutputKind(Consumes.DAC, "tpad_rt.drivers.paced:PacedDriver", Capability.OFFLINE | Capability.WRITES_FILE)
 
 _FORMAT_IEEE_FLOAT = 3
 BYTES_PER_SAMPLE = 4

@@ -237,15 +237,17 @@ class TelemetryFeed:
 
 
 def device_info(renderer: Renderer) -> dict[str, Any]:
-    """The ``device`` message: the plate (mm), the limits, the carrier, the stream's rate and block, and the
-    default force and watchdog the renderer applies."""
-    device, options, stats = renderer.device, renderer.options, renderer.stats()
+    """The ``device`` message: the plate (mm), the limits, the drive the run uses (the carrier, full scale and
+    clamp: on ``serial://`` the amplifier's), the stream's rate and block, and the default force and watchdog
+    the renderer applies."""
+    device, options, stats, drive = renderer.device, renderer.options, renderer.stats(), renderer.drive
     plate = device.plate
     return {
         "type": "device", "label": device.label, "description": device.description,
         "plate": {"length_mm": plate.length_m * 1e3, "width_mm": plate.width_m * 1e3,
                   "thickness_mm": plate.thickness_m * 1e3, "material": plate.material, "mode": list(plate.mode)},
-        "carrier_hz": device.carrier_hz, "max_voltage_v": device.max_voltage_v,
+        "carrier_hz": drive.carrier_hz, "max_voltage_v": drive.max_voltage_v,
+        "volts_per_full_scale": drive.volts_per_full_scale, "drive_source": drive.source,
         "power_budget_w": json_safe(stats["power_budget_w"]), "power_avg_w": json_safe(stats["power_avg_w"]),
         "default_force_n": options.default_force_n, "watchdog_ms": options.watchdog_ms,
         "rate_hz": renderer.rate_hz, "block_frames": renderer.block_frames, "output": renderer.output_url,
@@ -257,7 +259,7 @@ def friction_map_png(texture: CompiledTexture, device: Device) -> bytes:
     0.5 N, at t = 0; viridis from 0 to 1, row 0 at y = 0), one pixel per grid cell, as PNG bytes."""
     from matplotlib import colormaps
 
-    from tpad_rt.cli.show import Finger, plate_maps
+    from tpad_rt.plate_maps import Finger, plate_maps
 
     length_mm, width_mm = device.plate.length_m * 1e3, device.plate.width_m * 1e3
     resolution_mm = max(0.25, math.sqrt(length_mm * width_mm / MAP_POINTS))

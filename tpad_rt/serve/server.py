@@ -53,7 +53,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request as HttpRequest
 from websockets.http11 import Response
 
-from tpad_rt import __version__
+from tpad_rt.version import __version__
 from tpad_rt.errors import SampleError, printable
 from tpad_rt.serve import protocol
 from tpad_rt.json_text import json_safe, json_text
