@@ -345,7 +345,6 @@ class VirtualStreamer:
         self.realtime = False
         self._line, self._table, self._link, self._buffers, self._envelope = line, table, link, buffers, envelope
         self._times = np.zeros(3)
-        self.steps = 0
         amp_stream.begin(table, link, line.clock.now_ns())
         line.clock.at(line.clock.now_ns(), self._step)
 
@@ -369,7 +368,6 @@ class VirtualStreamer:
             line.clock.at(line.frozen_until_ns, self._step)
             return
         try:
-            self.steps += 1
             while amp_stream.reading(link):
                 offset = int(link[amp_stream.LINK_RX_LENGTH])
                 data = line.take(buffers.shape[1] - offset)
