@@ -47,7 +47,8 @@ def main(url: str, seconds: float, gil_threads: int) -> None:
     scale = link.scale  # the streamer's scale (H3), decided by the link
     assert scale is not None
     pipeline = Pipeline(device, load_compiled(GRATING), target.envelope_hz, envelope_output=True)
-    pipeline.set_drive_scale(scale.full_scale_v, scale.max_v, link.carrier_hz)
+    pipeline.set_drive(pipeline.drive.from_hardware(volts_per_full_scale=scale.full_scale_v, max_voltage_v=scale.max_v,
+                                                    carrier_hz=link.carrier_hz, source="the Python writer's amplifier"))
     pipeline.start()
     frame = np.zeros(link.frame_samples, dtype=np.float32)
     pipeline.render(frame)  # compiled before the clock starts
@@ -88,7 +89,7 @@ def _missed_samples(link: AmpLink) -> int:
     writer's frames: its underruns, and the samples of the frames it refused (late ones, or any after its
     watchdog tripped); -1 if no STATUS came."""
     link._command((5).to_bytes(2, "little"), codec.MSG_STOP, "STOP")
-    body = link._receive(codec.MSG_STATUS, time.monotonic() + 1.0)
+    body = link._receive(codec.MSG_STATUS, link.clock.now_ns() + 1_000_000_000)
     if body is None:
         return -1
     rejected = int(codec.get_u32(body, codec.PAYLOAD + codec.STATUS_FRAMES_REJECTED))

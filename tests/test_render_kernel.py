@@ -26,7 +26,7 @@ from reference.pipeline_ref import SAFETY_MARGIN, SHAPER_LIMIT as FLAG_SHAPER_LI
 
 from tpad_rt.config import TextureFile, load_texture
 from tpad_rt.device import Device
-from tpad_rt.kernel import layout
+from tpad_rt.kernel import device_lookup, layout
 from tpad_rt.kernel import render as render_module
 from tpad_rt.kernel import texture_eval
 from tpad_rt.kernel.render import PHASE_BITS, carrier_phase_units, carrier_step_units, render_block
@@ -489,7 +489,7 @@ def _argument_arrays(pipeline: Pipeline, block: int) -> tuple[Any, ...]:
 def test_render_block_cache_is_stamped_with_every_source_compiled_into_it() -> None:
     """numba would watch render.py alone: editing texture_eval.py must also invalidate the cache."""
     stamp = render_block._cache._impl.locator.get_source_stamp()
-    sources = (render_module, layout, texture_eval, friction)
+    sources = (render_module, layout, texture_eval, friction, device_lookup)
     assert stamp == tuple(hashlib.sha256(Path(module.__file__).read_bytes()).hexdigest() for module in sources)
 
 

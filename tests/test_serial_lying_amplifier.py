@@ -1,50 +1,44 @@
-"""A lying amplifier on a real pty: the host must keep the envelope within min(the device's max_voltage_v, the
+"""A lying amplifier on the virtual link: the host must keep the envelope within min(the device's max_voltage_v, the
 amplifier's clamp) whatever order, timing, duplication or contradiction its answers come in, and refuse reports out
 of range in one line naming the amplifier (docs/amp-protocol.md H1-H3, H7, H8, H10; issue 20).
 
-The amplifier is :class:`ScriptedAmp`, a thread of this test on the master side of a new
-pty pair, which answers each frame the host sends as its :class:`Script` says, when the
-frame arrives (never after a sleep): a late answer to a HELLO is sent when the next
-HELLO arrives, an INFO "after the carrier" right after SET_CARRIER's ACK, a lying STATUS
-after the N-th ENVELOPE frame. Between those it sends honest STATUS frames every 5 ms on
-its own clock (H7's silence would otherwise end the run), each consistent with its own
-clock whenever it is sent. Every frame the host sent is
+The amplifier is :class:`ScriptedAmp`, at the other end of a
+:class:`tpad_rt.amp.virtual_link.VirtualLink` on a virtual clock, which answers each
+frame the host sends as its :class:`Script` says, when the frame arrives: a late answer
+to a HELLO is sent when the next HELLO arrives, an INFO "after the carrier" right after
+SET_CARRIER's ACK, a lying STATUS after the N-th ENVELOPE frame. Between those it sends
+honest STATUS frames every 5 ms of its clock (H7's silence would otherwise end the run),
+each consistent with its own clock whenever it is sent. Every frame the host sent is
 decoded with the emulator's codec (:mod:`tpad_rt.amp.wire`, not the host's) and judged:
 each ENVELOPE sample, read with the full scale of every INFO that answered the host's
 last HELLO, stays within min(max_voltage_v, that INFO's max_mv); a run that sent START
-ends with STOP; an error is one line naming the port.
+ends with STOP; an error is one line naming the port. Deterministic: no thread, no
+sleep (a HELLO's wait for INFO, H1, passes on the virtual clock).
 """
 
 from __future__ import annotations
 
-import os
-import select
-import threading
-import time
-import tty
+import math
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_run import tpad_rt
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from virtual_serial import DEVICE, VirtualRun
 
 from tpad_rt.amp import wire
-from tpad_rt.device import Device
-from tpad_rt.engine import Renderer
+from tpad_rt.amp.virtual_link import VirtualLink
+from tpad_rt.clock import VirtualClock
 from tpad_rt.errors import TpadError
 from tpad_rt.outputs import serial_amp
 
-REPO = Path(__file__).resolve().parents[1]
-GRATING = REPO / "textures" / "grating.yaml"
-DEVICE = Device.default()
 CARRIER_MHZ = round(DEVICE.carrier_hz * 1000)
 U32 = 0xFFFFFFFF
-#: How often (ms) the scripted amplifier sends STATUS, and the period its INFO declares (the most it may take: H7
-#: ends a run after 4 periods and 100 ms without one, 0.5 s, which a loaded machine's scheduling does not reach);
-#: its INFO's other fields are the emulator's, without measurements.
+#: The port the host sees (its errors name it).
+PORT = "liar"
+#: How often (ms) the scripted amplifier sends STATUS, and the period its INFO declares (H7 ends a run after 4
+#: periods and 100 ms without one); its INFO's other fields are the emulator's, without measurements.
 STATUS_EVERY_MS = 5
 STATUS_PERIOD_MS = 100
 HONEST = wire.Info(firmware="liar 1.0", serial="L-1", envelope_rates_hz=(8000, 16000, 0, 0),
@@ -73,10 +67,9 @@ class Answer:
 @dataclass
 class Script:
     """What the scripted amplifier answers: INFOs per HELLO (by the HELLO's number), SET_CARRIER's achieved
-    carrier (None: the nearest it makes), START's ACK value, STATUS payload fields that replace the honest ones after the N-th
-    ENVELOPE frame (``play_index`` as an int, or "jump" / "back" relative to the honest index, "stuck" at the last
-STATUS's), an INFO
-    sent after the N-th ENVELOPE frame."""
+    carrier (None: the nearest it makes), START's ACK value, STATUS payload fields that replace the honest ones
+    after the N-th ENVELOPE frame (``play_index`` as an int, or "jump" / "back" relative to the honest index,
+    "stuck" at the last STATUS's), an INFO sent after the N-th ENVELOPE frame."""
 
     answers: dict[int, list[Answer]]
     carrier_mhz: int | None = None
@@ -86,60 +79,50 @@ STATUS's), an INFO
 
 
 class ScriptedAmp:
-    """A test amplifier on the master side of a new pty (``port`` is the slave's name), in a thread of its own."""
+    """A test amplifier for the virtual link (the emulator's discrete-event interface: ``receive``, ``advance``,
+    ``next_status_s``, ``out``), its clock in s from 0."""
 
     def __init__(self, script: Script):
         self.script = script
-        self.master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        self.port = os.ttyname(self._slave)
+        self.port = PORT
+        self.out = bytearray()
+        self.now_s = 0.0
+        self.on_hello = None
+        self.recorder = None
         self.frames: list[wire.Frame] = []  # every valid frame the host sent, in order
         self.infos: list[tuple[int, wire.Info, int]] = []  # (nonce field, INFO, host frames before) of each INFO sent
         self.hello_nonces: list[int] = []
         self._held: list[tuple[str, int, Answer]] = []  # (when, HELLO number, answer) not sent yet
         self._seq = 0
-        self._origin = time.monotonic()
+        self._splitter = wire.FrameSplitter()
+        self._next_status_s = math.inf  # from the first HELLO on, every STATUS_EVERY_MS
         self._carrier_mhz = 0
         self._start: tuple[float, int, int] | None = None  # (time, start index, rate) of the stream
         self._envelopes = 0
         self._last_play = 0  # the play index of the last STATUS sent
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._serve, daemon=True)
-        self._thread.start()
 
-    # --- the line ---
+    # --- the discrete-event interface ---
+
+    @property
+    def next_status_s(self) -> float:
+        return self._next_status_s
+
+    def advance(self, t_s: float) -> None:
+        while self._next_status_s <= t_s:
+            self._send(wire.Type.STATUS, self._status({}, self._next_status_s))
+            self._next_status_s += STATUS_EVERY_MS / 1000
+        self.now_s = max(self.now_s, t_s)
+
+    def receive(self, encoded: bytes | None, t_s: float) -> None:
+        self.advance(t_s)
+        frame = None if encoded is None else wire.decode(encoded)
+        if frame is not None and frame.version == wire.VERSION:
+            self.frames.append(frame)
+            self._act(frame, t_s)
 
     def _send(self, type_: int, payload: bytes) -> None:
-        os.write(self.master, wire.encode(type_, self._seq, payload))
+        self.out += wire.encode(type_, self._seq, payload)
         self._seq = (self._seq + 1) & 0xFFFF
-
-    def _serve(self) -> None:
-        splitter = wire.FrameSplitter()
-        next_status = time.monotonic()
-        while not self._stop.is_set():
-            readable, _, _ = select.select([self.master], [], [], max(0.0, next_status - time.monotonic()))
-            if readable:
-                try:
-                    data = os.read(self.master, 65536)
-                except OSError:
-                    return
-                for encoded in splitter.feed(data):
-                    frame = None if encoded is None else wire.decode(encoded)
-                    if frame is not None and frame.version == wire.VERSION:
-                        self.frames.append(frame)
-                        self._act(frame)
-            if time.monotonic() >= next_status:
-                if self.hello_nonces:
-                    self._send(wire.Type.STATUS, self._status({}))
-                next_status += STATUS_EVERY_MS / 1000
-
-    def finish(self) -> list[wire.Frame]:
-        """Stop serving (the host closed its end) and close the pty; every frame the host sent."""
-        self._stop.set()
-        self._thread.join(10)
-        os.close(self.master)
-        os.close(self._slave)
-        return self.frames
 
     # --- answers ---
 
@@ -159,12 +142,14 @@ class ScriptedAmp:
     def _ack(self, frame: wire.Frame, value: int, code: int = wire.Code.OK) -> None:
         self._send(wire.Type.ACK, wire.Ack(frame.seq, frame.type, code, value & U32).pack())
 
-    def _act(self, frame: wire.Frame) -> None:
+    def _act(self, frame: wire.Frame, t_s: float) -> None:
         if frame.type == wire.Type.HELLO:
             number = len(self.hello_nonces)
             self.hello_nonces.append(wire.Hello.unpack(frame.payload).nonce)
             self._seq = 0
             self._start = None
+            if math.isinf(self._next_status_s):
+                self._next_status_s = t_s + STATUS_EVERY_MS / 1000
             self._release("next_hello")  # late answers to the HELLO before
             for answer in self.script.answers.get(number, []):
                 if answer.when == "now":
@@ -179,24 +164,23 @@ class ScriptedAmp:
             self._release("after_carrier")
         elif frame.type == wire.Type.START:
             start = wire.Start.unpack(frame.payload)
-            self._start = (time.monotonic(), start.start_index, start.envelope_hz)
+            self._start = (t_s, start.start_index, start.envelope_hz)
             self._ack(frame, start.start_index if self.script.start_ack is None else self.script.start_ack)
         elif frame.type == wire.Type.ENVELOPE:
             self._envelopes += 1
             if self._envelopes in self.script.lies:
-                self._send(wire.Type.STATUS, self._status(self.script.lies[self._envelopes]))
+                self._send(wire.Type.STATUS, self._status(self.script.lies[self._envelopes], t_s))
             if self._envelopes in self.script.info_at:
                 self._info(len(self.hello_nonces) - 1, self.script.info_at[self._envelopes])
         elif frame.type == wire.Type.STOP:
             self._ack(frame, 0)
             self._start = None
 
-    def _status(self, lie: dict[str, int | str]) -> bytes:
-        """A STATUS payload: honest (RUNNING at the envelope rate since START, on this thread's clock), with the
-        fields of ``lie`` instead."""
-        now = time.monotonic()
+    def _status(self, lie: dict[str, int | str], now: float) -> bytes:
+        """A STATUS payload at ``now`` (s): honest (RUNNING at the envelope rate since START), with the fields of
+        ``lie`` instead."""
         fields: dict[str, int] = dict(
-            time_us=round((now - self._origin) * 1e6) & U32, play_index=0, buffer_fill=0, state=wire.State.IDLE,
+            time_us=round(now * 1e6) & U32, play_index=0, buffer_fill=0, state=wire.State.IDLE,
             faults=0, frames_ok=len(self.frames), frames_bad=0, frames_rejected=0, sequence_gaps=0, underruns=0,
             watchdog_trips=0, last_seq=self.frames[-1].seq if self.frames else 0, phase_cdeg=0, envelope_mv=0,
             voltage_mv_rms=0, current_ua_rms=0, carrier_mhz=self._carrier_mhz)
@@ -218,10 +202,9 @@ class ScriptedAmp:
         return wire.Status(**fields).pack()
 
 
-@pytest.fixture(autouse=True)
-def quick_hello(monkeypatch: pytest.MonkeyPatch) -> None:
-    """HELLO's wait for INFO (H1) shortened: a late answer is one the next HELLO releases, not a slow one."""
-    monkeypatch.setattr(serial_amp, "HELLO_TIMEOUT_S", 0.05)
+def line_to(amp: ScriptedAmp) -> VirtualLink:
+    """A virtual link to ``amp`` on a new clock, named PORT."""
+    return VirtualLink(VirtualClock(), amp, name=PORT)
 
 
 @dataclass
@@ -248,19 +231,18 @@ class Outcome:
 
 
 def run(script: Script, seconds: float = 0.3) -> Outcome:
-    """A Renderer on the scripted amplifier, swiping for ``seconds`` (or until it fails)."""
+    """The serial driver on the scripted amplifier, swiping for ``seconds`` of the clock (or until it fails), then
+    stopped as the Renderer stops it."""
     amp = ScriptedAmp(script)
     error = None
     try:
-        with Renderer(output=f"serial://{amp.port}", texture=GRATING) as renderer:
-            started = time.monotonic()
-            while (elapsed := time.monotonic() - started) < seconds:
-                renderer.check()
-                renderer.push_finger(20.0 + 50.0 * elapsed, 20.0, 0.5)
-                time.sleep(0.002)
+        streaming = VirtualRun(line_to(amp)).start()
+        streaming.swipe(seconds)
+        failure = streaming.stop()
+        error = None if failure is None else str(failure)
     except TpadError as failure:
         error = str(failure)
-    return Outcome(error, amp.finish(), amp)
+    return Outcome(error, amp.frames, amp)
 
 
 def assert_within_limits(outcome: Outcome) -> None:
@@ -299,21 +281,6 @@ def test_a_late_answer_to_a_first_hello_does_not_set_the_envelope_scale() -> Non
     assert [nonce for nonce, _, _ in outcome.amp.infos] == outcome.amp.hello_nonces[:2]
     samples = outcome.envelope()
     assert samples.size and np.abs(samples).max() / 32767 * 400 > 10, "the swipe must drive the plate"
-    assert_within_limits(outcome)
-
-
-def test_play_on_the_issue_s_amplifier_keeps_within_the_device_s_cap() -> None:
-    """The same amplifier under ``tpad-rt play`` (its own process, H1's full 0.5 s per HELLO): it plays, within 40 V
-    read with the 400 V full scale the amplifier runs by, and ends with STOP."""
-    amp = ScriptedAmp(Script({0: [Answer(info(40_000, 40_000), when="next_hello")],
-                              1: [Answer(info(400_000, 400_000))]}))
-    try:
-        done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}", "--duration", "1")
-    finally:
-        frames = amp.finish()
-    assert done.returncode == 0, done.stderr
-    outcome = Outcome(None, frames, amp)
-    assert np.abs(outcome.envelope()).max() / 32767 * 400 > 10, "the swipe must drive the plate"
     assert_within_limits(outcome)
 
 
@@ -405,15 +372,12 @@ def test_an_achieved_carrier_near_the_one_asked_plays(offset_mhz: int) -> None:
     assert_within_limits(outcome)
 
 
-def test_play_refuses_a_zero_hz_echo_in_one_line(tmp_path: Path) -> None:
-    """On the command line: one line naming the amplifier and what it sent, not ``carrier_hz: must be > 0``."""
-    amp = ScriptedAmp(Script({0: [Answer(HONEST)]}, carrier_mhz=0))
-    try:
-        done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}", "--duration", "1")
-    finally:
-        amp.finish()
-    done.assert_one_line_error(f"serial: the amplifier on {amp.port} answered SET_CARRIER")
-    assert "achieved carrier of 0 Hz (value 0 mHz)" in done.stderr
+def test_a_zero_hz_echo_is_refused_for_what_it_is() -> None:
+    """One line naming the amplifier and what it sent, not a drive setting's ``carrier_hz: must be > 0``."""
+    outcome = run(Script({0: [Answer(HONEST)]}, carrier_mhz=0))
+    assert outcome.error is not None and outcome.names_the_amplifier()
+    assert outcome.error.startswith(f"serial: the amplifier on {PORT} answered SET_CARRIER")
+    assert "achieved carrier of 0 Hz (value 0 mHz)" in outcome.error
 
 
 # --- STATUS ----------------------------------------------------------------------------------------------------
@@ -441,29 +405,19 @@ def test_a_status_out_of_range_ends_the_run_in_one_line_with_stop(lie: dict[str,
     assert_within_limits(outcome)
 
 
-def test_play_ends_a_backwards_play_index_in_one_line_with_stop() -> None:
-    """On the command line, a play index that runs backwards: one line, and STOP (H8), not an idle host."""
-    amp = ScriptedAmp(Script({0: [Answer(HONEST)]}, lies={30: {"play_index": "back"}}))
-    try:
-        done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}", "--duration", "30")
-    finally:
-        frames = amp.finish()
-    done.assert_one_line_error(f"serial: the amplifier on {amp.port} sent a STATUS with play_index")
-    assert frames[-1].type == wire.Type.STOP
-
-
 @pytest.mark.parametrize("lie", [{"play_index": "jump"}, {"play_index": "back"}, {"play_index": "stuck"},
                                  {"envelope_mv": 40_001}])
 def test_a_tone_refuses_a_status_out_of_range_and_stops(lie: dict[str, int | str]) -> None:
     """``calibrate sweep``'s tone (a Python loop, not the streamer) checks STATUS the same way, STOP and all."""
     amp = ScriptedAmp(Script({0: [Answer(HONEST)]}, lies={12: lie}))
-    link = serial_amp.AmpLink.open(serial_amp.parse_serial_url(f"serial://{amp.port}"), carrier_hz=DEVICE.carrier_hz)
+    link = serial_amp.AmpLink.open(serial_amp.parse_serial_url(f"serial://{amp.port}"), carrier_hz=DEVICE.carrier_hz,
+                                   line=line_to(amp))
     try:
         with pytest.raises(TpadError) as failure:
             link.tone(1.0, 1.0)
     finally:
         link.stop(5.0)
-        frames = amp.finish()
+    frames = amp.frames
     assert str(failure.value).startswith(f"serial: the amplifier on {amp.port} sent a STATUS with "), failure.value
     assert frames[-1].type == wire.Type.STOP
 

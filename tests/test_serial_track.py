@@ -1,11 +1,11 @@
 """Tracking through a serial amplifier (issue 11, Deliver 6): the streamer sends the carrier of each control step
 as the contact force moves the plate's resonance (from the device model), and locks it onto the emulated plate's
-own resonance from the voltage, current and phase the amplifier measures; the emulator (``tpad-rt amp
-emulate``, a real pty) makes the carrier and simulates its own device file's circuit."""
+own resonance from the voltage, current and phase the amplifier measures; the emulator makes the carrier and
+simulates its own device file's circuit: in process on the virtual link (deterministic), and once through
+``tpad-rt play`` and ``tpad-rt amp emulate`` on a real pty."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
@@ -14,9 +14,10 @@ import pytest
 from amp_emulator import Emulator
 from cli_run import tpad_rt
 from test_track import _even
+from virtual_serial import VirtualRun
 
+from tpad_rt.amp.virtual_link import VirtualLink
 from tpad_rt.device import Device
-from tpad_rt.engine import Renderer
 from tpad_rt.kernel import layout
 from tpad_rt.pipeline import LOCK_RANGE, Pipeline, RenderOptions
 from tpad_rt.shipped import DEVICES_DIR
@@ -28,33 +29,27 @@ FORCE_N = 2.0
 RUN_S = 1.2
 #: How close the lock holds the carrier to the emulated plate's resonance (Hz): it measures the reactance from
 #: STATUS's whole mV, uA and centidegrees at whatever envelope plays, so its correction wanders by about a tenth
-#: of a hertz (a fresh-clone run ended 0.07 Hz off the model); the fixed carrier lies 28 Hz away.
+#: of a hertz; the fixed carrier lies 28 Hz away.
 LOCK_RESOLUTION_HZ = 0.3
 
 
 def _run(tmp_path: Path, amplifier_device: Path, track: bool) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """A finger pressing FORCE_N and sliding at 50 mm/s for RUN_S over an even 0.6, rendered for SLG_0.4 through
-    an emulator of ``amplifier_device`` at that force: the host's amplifier stats and the emulator's recording.
-    The finger moves on the stream's clock (a busy host's wall clock would give its samples jittered speeds, and
-    the friction model another amplitude for each)."""
+    the emulated amplifier of ``amplifier_device`` at that force (the virtual link): the host's amplifier stats
+    and the emulator's recording."""
     tmp_path.mkdir(exist_ok=True)
-    with Emulator(tmp_path, "--device", str(amplifier_device), "--force-n", str(FORCE_N)) as amp:
-        renderer = Renderer(SLG04, f"serial://{amp.port}", texture=_even(tmp_path, 0.6),
-                            options=RenderOptions(track=track))
-        with renderer:
-            start_s = renderer.now_s()
-            while (elapsed_s := renderer.now_s() - start_s) < RUN_S:
-                renderer.push_finger(20.0 + 50.0 * elapsed_s, 20.0, FORCE_N, t=start_s + elapsed_s)
-                time.sleep(0.002)
-        stats = renderer.stats()["amplifier"]
-        recording = amp.finish()
-    return stats, recording
+    link = VirtualLink.emulating(Device.from_file(amplifier_device), force_n=FORCE_N)
+    run = VirtualRun(link, device=SLG04, texture=_even(tmp_path, 0.6), options=RenderOptions(track=track)).start()
+    run.swipe(RUN_S, force_n=FORCE_N)
+    assert run.stop() is None
+    stats = run.stats()
+    return stats, {**link.recording(), "envelope_hz": np.array(stats["envelope_hz"])}
 
 
 def _last(recording: dict[str, np.ndarray], name: str, seconds: float = 0.2) -> np.ndarray:
     """``name`` over the last ``seconds`` the emulator played a sample the host sent, where the plate had settled
-    on what the host sent: that sample and the 5 plate time constants before it were all fed (a busy host's
-    underruns play zeros, from which the plate takes that long to come back)."""
+    on what the host sent: that sample and the 5 plate time constants before it were all fed (underruns play
+    zeros, from which the plate takes that long to come back)."""
     fed = recording["index"] >= 0
     memory = round(5 * float(SLG04.envelope_time_constant_s(FORCE_N)) * float(recording["envelope_hz"]))
     settled = np.flatnonzero(np.convolve(~fed, np.ones(memory + 1), mode="full")[:len(fed)] == 0)

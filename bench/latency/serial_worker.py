@@ -15,6 +15,7 @@ own latency estimate, the target fill.
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import json
 import sys
 import time
@@ -31,9 +32,12 @@ from tpad_rt.engine import Renderer  # noqa: E402
 from tpad_rt.kernel import table as tab  # noqa: E402
 
 GRATING = HERE.parents[1] / "textures" / "grating.yaml"
+#: Seconds past its run after which the worker prints every thread's stack and exits (a hang shows where it hung).
+HANG_S = 120.0
 
 
 def main(url: str, seconds: float, gil_threads: int, pushes_path: Path) -> None:
+    faulthandler.dump_traceback_later(seconds + HANG_S, exit=True)
     with Renderer(output=url, texture=GRATING) as renderer:
         table = renderer.callback_table
         assert table is not None

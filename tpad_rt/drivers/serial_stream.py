@@ -9,6 +9,7 @@ as PortAudio does, once per frame, in one numba call that holds no GIL.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -17,6 +18,7 @@ from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
 from tpad_rt.outputs import serial_amp
 from tpad_rt.outputs.base import Consumes
+from tpad_rt.outputs.serial_line import Line
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.realtime import CallbackTable
 from tpad_rt.urls import Url
@@ -29,12 +31,15 @@ DEFAULT_CONTROL_RATE_HZ = 192000
 class SerialStreamDriver(Driver):
     """A ``serial://`` amplifier: ``envelope_hz`` replaces the renderer's rate, ``frame_ms`` its block (until
     the amplifier's INFO says how many samples a frame may hold); a default ``options.control_interval``
-    is scaled to keep its control period."""
+    is scaled to keep its control period. ``open_line`` opens the line to the amplifier for the URL's target
+    (default: its serial port); ``clock`` must be that line's (a :class:`tpad_rt.amp.virtual_link.VirtualLink`
+    and its VirtualClock run the driver on a virtual clock)."""
 
     consumes = Consumes.ENVELOPE
 
     def __init__(self, url: Url, *, device: Device, rate_hz: int, block_frames: int, options: RenderOptions,
-                 stall_timeout_s: float = 0.5, clock: Clock | None = None):
+                 stall_timeout_s: float = 0.5, clock: Clock | None = None,
+                 open_line: Callable[[serial_amp.SerialTarget], Line] | None = None):
         target = serial_amp.parse_serial_url(url)
         rate_hz = target.envelope_hz
         if options.control_interval == RenderOptions.control_interval:
@@ -44,6 +49,7 @@ class SerialStreamDriver(Driver):
                          clock=clock,
                          block_frames=max(1, round(target.frame_ms * 1e-3 * rate_hz)))
         self.target = target
+        self._open_line = open_line
         self.link: serial_amp.AmpLink | None = None  # open between open() and close()
         self._last_link: serial_amp.AmpLink | None = None  # for stats() after close()
 
@@ -57,8 +63,9 @@ class SerialStreamDriver(Driver):
         """Open the port, make the handshake, set the carrier to the device's resonance; the envelope's scale the
         link decided (the amplifier's full scale; the lower of its clamp and the device's max_voltage_v) and the
         achieved carrier go into the pipeline. BackendError as AmpLink.open says."""
+        line = self._open_line(self.target) if self._open_line is not None else None
         link = self.link = self._last_link = serial_amp.AmpLink.open(self.target, carrier_hz=self.device.carrier_hz,
-                                                                    max_voltage_v=self.device.max_voltage_v)
+                                                                    max_voltage_v=self.device.max_voltage_v, line=line)
         scale = link.scale  # decided once, from the INFO the handshake took (H1, H3); the streamer clamps to it
         assert scale is not None
         pipeline.set_drive(pipeline.device_drive.from_hardware(

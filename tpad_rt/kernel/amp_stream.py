@@ -1,32 +1,53 @@
-"""The serial amplifier's streamer: one numba call that streams the envelope for a whole run, without the GIL.
+"""The serial amplifier's streamer: a step that takes the time and the bytes read and returns the bytes to write and
+when to wake, and one numba call that runs it on a real port for a whole run, without the GIL.
 
 API map
 -------
-stream(table, link, buffers) -> int
-    render envelope frames with the pointer table's arrays (:mod:`tpad_rt.kernel.table`)
-    and write them to the port's file descriptor at the amplifier's pace, reading its
-    STATUS and ACK frames, until ``link[LINK_STOP]`` is set or the link fails, then send
-    STOP unless the port is lost (H8); returns the EXIT_* reason (also in ``link[LINK_EXIT]``)
+begin(table, link, now_ns)
+    set the step's state for a run starting at ``now_ns`` from the table's next sample
+reading(link) -> bool
+    whether the run reads the port now (not once it ends: STOP's ACK is the Python side's)
+on_received(link, buffers, count, now_ns) -> int
+    act on ``count`` bytes just read into ``BUF_RX`` at ``LINK_RX_LENGTH`` (negative:
+    ``-errno`` of a failed read), dated ``now_ns``; the EXIT_* reason the run now ends for
+step(table, link, buffers, envelope, times, now_ns) -> int
+    react to the STATUS frames taken, check the timeouts, queue the frames due (rendered
+    with the pointer table's arrays, :mod:`tpad_rt.kernel.table`) or, once the run ends,
+    STOP (H8); the bytes waiting in ``BUF_TX[LINK_TX_FIRST:LINK_TX_END]``
+on_written(link, count) -> int
+    the port took ``count`` of them (0: full; negative: ``-errno``); the bytes still waiting
+settle(link, now_ns) -> int
+    after the writes: the stall check, the prefill's end; when to wake (ns), or RUN_OVER
+    (``link[LINK_EXIT]`` says why)
+stream(table, link, buffers, envelope, times) -> int
+    the production loop: the steps above on CLOCK_MONOTONIC and the non-blocking
+    descriptor ``link[LINK_FD]`` (reads until EAGAIN, writes until EAGAIN, EINTR retried,
+    ``clock_nanosleep`` to the wake time), until the run is over; the EXIT_* reason
 carrier_echo_ok(link, asked_mhz, achieved_mhz) / check_status(link, body, now_ns) / start_checks(link)
     the checks of what the amplifier reports (H2, H10), shared with the Python side
-LINK_*, EXIT_*, EXIT_NAMES, BUF_*
-    the layout of the int64 ``link`` array it shares with the Python side, the exit
-    reasons, and the uint8 buffers it works in
+LINK_*, STAGE_*, EXIT_*, EXIT_NAMES, BUF_*
+    the layout of the int64 ``link`` array it shares with the Python side (the step's own
+    state between calls in its last block), the run's stages, the exit reasons, and the
+    uint8 buffers it works in
 
 docs/amp-protocol.md is the protocol (rules H3-H7 are the host's, here) and
-docs/realtime.md the design. The Python side (:mod:`tpad_rt.outputs.serial`) opens the
-port, makes the handshake (HELLO, SET_CARRIER, START) and calls :func:`stream` from a
-thread of its own; numba releases the GIL for the whole call, so the frames keep their
-cadence while the application's Python threads hold it. The loop wakes every
-``WAKE_NS`` (or sooner when a frame is due): it reads what the amplifier sent (never
-blocking: the descriptor is non-blocking), keeps the amplifier's buffer at the target
-fill from its own clock, corrected by each STATUS, renders one frame at a time by
+docs/realtime.md the design. The Python side (:mod:`tpad_rt.outputs.serial_amp`) makes
+the handshake (HELLO, SET_CARRIER, START) on its line, then the line runs the steps: on a
+real port (:class:`tpad_rt.outputs.serial_line.SerialLine`) :func:`stream`, in a thread of
+its own, one numba call that releases the GIL for the whole run, so the frames keep their
+cadence while the application's Python threads hold it; on the virtual link
+(:mod:`tpad_rt.amp.virtual_link`) the same compiled steps as events on a virtual clock,
+against the in-process amplifier emulator. Every timing decision (pacing, skip-ahead,
+restart after the watchdog, the STATUS timeout, a stalled port, the STOP tail) is the
+step's; the loop around it only reads the clock, moves bytes and sleeps. The step wakes
+every ``WAKE_NS`` (or sooner when a frame is due): it keeps the amplifier's buffer at the
+target fill from its own clock, corrected by each STATUS, renders one frame at a time by
 calling the audio driver's compiled callback on the same pointer table (the kernel
-renders the envelope: ``cfg[CFG_OUTPUT_ENVELOPE]``), and writes it; bytes a
-full port refuses wait in a pending buffer. It allocates nothing.
+renders the envelope: ``cfg[CFG_OUTPUT_ENVELOPE]``); bytes a full port refuses wait in
+BUF_TX. It allocates nothing.
 
 Play position: the host estimates the sample ``p`` the amplifier plays now as
-``ref_index + (now - ref_ns) * envelope_hz``, from when the prefill has been written
+``ref_index + (now - ref_ns) * envelope_hz`` (LINK_REF_INDEX, LINK_REF_NS), from when the prefill has been written
 until a RUNNING STATUS says which sample (``play_index``, unwrapped from 32 bits) it
 played at its own time ``time_us``. That time is put on the host's clock by the
 smallest offset (receive time - ``time_us``) seen so far: the STATUS the line and the
@@ -98,7 +119,7 @@ from tpad_rt.kernel.amp_codec import (
 )
 from tpad_rt.kernel.atomics import load_acquire
 from tpad_rt.kernel.cache_stamp import stamp_cache
-from tpad_rt.kernel import render
+from tpad_rt.kernel import callback, device_lookup, layout
 from tpad_rt.kernel.layout import (
     CFG_C0_F,
     CFG_SHUNT_OHM,
@@ -108,7 +129,8 @@ from tpad_rt.kernel.layout import (
     STATE_NEXT_INDEX,
     STATE_STEP_CARRIER_HZ,
 )
-from tpad_rt.kernel.render import _device_value, _force_cell
+from tpad_rt.kernel.callback import BLOCK_LATE, BLOCK_PRIMING
+from tpad_rt.kernel.device_lookup import device_value, force_cell
 from tpad_rt.kernel.libc import (
     EAGAIN,
     EINTR,
@@ -122,7 +144,10 @@ from tpad_rt.kernel.libc import (
 )
 from tpad_rt.kernel.table import kernel_views
 
-stamp_cache(__file__, codec.__file__, libc.__file__, atomics.__file__, tab.__file__, render.__file__)
+# Compiled in: the codec, the libc calls, the atomics, the table's views, the device lookups, the layout's and the
+# callback's constants.
+stamp_cache(__file__, codec.__file__, libc.__file__, atomics.__file__, tab.__file__, device_lookup.__file__,
+            layout.__file__, callback.__file__)
 
 # --- link: int64[LINK_SIZE]; the Python side writes the first block before the run --------
 LINK_FD = 0                   # the port's file descriptor (non-blocking)
@@ -197,7 +222,29 @@ LINK_REPORT_VALUE = 63
 LINK_REPORT_LOW = 64
 LINK_REPORT_HIGH = 65
 LINK_INFOS_STALE = 66         # INFO frames passed over: answers to an earlier HELLO, or the taken one again
-LINK_SIZE = 67
+# --- the step's own state between calls (begin() sets it; nothing else writes it) ---------------------------
+LINK_STAGE = 67               # STAGE_*: streaming, flushing the STOP tail, done
+LINK_REASON = 68              # the EXIT_* the run is ending for (LINK_EXIT once the STOP tail is done)
+LINK_REF_INDEX = 69           # the play position's reference: the amplifier plays this stream index ...
+LINK_REF_NS = 70              # ... at this time of the host's clock (ns)
+LINK_PRIMED = 71              # 1 once the prefill is out (the amplifier plays), until a restart
+LINK_AMP_US = 72              # the last RUNNING STATUS's time_us, unwrapped (us)
+LINK_OFFSET_NS = 73           # the smallest (receive time - amplifier time) seen, allowed to grow by CLOCK_SKEW
+LINK_SYNCED_NS = 74           # when LINK_OFFSET_NS was last updated (ns)
+LINK_TRIPS_AT_START = 75      # the amplifier's watchdog trips when the last START went out
+LINK_RX_LENGTH = 76           # bytes of an unfinished frame at the front of BUF_RX
+LINK_RX_STATUSES = 77         # STATUS frames taken since the last step
+LINK_TX_FIRST = 78            # the bytes waiting for the port: BUF_TX[LINK_TX_FIRST:LINK_TX_END]
+LINK_TX_END = 79
+LINK_TX_BEFORE = 80           # LINK_TX_FIRST when the last step left bytes waiting (-1: none)
+LINK_MOVED_NS = 81            # the last time the port took bytes (ns)
+LINK_SKIPPED = 82             # 1: the stream skipped ahead since the last frame (the next is late)
+LINK_SIZE = 83
+
+# --- LINK_STAGE ---------------------------------------------------------------------------------
+STAGE_STREAMING = 0           # pacing frames
+STAGE_FLUSHING = 1            # the run ended (LINK_REASON): STOP is queued, its bytes are being written
+STAGE_DONE = 2                # over: LINK_EXIT says why; settle() returns RUN_OVER
 
 # --- LINK_TRACK --------------------------------------------------------------------------------
 TRACK_OFF = 0                 # the handshake's carrier throughout
@@ -252,11 +299,13 @@ BUF_INFO = 4                  # the INFO body the handshake took (H1)
 BUF_INFO_OTHER = 5            # an INFO body that contradicted it (EXIT_CONTRADICTED)
 BUF_ROWS = 6
 BUF_BYTES = 1 << 16
-#: Seconds between the loop's wake-ups when no frame is due sooner (ns).
+#: The longest time (ns) between two steps when no frame is due sooner, and the shortest one ahead.
 WAKE_NS = 250_000
-#: PortAudio's status flags the callback counts: paOutputUnderflow, paPrimingOutput.
-PA_OUTPUT_UNDERFLOW = 0x4
-PA_PRIMING_OUTPUT = 0x10
+MIN_WAKE_NS = 20_000
+#: What settle() returns once the run is over.
+RUN_OVER = -1
+#: LINK_OFFSET_NS before any RUNNING STATUS: larger than any offset.
+NO_OFFSET_NS = 1 << 62
 #: How fast (s per s) the host lets the amplifier's clock offset grow: an amplifier clock up to this much
 #: slower than the host's is followed (a crystal is within 1e-4).
 CLOCK_SKEW = 1e-4
@@ -481,69 +530,6 @@ def _take_frame(link: np.ndarray, encoded: np.ndarray, length: int, body: np.nda
 
 
 @njit(**_KERNEL)
-def _receive(link: np.ndarray, buffers: np.ndarray, rx_length: int, now_ns: int) -> tuple[int, int, int, int]:
-    """Read what the port holds and act on each whole frame; (bytes kept, STATUS frames, exit reason or 0,
-    the time of the last read that returned bytes, else ``now_ns``).
-
-    Frames are timed by the clock read after the read() that returned them, never by an
-    earlier reading: a host thread held up (preempted, or the process stopped) between
-    ``now_ns`` and the read would otherwise date the STATUS frames that piled up meanwhile
-    to before the hold, and take the hold for the amplifier's silence (H7).
-    """
-    rx = buffers[BUF_RX]
-    body = buffers[BUF_BODY]
-    info = buffers[BUF_INFO:BUF_INFO_OTHER + 1]
-    statuses = 0
-    while True:
-        got = read_fd(link[LINK_FD], rx.ctypes.data + rx_length, rx.shape[0] - rx_length)
-        if got == 0:  # a tty with VMIN = 0 says "nothing now" so; a silent loss shows as no STATUS (H7)
-            return rx_length, statuses, 0, now_ns
-        if got < 0:
-            error = errno()
-            if error == EAGAIN:
-                return rx_length, statuses, 0, now_ns
-            if error != EINTR:
-                link[LINK_ERRNO] = error
-                return rx_length, statuses, EXIT_PORT_LOST, now_ns
-            continue
-        now_ns = max(now_ns, monotonic_ns())
-        end = rx_length + got
-        start = 0
-        for i in range(rx_length, end):
-            if rx[i] == 0:
-                taken = _take_frame(link, rx[start:i], i - start, body, info, now_ns)
-                if taken < 0:
-                    return 0, statuses, -taken, now_ns
-                statuses += taken
-                start = i + 1
-        rx_length = end - start
-        for k in range(rx_length if start > 0 else 0):  # keep the unfinished frame at the front
-            rx[k] = rx[start + k]
-        if rx_length > MAX_ENCODED:  # no delimiter where one had to be: drop the bytes, count a bad frame
-            link[LINK_RX_BAD] += 1
-            rx_length = 0
-
-
-@njit(**_KERNEL)
-def _flush(link: np.ndarray, tx: np.ndarray, pending: tuple[int, int]) -> tuple[int, int, int]:
-    """Write the pending bytes ``tx[first:end]``; (first, end, exit reason or 0) after it."""
-    first, end = pending
-    while first < end:
-        wrote = write_fd(link[LINK_FD], tx.ctypes.data + first, end - first)
-        if wrote < 0:
-            error = errno()
-            if error == EAGAIN:
-                link[LINK_TX_BLOCKED] += 1
-                return first, end, 0
-            if error != EINTR:
-                link[LINK_ERRNO] = error
-                return first, end, EXIT_PORT_LOST
-            continue
-        first += wrote
-    return 0, 0, 0
-
-
-@njit(**_KERNEL)
 def _queue(link: np.ndarray, buffers: np.ndarray, payload_length: int, msg_type: int, end: int) -> int:
     """Seal the body in BUF_FRAME (payload written) as the next host frame, appended to BUF_TX at ``end``;
     the new end."""
@@ -561,13 +547,14 @@ def start_checks(link: np.ndarray) -> None:
 
 
 @njit(**_KERNEL)
-def _queue_start(link: np.ndarray, buffers: np.ndarray, end: int) -> int:
-    """Queue a START from LINK_WRITTEN with the target fill as prefill (a restart after the watchdog)."""
+def _queue_start(link: np.ndarray, buffers: np.ndarray, now_ns: int, end: int) -> int:
+    """Queue a START from LINK_WRITTEN with the target fill as prefill (a restart after the watchdog), at ``now_ns``
+    (ns: before it can go out, so no sample of it plays earlier)."""
     frame = buffers[BUF_FRAME]
     codec.put_u32(frame, PAYLOAD + START_ENVELOPE_HZ, link[LINK_ENVELOPE_HZ])
     codec.put_u32(frame, PAYLOAD + START_INDEX, link[LINK_WRITTEN])
     link[LINK_START_INDEX] = link[LINK_WRITTEN]
-    link[LINK_START_NS] = monotonic_ns()  # before it can go out: no sample of it plays earlier
+    link[LINK_START_NS] = now_ns
     start_checks(link)
     codec.put_u16(frame, PAYLOAD + START_PREFILL, min(link[LINK_TARGET_FILL], link[LINK_BUFFER_SAMPLES]))
     return _queue(link, buffers, START_BYTES, MSG_START, end)
@@ -581,9 +568,9 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
 
     The samples come from the audio driver's own compiled callback (LINK_CALLBACK), called
     as PortAudio calls it: one block of the pointer table, its record and statistics
-    (the time info says its first sample plays ``delay_ns`` from now; the status flags
-    count it as late, the stream having skipped ahead before it, or priming, part of a
-    prefill). So the render kernel is compiled once, for both drivers. Its samples are in
+    (the time info says its first sample plays ``delay_ns`` from now; the callback's status
+    flags say BLOCK_LATE, the stream having skipped ahead before it, or BLOCK_PRIMING, part
+    of a prefill). So the render kernel is compiled once, for both drivers. Its samples are in
     [-1, 1] of full scale (the output guard); each becomes round(32767 x sample), clamped
     to +-LINK_LEVEL_LIMIT (the host's envelope scale: H3), and anything else (never
     expected) is sent as 0.
@@ -593,7 +580,7 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
     times[0] = 0.0
     times[1] = 0.0
     times[2] = delay_ns * 1e-9
-    flags = (PA_OUTPUT_UNDERFLOW if late else 0) | (PA_PRIMING_OUTPUT if priming else 0)
+    flags = (BLOCK_LATE if late else 0) | (BLOCK_PRIMING if priming else 0)
     call_stream_callback(link[LINK_CALLBACK], envelope.ctypes.data, count, times.ctypes.data, flags,
                          table.ctypes.data)
     frame = buffers[BUF_FRAME]
@@ -658,9 +645,9 @@ def _lock(cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, link: np.ndarray)
     if motional == 0.0:
         return
     measured_ohm = (1.0 / motional).imag
-    cell = _force_cell(cfg, dev, state[STATE_FORCE_N])
-    slope = _device_value(dev, DEV_REACTANCE_SLOPE_OHM_PER_HZ, cell)
-    model_ohm = _device_value(dev, DEV_REACTANCE_OHM, cell) + slope * (carrier_hz - state[STATE_STEP_CARRIER_HZ])
+    cell = force_cell(cfg, dev, state[STATE_FORCE_N])
+    slope = device_value(dev, DEV_REACTANCE_SLOPE_OHM_PER_HZ, cell)
+    model_ohm = device_value(dev, DEV_REACTANCE_OHM, cell) + slope * (carrier_hz - state[STATE_STEP_CARRIER_HZ])
     shift_hz = (model_ohm - measured_ohm) / slope
     if not abs(shift_hz) < np.inf:
         return
@@ -682,123 +669,322 @@ def _skip_to(table: np.ndarray, state: np.ndarray, link: np.ndarray, index: int)
     link[LINK_WRITTEN] = index
 
 
-@njit(**_KERNEL)
-def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: np.ndarray,
-           times: np.ndarray) -> int:
-    """Stream until LINK_STOP or a failure (module docstring); the EXIT_* reason, also in LINK_EXIT.
+# --- the step: every decision of the run, given the time and the bytes -----------------------------------------
 
-    ``table`` is the pointer table (its kernel's cfg set for envelope output), ``link``
-    the int64 LINK_* array, ``buffers`` uint8 ``[BUF_ROWS, BUF_BYTES]``, ``envelope``
-    float32 of at least LINK_FRAME_SAMPLES samples, ``times`` float64[3] (the callback's
-    time info).
-    """
-    cfg, dev, state = kernel_views(table)[:3]
+@njit(**_KERNEL)
+def _end(link: np.ndarray, reason: int) -> int:
+    """End the run for ``reason`` (EXIT_*) unless it already ends for another; the reason it ends for."""
+    if link[LINK_REASON] == EXIT_RUNNING:
+        link[LINK_REASON] = reason
+    return link[LINK_REASON]
+
+
+@njit(**_KERNEL)
+def begin(table: np.ndarray, link: np.ndarray, now_ns: int) -> None:
+    """Set the step's state for a run that starts at ``now_ns`` (ns) from the table's next sample (the index the
+    handshake's START named); the Python side has written the link's first block."""
+    state = kernel_views(table)[2]
+    link[LINK_WRITTEN] = np.int64(state[STATE_NEXT_INDEX])
+    link[LINK_STATUS_NS] = now_ns
+    link[LINK_REF_INDEX] = link[LINK_WRITTEN]
+    link[LINK_REF_NS] = now_ns
+    link[LINK_PRIMED] = 0
+    link[LINK_AMP_US] = 0
+    link[LINK_OFFSET_NS] = NO_OFFSET_NS
+    link[LINK_SYNCED_NS] = now_ns
+    link[LINK_TRIPS_AT_START] = link[LINK_AMP_WATCHDOG_TRIPS]
+    start_checks(link)
+    link[LINK_RX_LENGTH] = 0
+    link[LINK_RX_STATUSES] = 0
+    link[LINK_TX_FIRST] = 0
+    link[LINK_TX_END] = 0
+    link[LINK_TX_BEFORE] = -1
+    link[LINK_MOVED_NS] = now_ns
+    link[LINK_SKIPPED] = 0
+    link[LINK_STAGE] = STAGE_STREAMING
+    link[LINK_REASON] = EXIT_RUNNING
+    link[LINK_EXIT] = EXIT_RUNNING
+
+
+@njit(**_KERNEL)
+def reading(link: np.ndarray) -> bool:
+    """Whether the run reads the port now: it streams, no failure and no stop request has come (the STOP tail
+    leaves STOP's ACK to the Python side)."""
+    return (link[LINK_STAGE] == STAGE_STREAMING and link[LINK_REASON] == EXIT_RUNNING
+            and load_acquire(link, LINK_STOP) == 0)
+
+
+@njit(**_KERNEL)
+def on_received(link: np.ndarray, buffers: np.ndarray, count: int, now_ns: int) -> int:
+    """Act on ``count`` bytes just read into BUF_RX at LINK_RX_LENGTH, at ``now_ns`` (ns: the time of that read,
+    never an earlier reading: a host held up before it must not date the STATUS frames that piled up meanwhile
+    to before the hold, and take the hold for the amplifier's silence, H7). ``count < 0``: the read failed with
+    errno ``-count`` (the port is lost). Each whole frame is decoded and checked (H10); the EXIT_* reason the
+    run now ends for, or EXIT_RUNNING."""
+    if count < 0:
+        link[LINK_ERRNO] = -count
+        return _end(link, EXIT_PORT_LOST)
+    rx = buffers[BUF_RX]
+    body = buffers[BUF_BODY]
+    info = buffers[BUF_INFO:BUF_INFO_OTHER + 1]
+    rx_length = link[LINK_RX_LENGTH]
+    end = rx_length + count
+    start = 0
+    for i in range(rx_length, end):
+        if rx[i] == 0:
+            taken = _take_frame(link, rx[start:i], i - start, body, info, now_ns)
+            if taken < 0:
+                link[LINK_RX_LENGTH] = 0
+                return _end(link, -taken)
+            link[LINK_RX_STATUSES] += taken
+            start = i + 1
+    rx_length = end - start
+    for k in range(rx_length if start > 0 else 0):  # keep the unfinished frame at the front
+        rx[k] = rx[start + k]
+    if rx_length > MAX_ENCODED:  # no delimiter where one had to be: drop the bytes, count a bad frame
+        link[LINK_RX_BAD] += 1
+        rx_length = 0
+    link[LINK_RX_LENGTH] = rx_length
+    return EXIT_RUNNING
+
+
+@njit(**_KERNEL)
+def _react(cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, link: np.ndarray, buffers: np.ndarray,
+           now_ns: int) -> None:
+    """Act on the STATUS frames taken since the last step (the last one's values): a fault ends the run; a
+    watchdog trip (A4: the amplifier went IDLE) queues START again from the next sample (H7: recover); a RUNNING
+    one moves the phase lock and puts its play position on the host's clock. Then the run ends for a refused
+    START or no STATUS for LINK_STATUS_TIMEOUT_NS."""
+    if link[LINK_RX_STATUSES] > 0:
+        link[LINK_RX_STATUSES] = 0
+        if link[LINK_AMP_FAULTS] != 0:
+            _end(link, EXIT_FAULT)
+            return
+        if link[LINK_AMP_WATCHDOG_TRIPS] > link[LINK_TRIPS_AT_START]:
+            link[LINK_TRIPS_AT_START] = link[LINK_AMP_WATCHDOG_TRIPS]
+            link[LINK_RESTARTS] += 1
+            link[LINK_TX_END] = _queue_start(link, buffers, now_ns, link[LINK_TX_END])
+            link[LINK_PRIMED] = 0
+            link[LINK_REF_INDEX] = link[LINK_WRITTEN]
+            link[LINK_REF_NS] = now_ns
+        elif link[LINK_AMP_STATE] == codec.STATE_RUNNING:
+            if link[LINK_TRACK] == TRACK_LOCKED:
+                _lock(cfg, dev, state, link)
+            # The amplifier played sample play_index at its time time_us: on the host's clock, at time_us + offset,
+            # where offset is the smallest (receive time - time_us) seen, the one the line delayed least (allowed
+            # to grow by CLOCK_SKEW, for a slower amplifier clock).
+            amp_ns = _unwrap(link[LINK_AMP_TIME_US], link[LINK_AMP_US]) * 1000
+            link[LINK_AMP_US] = amp_ns // 1000
+            link[LINK_OFFSET_NS] = min(np.int64(now_ns - amp_ns), link[LINK_OFFSET_NS] + np.int64(
+                (now_ns - link[LINK_SYNCED_NS]) * CLOCK_SKEW))
+            link[LINK_SYNCED_NS] = now_ns
+            link[LINK_REF_INDEX] = link[LINK_AMP_PLAY_INDEX]
+            link[LINK_REF_NS] = amp_ns + link[LINK_OFFSET_NS]
+            link[LINK_PRIMED] = 1
+    if link[LINK_ACK_TYPE] == MSG_START and link[LINK_ACK_CODE] != codec.ACK_OK:
+        _end(link, EXIT_REFUSED)
+    elif now_ns - link[LINK_STATUS_NS] > link[LINK_STATUS_TIMEOUT_NS]:
+        _end(link, EXIT_STATUS_TIMEOUT)
+
+
+@njit(**_KERNEL)
+def _play_position(link: np.ndarray, now_ns: int) -> float:
+    """The stream index the amplifier plays at ``now_ns``: from the reference, at the envelope rate once primed."""
+    if link[LINK_PRIMED] == 0:
+        return float(link[LINK_REF_INDEX])
+    return link[LINK_REF_INDEX] + (now_ns - link[LINK_REF_NS]) * 1e-9 * link[LINK_ENVELOPE_HZ]
+
+
+@njit(**_KERNEL)
+def _pace(table: np.ndarray, state: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: np.ndarray,
+          times: np.ndarray, now_ns: int) -> None:
+    """Queue the frames due at ``now_ns``: skip ahead of a play position that passed what was sent, then render
+    frames while fewer than the target fill (and a frame, once primed) are ahead of it, never more than the
+    amplifier's buffer, with room left in BUF_TX for a START or a STOP; each followed by a SET_CARRIER if
+    tracking moved the carrier."""
     rate_hz = link[LINK_ENVELOPE_HZ]
     frame_samples = link[LINK_FRAME_SAMPLES]
     body_bytes = PAYLOAD + ENVELOPE_SAMPLES + 2 * frame_samples + codec.CRC_BYTES
     frame_bytes = body_bytes + body_bytes // 254 + 2  # its most COBS bytes, delimiter included
-    tx = buffers[BUF_TX]
-    timeout_ns = link[LINK_STATUS_TIMEOUT_NS]
-    now_ns = monotonic_ns()
-    link[LINK_WRITTEN] = np.int64(state[STATE_NEXT_INDEX])
-    link[LINK_STATUS_NS] = now_ns
-    ref_index = float(link[LINK_WRITTEN])
-    ref_ns = now_ns
-    primed = False
-    amp_us = 0
-    offset_ns = np.int64(1) << 62  # no STATUS yet
-    synced_ns = now_ns
-    trips_at_start = link[LINK_AMP_WATCHDOG_TRIPS]
-    start_checks(link)
-    rx_length = 0
-    first, end = 0, 0
-    moved_ns = now_ns  # the last time the port took bytes
-    exit_reason = EXIT_RUNNING
-    skipped = False  # the stream skipped ahead since the last frame
-    while exit_reason == EXIT_RUNNING:
-        if load_acquire(link, LINK_STOP) != 0:
-            exit_reason = EXIT_STOPPED
-            break
-        now_ns = monotonic_ns()
-        rx_length, statuses, exit_reason, now_ns = _receive(link, buffers, rx_length, now_ns)
-        if exit_reason != EXIT_RUNNING:
-            break
-        if statuses > 0:
-            if link[LINK_AMP_FAULTS] != 0:
-                exit_reason = EXIT_FAULT
-                break
-            if link[LINK_AMP_WATCHDOG_TRIPS] > trips_at_start:  # A4: it went IDLE; start again (H7: recover)
-                trips_at_start = link[LINK_AMP_WATCHDOG_TRIPS]
-                link[LINK_RESTARTS] += 1
-                end = _queue_start(link, buffers, end)
-                primed = False
-                ref_index, ref_ns = float(link[LINK_WRITTEN]), now_ns
-            elif link[LINK_AMP_STATE] == codec.STATE_RUNNING:
-                if link[LINK_TRACK] == TRACK_LOCKED:
-                    _lock(cfg, dev, state, link)
-                # The amplifier played sample play_index at its time time_us: on the host's clock, at
-                # time_us + offset, where offset is the smallest (receive time - time_us) seen, the one the
-                # line delayed least (allowed to grow by CLOCK_SKEW, for a slower amplifier clock).
-                amp_ns = _unwrap(link[LINK_AMP_TIME_US], amp_us) * 1000
-                amp_us = amp_ns // 1000
-                offset_ns = min(np.int64(now_ns - amp_ns), offset_ns + np.int64((now_ns - synced_ns) * CLOCK_SKEW))
-                synced_ns = now_ns
-                ref_index, ref_ns, primed = float(link[LINK_AMP_PLAY_INDEX]), amp_ns + offset_ns, True
-        if link[LINK_ACK_TYPE] == MSG_START and link[LINK_ACK_CODE] != codec.ACK_OK:
-            exit_reason = EXIT_REFUSED
-            break
-        if now_ns - link[LINK_STATUS_NS] > timeout_ns:
-            exit_reason = EXIT_STATUS_TIMEOUT
-            break
-        play = ref_index + (now_ns - ref_ns) * 1e-9 * rate_hz if primed else ref_index
-        if link[LINK_WRITTEN] < play - frame_samples:
-            # The amplifier played past what it was sent (an underrun: it plays 0 and moves on), so samples
-            # for those indices would be refused as already played: skip the stream ahead of it.
-            link[LINK_LATE] += 1
-            _skip_to(table, state, link, np.int64(play) + frame_samples)
-            skipped = True
-        while (link[LINK_WRITTEN] < play + link[LINK_TARGET_FILL] + frame_samples * primed
-               and link[LINK_WRITTEN] + frame_samples <= play + link[LINK_BUFFER_SAMPLES]
-               and end + frame_bytes + MAX_ENCODED <= tx.shape[0]):  # room left for a START or STOP
-            delay_ns = int((link[LINK_WRITTEN] - play) * 1e9 / rate_hz)
-            end = _queue_envelope(table, state, link, buffers, envelope, times, delay_ns, skipped, not primed, end)
-            skipped = False
-            if link[LINK_TRACK] != TRACK_OFF:
-                end = _queue_carrier(state, link, buffers, now_ns, end)
-        if end > first:
-            before = first
-            first, end, exit_reason = _flush(link, tx, (first, end))
-            if first != before or end == 0:
-                moved_ns = now_ns
-            elif now_ns - moved_ns > timeout_ns:
-                exit_reason = EXIT_TX_STALLED
-        if not primed and end == 0 and link[LINK_WRITTEN] >= ref_index + link[LINK_TARGET_FILL]:
-            primed = True  # the prefill is out: the amplifier starts playing about now
-            ref_ns = monotonic_ns()
-        next_due_ns = ref_ns + np.int64(
-            (link[LINK_WRITTEN] - link[LINK_TARGET_FILL] - frame_samples - ref_index) * 1e9 / rate_hz)
-        sleep_until_ns(min(now_ns + WAKE_NS, max(next_due_ns, now_ns + 20_000)))
+    room = buffers[BUF_TX].shape[0] - frame_bytes - MAX_ENCODED
+    play = _play_position(link, now_ns)
+    if link[LINK_WRITTEN] < play - frame_samples:
+        # The amplifier played past what it was sent (an underrun: it plays 0 and moves on), so samples for those
+        # indices would be refused as already played: skip the stream ahead of it.
+        link[LINK_LATE] += 1
+        _skip_to(table, state, link, np.int64(play) + frame_samples)
+        link[LINK_SKIPPED] = 1
+    end = link[LINK_TX_END]
+    while (link[LINK_WRITTEN] < play + link[LINK_TARGET_FILL] + frame_samples * link[LINK_PRIMED]
+           and link[LINK_WRITTEN] + frame_samples <= play + link[LINK_BUFFER_SAMPLES] and end <= room):
+        delay_ns = int((link[LINK_WRITTEN] - play) * 1e9 / rate_hz)
+        end = _queue_envelope(table, state, link, buffers, envelope, times, delay_ns, link[LINK_SKIPPED] != 0,
+                              link[LINK_PRIMED] == 0, end)
+        link[LINK_SKIPPED] = 0
+        if link[LINK_TRACK] != TRACK_OFF:
+            end = _queue_carrier(state, link, buffers, now_ns, end)
+    link[LINK_TX_END] = end
+
+
+@njit(**_KERNEL)
+def _begin_stop(link: np.ndarray, buffers: np.ndarray) -> None:
+    """The run ended (LINK_REASON). H8: STOP right after the last envelope frame, to be flushed whole, also when a
+    failure ended the run (H7), unless the port is lost."""
     link[LINK_STOP_SEQ] = -1
-    if exit_reason != EXIT_PORT_LOST:
-        # H8: STOP right after the last envelope frame, then flush it all: also when a failure ended the run (H7),
-        # as long as the port takes bytes. The failure stays the reason; a stop that cannot flush becomes one.
-        frame = buffers[BUF_FRAME]
-        codec.put_u16(frame, PAYLOAD, min(max(link[LINK_STOP_RAMP_MS], 1), 0xFFFF))
-        link[LINK_STOP_SEQ] = link[LINK_SEQ]
-        end = _queue(link, buffers, codec.STOP_BYTES, codec.MSG_STOP, end)
-        flushed = 0
-        while end > first and flushed == 0:
-            before = first
-            first, end, flushed = _flush(link, tx, (first, end))
-            if first != before or end == 0:
-                moved_ns = monotonic_ns()
-            elif monotonic_ns() - moved_ns > timeout_ns:
+    if link[LINK_REASON] == EXIT_PORT_LOST:
+        _finish(link, False)
+        return
+    codec.put_u16(buffers[BUF_FRAME], PAYLOAD, min(max(link[LINK_STOP_RAMP_MS], 1), 0xFFFF))
+    link[LINK_STOP_SEQ] = link[LINK_SEQ]
+    link[LINK_TX_END] = _queue(link, buffers, codec.STOP_BYTES, codec.MSG_STOP, link[LINK_TX_END])
+    link[LINK_STAGE] = STAGE_FLUSHING
+
+
+@njit(**_KERNEL)
+def _finish(link: np.ndarray, lost: bool) -> None:
+    """The run is over: LINK_EXIT is its reason. A STOP that did not go out whole has no seq (LINK_STOP_SEQ -1);
+    a requested stop that could not flush it ends as a failure (the port lost if ``lost``, else stalled)."""
+    pending = link[LINK_TX_END] > link[LINK_TX_FIRST]
+    if pending:
+        link[LINK_STOP_SEQ] = -1
+    reason = link[LINK_REASON]
+    if reason == EXIT_STOPPED and (lost or pending):
+        reason = EXIT_PORT_LOST if lost else EXIT_TX_STALLED
+    link[LINK_EXIT] = reason
+    link[LINK_STAGE] = STAGE_DONE
+
+
+@njit(**_KERNEL)
+def step(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: np.ndarray, times: np.ndarray,
+         now_ns: int) -> int:
+    """One step of the run at ``now_ns`` (ns), after the bytes read were given to :func:`on_received`: react to
+    the STATUS frames taken, check the timeouts, queue the frames due (or, once the run ends, STOP); the bytes
+    now waiting for the port, BUF_TX[LINK_TX_FIRST:LINK_TX_END] (hand what the port takes to :func:`on_written`).
+
+    ``table`` is the pointer table (its kernel's cfg set for envelope output), ``envelope``
+    float32 of at least LINK_FRAME_SAMPLES samples, ``times`` float64[3] (the callback's
+    time info).
+    """
+    if link[LINK_STAGE] == STAGE_STREAMING:
+        if link[LINK_REASON] == EXIT_RUNNING and load_acquire(link, LINK_STOP) != 0:
+            _end(link, EXIT_STOPPED)
+        if link[LINK_REASON] == EXIT_RUNNING:
+            cfg, dev, state = kernel_views(table)[:3]
+            _react(cfg, dev, state, link, buffers, now_ns)
+            if link[LINK_REASON] == EXIT_RUNNING:
+                _pace(table, state, link, buffers, envelope, times, now_ns)
+        if link[LINK_REASON] != EXIT_RUNNING:
+            _begin_stop(link, buffers)
+    pending = link[LINK_TX_END] - link[LINK_TX_FIRST]
+    link[LINK_TX_BEFORE] = link[LINK_TX_FIRST] if pending > 0 else -1
+    return pending
+
+
+@njit(**_KERNEL)
+def on_written(link: np.ndarray, count: int) -> int:
+    """The port took ``count`` of the waiting bytes (0: it is full for now; negative: the write failed with errno
+    ``-count``, the port is lost); the bytes still waiting."""
+    if count < 0:
+        link[LINK_ERRNO] = -count
+        if link[LINK_STAGE] == STAGE_FLUSHING:
+            _finish(link, True)
+        elif link[LINK_STAGE] == STAGE_STREAMING:
+            _end(link, EXIT_PORT_LOST)
+        return 0
+    if count == 0:
+        link[LINK_TX_BLOCKED] += 1
+    link[LINK_TX_FIRST] += count
+    if link[LINK_TX_FIRST] >= link[LINK_TX_END]:
+        link[LINK_TX_FIRST] = 0
+        link[LINK_TX_END] = 0
+    return link[LINK_TX_END] - link[LINK_TX_FIRST]
+
+
+@njit(**_KERNEL)
+def settle(link: np.ndarray, now_ns: int) -> int:
+    """After the step's bytes were offered to the port, at ``now_ns`` (ns): a port that took none of them for
+    LINK_STATUS_TIMEOUT_NS ends the run (stalled) or the STOP tail; the prefill out, the amplifier plays from
+    now. The time (ns) of the next step: when the next frame is due, at most WAKE_NS away (at once when the run
+    just ended, so that its STOP goes out); RUN_OVER once the run is over (LINK_EXIT says why)."""
+    stage = link[LINK_STAGE]
+    if stage == STAGE_DONE:
+        return RUN_OVER
+    first, end, before = link[LINK_TX_FIRST], link[LINK_TX_END], link[LINK_TX_BEFORE]
+    if before >= 0:
+        if first != before or end == 0:
+            link[LINK_MOVED_NS] = now_ns
+        elif now_ns - link[LINK_MOVED_NS] > link[LINK_STATUS_TIMEOUT_NS]:
+            if stage == STAGE_FLUSHING:
+                _finish(link, False)
+                return RUN_OVER
+            _end(link, EXIT_TX_STALLED)
+    if stage == STAGE_FLUSHING:
+        if end <= first:
+            _finish(link, False)
+            return RUN_OVER
+        return now_ns + WAKE_NS
+    if link[LINK_REASON] != EXIT_RUNNING:
+        return now_ns
+    rate_hz = link[LINK_ENVELOPE_HZ]
+    if link[LINK_PRIMED] == 0 and end == 0 and link[LINK_WRITTEN] >= link[LINK_REF_INDEX] + link[LINK_TARGET_FILL]:
+        link[LINK_PRIMED] = 1  # the prefill is out: the amplifier starts playing about now
+        link[LINK_REF_NS] = now_ns
+    next_due_ns = link[LINK_REF_NS] + np.int64((link[LINK_WRITTEN] - link[LINK_TARGET_FILL]
+                                                - link[LINK_FRAME_SAMPLES] - link[LINK_REF_INDEX]) * 1e9 / rate_hz)
+    return min(now_ns + WAKE_NS, max(next_due_ns, now_ns + MIN_WAKE_NS))
+
+
+# --- the production loop: the real clock and the port's descriptor, around the step --------------------------
+
+@njit(**_KERNEL)
+def _read_port(link: np.ndarray, buffers: np.ndarray, now_ns: int) -> int:
+    """Read what the port (LINK_FD, non-blocking) holds into the step (:func:`on_received`), each read timed by
+    the clock after it; the time of the last read that returned bytes, else ``now_ns``."""
+    rx = buffers[BUF_RX]
+    while reading(link):
+        offset = link[LINK_RX_LENGTH]
+        got = read_fd(link[LINK_FD], rx.ctypes.data + offset, rx.shape[0] - offset)
+        if got == 0:  # a tty with VMIN = 0 says "nothing now" so; a silent loss shows as no STATUS (H7)
+            break
+        if got < 0:
+            error = errno()
+            if error == EAGAIN:
                 break
-            if end > first:
-                sleep_until_ns(monotonic_ns() + WAKE_NS)
-        if end > first:
-            link[LINK_STOP_SEQ] = -1  # it did not go out whole
-        if exit_reason == EXIT_STOPPED and (flushed != 0 or end > first):
-            exit_reason = flushed if flushed != 0 else EXIT_TX_STALLED
-    link[LINK_EXIT] = exit_reason
-    return exit_reason
+            if error != EINTR:
+                on_received(link, buffers, -error, now_ns)
+            continue
+        now_ns = max(now_ns, monotonic_ns())
+        on_received(link, buffers, got, now_ns)
+    return now_ns
+
+
+@njit(**_KERNEL)
+def _write_port(link: np.ndarray, buffers: np.ndarray, pending: int) -> None:
+    """Offer the ``pending`` bytes the step left in BUF_TX to the port until it takes them all, is full, or
+    fails (:func:`on_written`)."""
+    tx = buffers[BUF_TX]
+    while pending > 0:
+        wrote = write_fd(link[LINK_FD], tx.ctypes.data + link[LINK_TX_FIRST], pending)
+        if wrote < 0:
+            error = errno()
+            if error == EINTR:
+                continue
+            wrote = 0 if error == EAGAIN else -error
+        pending = on_written(link, wrote)
+        if wrote <= 0:
+            break
+
+
+@njit(**_KERNEL)
+def stream(table: np.ndarray, link: np.ndarray, buffers: np.ndarray, envelope: np.ndarray,
+           times: np.ndarray) -> int:
+    """Stream until LINK_STOP or a failure (module docstring) on the port LINK_FD with CLOCK_MONOTONIC, running
+    :func:`step` as the module docstring says; the EXIT_* reason, also in LINK_EXIT. Arguments as :func:`step`."""
+    begin(table, link, monotonic_ns())
+    while True:
+        now_ns = _read_port(link, buffers, monotonic_ns())
+        _write_port(link, buffers, step(table, link, buffers, envelope, times, now_ns))
+        wake_ns = settle(link, monotonic_ns())
+        if wake_ns == RUN_OVER:
+            return link[LINK_EXIT]
+        sleep_until_ns(wake_ns)

@@ -10,6 +10,9 @@ render_callback, silence_callback
     pays for it. ``render_callback`` renders the drive with
     :func:`tpad_rt.kernel.table.render_into`; ``silence_callback`` writes zeros (the
     empty-callback baseline of the tests and benchmarks). Both keep the same statistics.
+BLOCK_LATE, BLOCK_PRIMING
+    the status flags a caller passes with a block (the callback's contract with every
+    caller: PortAudio, and the serial streamer, which calls it once per frame)
 
 docs/realtime.md is the design. A callback receives only raw pointers, never raises
 and returns ``paContinue`` (0). It writes zeros to every channel but the drive's.
@@ -42,9 +45,14 @@ from tpad_rt.kernel.table import (
     render_into,
 )
 
-#: PortAudio's paOutputUnderflow and paPrimingOutput status flags, and paContinue.
-PA_OUTPUT_UNDERFLOW = 0x4
-PA_PRIMING_OUTPUT = 0x10
+#: The status flags of a block, bits of the callback's ``status_flags``: BLOCK_LATE, the output fell behind
+#: before this block (counted as an underflow: PortAudio's output underflowed, the serial stream skipped
+#: ahead); BLOCK_PRIMING, the block fills the output's buffer before it plays (PortAudio priming its
+#: buffers, a serial amplifier's prefill). Other bits are ignored. The values are PortAudio's
+#: paOutputUnderflow and paPrimingOutput, since PortAudio calls the callback with its own flags.
+BLOCK_LATE = 0x4
+BLOCK_PRIMING = 0x10
+#: PortAudio's paContinue: what the callback returns.
 PA_CONTINUE = 0
 _F8 = np.float64
 _F4 = np.float32
@@ -72,7 +80,7 @@ def _silence(input_buffer, output_buffer, frames, time_info, status_flags, user_
     out = numba.carray(output_buffer, frames * table[TAB_CHANNELS], _F4)
     for i in range(out.shape[0]):
         out[i] = 0.0
-    finish_block(stats, row, entry_ns, frames, status_flags & PA_OUTPUT_UNDERFLOW, status_flags & PA_PRIMING_OUTPUT)
+    finish_block(stats, row, entry_ns, frames, status_flags & BLOCK_LATE, status_flags & BLOCK_PRIMING)
     return PA_CONTINUE
 
 
@@ -86,7 +94,7 @@ def _render(input_buffer, output_buffer, frames, time_info, status_flags, user_d
     for i in range(out.shape[0]):
         out[i] = 0.0
     render_into(table, state, out, frames, channels, table[TAB_CHANNEL])
-    finish_block(stats, row, entry_ns, frames, status_flags & PA_OUTPUT_UNDERFLOW, status_flags & PA_PRIMING_OUTPUT)
+    finish_block(stats, row, entry_ns, frames, status_flags & BLOCK_LATE, status_flags & BLOCK_PRIMING)
     return PA_CONTINUE
 
 

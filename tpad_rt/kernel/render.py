@@ -41,7 +41,7 @@ import math
 import numpy as np
 
 from tpad_rt.kernel.jit import njit
-from tpad_rt.kernel import layout, texture_eval
+from tpad_rt.kernel import device_lookup, layout, texture_eval
 from tpad_rt.kernel.cache_stamp import stamp_cache
 from tpad_rt.kernel.layout import (
     ABSURD_FORCE_N,
@@ -50,8 +50,6 @@ from tpad_rt.kernel.layout import (
     CFG_CARRIER_HZ,
     CFG_CONTROL_INTERVAL,
     CFG_DEFAULT_FORCE_N,
-    CFG_FORCE_GRID_START_N,
-    CFG_FORCE_GRID_STEP_N,
     CFG_FS_HZ,
     CFG_GAIN_SPAN,
     CFG_HORIZON_S,
@@ -168,6 +166,7 @@ from tpad_rt.kernel.layout import (
     TEL_X_MM,
     TEL_Y_MM,
 )
+from tpad_rt.kernel.device_lookup import device_value, force_cell, grid_cell
 from tpad_rt.kernel.texture_eval import eval_texture
 from tpad_rt.physics import friction
 from tpad_rt.physics.friction import amplitude_for_core
@@ -191,14 +190,15 @@ _RADIANS_PER_UNIT = _TWO_PI * 2.0**-PHASE_BITS
 _COARSE_COS = np.cos(_TWO_PI * np.arange(1 << _COARSE_BITS) / (1 << _COARSE_BITS))
 _COARSE_SIN = np.sin(_TWO_PI * np.arange(1 << _COARSE_BITS) / (1 << _COARSE_BITS))
 
-# render_block has the texture evaluation, the layout constants and the friction
-# model compiled into it: its disk cache is stamped with all of those files.
-COMPILED_SOURCES = stamp_cache(__file__, layout.__file__, texture_eval.__file__, friction.__file__)
+# render_block has the texture evaluation, the layout constants, the device lookups and the
+# friction model compiled into it: its disk cache is stamped with all of those files.
+COMPILED_SOURCES = stamp_cache(__file__, layout.__file__, texture_eval.__file__, friction.__file__,
+                               device_lookup.__file__)
 
 # error_model="numpy": a division by zero gives inf/nan instead of raising, so no
 # exception checks are compiled in (nothing here may raise inside an audio callback).
 # _nrt=False (numba's one option, private, that turns its runtime off for a function; these two
-# decorators and texture_eval's are the only places it is used): without numba's
+# decorators, texture_eval's and device_lookup's are the only places it is used): without numba's
 # reference-counted runtime (nothing here allocates), a call
 # passing arrays costs no reference-count calls, so the helpers are ordinary functions,
 # forceinline=True: marked for LLVM to inline always (LLVM's own heuristics left the
@@ -259,38 +259,13 @@ def _unit_phasor(phase_units: int) -> tuple[float, float]:
 
 
 @_kernel
-def _grid_cell(dev: np.ndarray, position: float) -> tuple[int, int, float]:
-    """Columns ``(i, i + 1)`` of ``dev`` around the fractional column ``position`` and the weight of the
-    second, clamped to the table (a NaN position is column 0: never an index from a non-finite value)."""
-    last = dev.shape[1] - 1
-    if not position > 0.0:
-        position = 0.0
-    position = min(position, float(last))
-    i = min(int(position), max(last - 1, 0))
-    return i, min(i + 1, last), position - i
-
-
-@_kernel
-def _force_cell(cfg: np.ndarray, dev: np.ndarray, force_n: float) -> tuple[int, int, float]:
-    """The :func:`_grid_cell` of the force grid around ``force_n`` (N)."""
-    return _grid_cell(dev, (force_n - cfg[CFG_FORCE_GRID_START_N]) / cfg[CFG_FORCE_GRID_STEP_N])
-
-
-@_kernel
 def _mode_gain(cfg: np.ndarray, dev: np.ndarray, x_mm: float) -> float:
     """``dev[DEV_MODE_GAIN]`` at ``x_mm`` (mm, clamped to its grid): the amplitude the finger's contact patch
     feels over the antinode amplitude; 1 when CFG_MODE_STEP_MM is not > 0 (no mode shape to compensate)."""
     step_mm = cfg[CFG_MODE_STEP_MM]
     if not step_mm > 0.0:
         return 1.0
-    return _device_value(dev, DEV_MODE_GAIN, _grid_cell(dev, x_mm / step_mm))
-
-
-@_kernel
-def _device_value(dev: np.ndarray, row: int, cell: tuple[int, int, float]) -> float:
-    """``dev[row]`` linearly interpolated in a :func:`_force_cell`."""
-    i, i_next, weight = cell
-    return dev[row, i] + weight * (dev[row, i_next] - dev[row, i])
+    return device_value(dev, DEV_MODE_GAIN, grid_cell(dev, x_mm / step_mm))
 
 
 @_kernel
@@ -804,10 +779,10 @@ def _control_step(
     finger_status = _read_finger(t_s, cfg, state, finger, finger_count[0])
     if finger_status < 0:
         fault |= FAULT_FINGER
-    cell = _force_cell(cfg, dev, state[STATE_FORCE_N])
+    cell = force_cell(cfg, dev, state[STATE_FORCE_N])
     carrier_hz = cfg[CFG_CARRIER_HZ]
     if cfg[CFG_TRACK] != 0.0:
-        tracked_hz = _device_value(dev, DEV_CARRIER_HZ, cell)
+        tracked_hz = device_value(dev, DEV_CARRIER_HZ, cell)
         # Carrier samples must stay below the sample rate's limit; an amplifier that makes the carrier itself
         # (envelope output) is sent the carrier instead, within twice the device's (its derived checks).
         highest_hz = (MAX_CARRIER_FRACTION * fs_hz if cfg[CFG_OUTPUT_ENVELOPE] == 0.0
@@ -819,9 +794,9 @@ def _control_step(
     _refresh_tables(cfg, state, carrier_hz)
     phase_units, phase_fault = _step_phase(n, cfg, state, carrier_hz)
     fault |= phase_fault
-    amplitude_m_per_v = _device_value(dev, DEV_AMP_M_PER_V, cell)
-    p1_w = _device_value(dev, DEV_POWER_W_PER_V2, cell)
-    tau_s = _device_value(dev, DEV_TAU_S, cell)
+    amplitude_m_per_v = device_value(dev, DEV_AMP_M_PER_V, cell)
+    p1_w = device_value(dev, DEV_POWER_W_PER_V2, cell)
+    tau_s = device_value(dev, DEV_TAU_S, cell)
     if not (0.0 < amplitude_m_per_v < math.inf and 0.0 < p1_w < math.inf and 0.0 <= tau_s < math.inf):
         fault |= FAULT_DEVICE
         # The step's power is then counted as if a drive at max_voltage_v used the whole cap.

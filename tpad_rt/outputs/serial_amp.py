@@ -6,14 +6,17 @@ FORMS
     ``serial:///dev/ttyACM0?envelope_hz=16000&buffer_ms=2&frame_ms=0.5&baud=921600``
 parse_serial_url(url) -> SerialTarget
     the port and options; ConfigError (showing the expected form) for a bad one
-AmpLink.open(target, *, carrier_hz, max_voltage_v=inf, timeout_s=None) -> AmpLink
-    open the port (pyserial), say HELLO with a new nonce, take the INFO that echoes it
+AmpLink.open(target, *, carrier_hz, max_voltage_v=inf, timeout_s=None, line=None) -> AmpLink
+    open the port (pyserial: :class:`tpad_rt.outputs.serial_line.SerialLine`; or talk on
+    ``line``, any :class:`~tpad_rt.outputs.serial_line.Line`, e.g. the virtual link of
+    :mod:`tpad_rt.amp.virtual_link`), say HELLO with a new nonce, take the INFO that echoes it
     (rule H1), decide the envelope's scale from it (H3: ``.scale``), set the carrier and
     check the achieved one (H2); BackendError naming the port for one that cannot open,
     no or a bad answer, an amplifier that contradicts itself, another protocol version,
     a carrier or envelope rate the amplifier cannot make
 AmpLink.start(table, track=False, ramp_ms=STOP_RAMP_MS) / .failure() / .stop(ramp_ms) / .stats() / .info / .scale / .carrier_hz
-    stream with the GIL-free streamer (:mod:`tpad_rt.kernel.amp_stream`) in a thread;
+    stream with the streamer's steps (:mod:`tpad_rt.kernel.amp_stream`) as the line runs
+    them (a real port: the GIL-free compiled loop in a thread);
     the error that ended the stream (a BackendError), or None; end with STOP (H8, also
     after a failure), close
 envelope_scale(full_scale_mv, max_mv, max_voltage_v) -> EnvelopeScale
@@ -28,16 +31,14 @@ warm_checks()
 
 docs/amp-protocol.md is the protocol, docs/amplifiers.md how to connect one. The
 handshake runs in Python with the same codec the streamer uses
-(:mod:`tpad_rt.kernel.amp_codec`); the stream runs in one numba call that holds no GIL.
+(:mod:`tpad_rt.kernel.amp_codec`), every wait on the line's clock; on a real port the
+stream runs in one numba call that holds no GIL.
 """
 
 from __future__ import annotations
 
 import math
 import os
-import select
-import threading
-import time
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -47,6 +48,7 @@ from tpad_rt.kernel import amp_codec as codec
 from tpad_rt.kernel import amp_stream
 from tpad_rt.kernel.atomics import publish
 from tpad_rt.outputs.base import Consumes, OutputKind
+from tpad_rt.outputs.serial_line import Line, SerialLine, Streamer
 from tpad_rt.pipeline import LOCK_RANGE
 from tpad_rt.urls import Option, Url, UrlForm, count, number, parse_url
 
@@ -63,9 +65,8 @@ STOP_RAMP_MS = 5.0
 #: Seconds to wait for the ACK of SET_CARRIER, START and STOP.
 ACK_TIMEOUT_S = 0.5
 STOP_ACK_TIMEOUT_S = 0.2
-#: The SCHED_FIFO priority of the streamer thread where allowed (below a JACK server's, typically 70-90): like
-#: an audio callback, it sleeps between frames and must run as soon as one is due.
-STREAMER_PRIORITY = 20
+#: How long (s) a write waits at a time for a full line to take bytes.
+WRITE_WAIT_S = 0.01
 #: INFO's ``measures`` bits a phase lock needs: current, voltage and phase.
 MEASURES_FOR_LOCK = 1 | 2 | 4
 #: A tracked carrier closer than this (mHz) to the amplifier's is not sent (nor closer than its resolution).
@@ -227,10 +228,10 @@ MAX_TONE_RESTARTS = 3
 class AmpLink:
     """An open session with a serial amplifier (create it with :meth:`open`)."""
 
-    def __init__(self, target: SerialTarget, port: object, fd: int):
+    def __init__(self, target: SerialTarget, line: Line):
         self.target = target
-        self._port = port  # the pyserial object: it owns fd
-        self._fd = fd
+        self._line: Line | None = line
+        self.clock = line.clock
         self._rx = b""
         self._frame = np.zeros(codec.MAX_BODY, dtype=np.uint8)
         self._body = np.zeros(codec.MAX_BODY, dtype=np.uint8)
@@ -239,8 +240,8 @@ class AmpLink:
         self._buffers = np.zeros((amp_stream.BUF_ROWS, amp_stream.BUF_BYTES), dtype=np.uint8)
         self._envelope = np.zeros(amp_stream.ENVELOPE_SCRATCH, dtype=np.float32)
         self.link[amp_stream.LINK_STOP_SEQ] = -1  # no STOP sent yet
-        self._thread: threading.Thread | None = None
-        self._crash: BaseException | None = None
+        self._stream: Streamer | None = None  # while streaming (start() to stop())
+        self._last_stream: Streamer | None = None  # the last, for failure() and realtime after stop()
         self._failure: BackendError | None = None  # the error that ended the stream, made once
         self._start_sent = False  # a START went out: the amplifier may be streaming
         self.info: AmpInfo | None = None
@@ -251,28 +252,19 @@ class AmpLink:
         self.carrier_hz = float("nan")
         self.frame_samples = 0
         self.target_fill = 0
-        self.realtime = False  # whether the streamer thread got real-time scheduling
         self._tone_index = -1  # the next envelope index tone() writes; -1 before its START
-        self._tone_started = 0.0  # time.monotonic() of the last START tone() sent
+        self._tone_started_ns = 0  # the clock (ns) when tone() sent its last START
 
     # --- opening ----------------------------------------------------------------------
 
     @classmethod
     def open(cls, target: SerialTarget, *, carrier_hz: float, max_voltage_v: float = math.inf,
-             timeout_s: float | None = None) -> AmpLink:
-        """Open ``target``'s port, make the handshake (H1: HELLO_TRIES HELLOs, ``timeout_s`` each, HELLO_TIMEOUT_S
-        unless given), decide the envelope's scale for a device capped at ``max_voltage_v`` (V peak) and set the
-        carrier to ``carrier_hz`` (H2); errors as the module says."""
-        import serial  # pyserial
-
+             timeout_s: float | None = None, line: Line | None = None) -> AmpLink:
+        """Open ``target``'s port (or talk on ``line``, closed with the link), make the handshake (H1: HELLO_TRIES
+        HELLOs, ``timeout_s`` each, HELLO_TIMEOUT_S unless given), decide the envelope's scale for a device capped
+        at ``max_voltage_v`` (V peak) and set the carrier to ``carrier_hz`` (H2); errors as the module says."""
         warm_checks()
-        try:
-            port = serial.Serial(target.port, target.baud, timeout=0, write_timeout=0, exclusive=True)
-        except (serial.SerialException, OSError, ValueError) as error:
-            raise BackendError(f"serial: cannot open {target.port}: {_reason(error)}") from None
-        fd = port.fileno()
-        os.set_blocking(fd, False)
-        link = cls(target, port, fd)
+        link = cls(target, line if line is not None else SerialLine.open(target.port, target.baud))
         try:
             link._hello(HELLO_TIMEOUT_S if timeout_s is None else timeout_s, max_voltage_v)
             link._set_carrier(carrier_hz)
@@ -291,21 +283,32 @@ class AmpLink:
         self._write(bytes(self._out[:size]))
         return seq
 
-    def _write(self, data: bytes) -> None:
-        """Write ``data`` whole (waiting, at most ACK_TIMEOUT_S, while the port is full)."""
-        deadline = time.monotonic() + ACK_TIMEOUT_S
-        while data:
-            try:
-                data = data[os.write(self._fd, data):]
-            except BlockingIOError:
-                if time.monotonic() > deadline:
-                    raise BackendError(f"serial: {self.target.port}: the amplifier does not read") from None
-                select.select([], [self._fd], [], 0.01)
-            except OSError as error:
-                raise BackendError(f"serial: {self.target.port}: {_reason(error)}") from None
+    @property
+    def line(self) -> Line:
+        """The open line; BackendError once it was closed."""
+        if self._line is None:
+            raise BackendError(f"serial: {self.target.port}: the port was closed")
+        return self._line
 
-    def _receive(self, wanted: int, deadline: float) -> np.ndarray | None:
-        """The next valid body of type ``wanted`` before ``deadline`` (time.monotonic); None on timeout.
+    def _deadline_ns(self, seconds: float) -> int:
+        """The clock's time ``seconds`` (s) from now (ns)."""
+        return self.clock.now_ns() + round(seconds * 1e9)
+
+    def _write(self, data: bytes) -> None:
+        """Write ``data`` whole (waiting, at most ACK_TIMEOUT_S, while the line is full)."""
+        line = self.line
+        deadline_ns = self._deadline_ns(ACK_TIMEOUT_S)
+        while data:
+            taken = line.write(data)
+            data = data[taken:]
+            if data and not taken:
+                now_ns = self.clock.now_ns()
+                if now_ns > deadline_ns:
+                    raise BackendError(f"serial: {self.target.port}: the amplifier does not read")
+                line.wait(min(deadline_ns, now_ns + round(WRITE_WAIT_S * 1e9)), writable=True)
+
+    def _receive(self, wanted: int, deadline_ns: int) -> np.ndarray | None:
+        """The next valid body of type ``wanted`` before ``deadline_ns`` (the clock's, ns); None on timeout.
 
         Other valid frames (STATUS) are passed over, and so is an INFO that does not answer the
         last HELLO (H1: its ``hello_nonce`` is another's, or its length wrong); once an INFO was
@@ -325,22 +328,15 @@ class AmpLink:
                     continue
                 if body[1] == wanted:
                     return body
-            left = deadline - time.monotonic()
             # Past the deadline, what the port already holds is still read once: a host held up (preempted,
             # stopped) past it must not take the frames that came meanwhile for silence.
-            readable, _, _ = select.select([self._fd], [], [], max(left, 0.0))
-            if not readable and left <= 0:
-                return None
-            if readable:
-                try:
-                    chunk = os.read(self._fd, 4096)
-                except BlockingIOError:
-                    continue
-                except OSError as error:
-                    raise BackendError(f"serial: {self.target.port}: {_reason(error)}") from None
-                if not chunk:
-                    raise BackendError(f"serial: {self.target.port}: the port closed")
+            chunk = self.line.read()
+            if chunk:
                 self._rx = (self._rx + chunk)[-4 * codec.MAX_ENCODED:]
+                continue
+            if self.clock.now_ns() >= deadline_ns:
+                return None
+            self.line.wait(deadline_ns)
 
     def _answers_hello(self, body: np.ndarray) -> bool:
         """Whether the INFO ``body`` answers the last HELLO and none was taken yet; BackendError if it answers it
@@ -370,8 +366,8 @@ class AmpLink:
     def _command(self, payload: bytes, msg_type: int, what: str) -> int:
         """Send a command and wait for its ACK: its value; BackendError for no ACK or a refusal."""
         seq = self._send(payload, msg_type)
-        deadline = time.monotonic() + ACK_TIMEOUT_S
-        while (body := self._receive(codec.MSG_ACK, deadline)) is not None:
+        deadline_ns = self._deadline_ns(ACK_TIMEOUT_S)
+        while (body := self._receive(codec.MSG_ACK, deadline_ns)) is not None:
             if codec.get_u16(body, codec.PAYLOAD + codec.ACK_ACKED_SEQ) != seq:
                 continue
             code = int(body[codec.PAYLOAD + codec.ACK_CODE])
@@ -394,7 +390,7 @@ class AmpLink:
             self._nonce = nonce
             self._nonces.add(nonce)
             self._send(HOST_NAME.ljust(codec.HELLO_NAME_BYTES, b"\0") + nonce.to_bytes(4, "little"), codec.MSG_HELLO)
-            body = self._receive(codec.MSG_INFO, time.monotonic() + timeout_s)
+            body = self._receive(codec.MSG_INFO, self._deadline_ns(timeout_s))
             if body is not None:
                 info = self.info = _read_info(body, self.target.port)
                 self._info_body = body.copy()
@@ -469,31 +465,32 @@ class AmpLink:
         BackendError for a fault, a lost port, an amplifier that stops reporting, or one that refuses START.
         """
         info = self.info
-        assert info is not None and self._thread is None
+        assert info is not None and self._stream is None
         limit = self.scale.level_limit if self.scale is not None else 0
         value = min(max(round(envelope_v / info.full_scale_v * 32767), -limit), limit)
         fill = min(info.buffer_samples - self.frame_samples,
                    max(self.target_fill, round(TONE_BUFFER_S * self.target.envelope_hz)))
         if self._tone_index < 0:
             self._start_tone(value, 0, fill)
-        deadline = time.monotonic() + seconds
-        give_up = deadline + TONE_APPLY_LIMIT_S
+        clock = self.clock
+        deadline_ns = self._deadline_ns(seconds)
+        give_up_ns = deadline_ns + round(TONE_APPLY_LIMIT_S * 1e9)
         silent_s = (4 * info.status_period_ms + 100) * 1e-3
         last: AmpStatus | None = None
         restarts = 0
         while True:
-            if time.monotonic() > give_up:
+            if clock.now_ns() > give_up_ns:
                 raise BackendError(f"serial: the amplifier on {self.target.port} did not apply a {envelope_v:g} V tone "
                                    f"at {self.carrier_hz:g} Hz within {seconds + TONE_APPLY_LIMIT_S:g} s (its STATUS "
                                    "never showed it RUNNING with that envelope and carrier)")
-            body = self._receive(codec.MSG_STATUS, time.monotonic() + silent_s)
+            body = self._receive(codec.MSG_STATUS, self._deadline_ns(silent_s))
             if body is None:
                 raise BackendError(f"serial: the amplifier on {self.target.port} stopped reporting (no STATUS for "
                                    f"{silent_s * 1e3:.0f} ms)")
             status = self._status(body)
             play_index = int(codec.get_u32(body, codec.PAYLOAD + codec.STATUS_PLAY_INDEX))
             idle = int(body[codec.PAYLOAD + codec.STATUS_STATE]) == codec.STATE_IDLE
-            if idle and time.monotonic() - self._tone_started > info.watchdog_ms * 1e-3:
+            if idle and clock.now_ns() - self._tone_started_ns > info.watchdog_ms * 1_000_000:
                 # The amplifier's watchdog ended the stream (no earlier than watchdog_ms after a START: an IDLE
                 # STATUS before that was sent before the START): this loop was held up for longer than the
                 # watchdog (a loaded host). START again where it stopped, and measure a whole dwell after that.
@@ -503,15 +500,15 @@ class AmpLink:
                                        f"(its {info.watchdog_ms} ms watchdog): this host does not keep its buffer "
                                        "filled")
                 self._start_tone(value, play_index, fill)
-                deadline = time.monotonic() + seconds
-                give_up = deadline + TONE_APPLY_LIMIT_S
+                deadline_ns = self._deadline_ns(seconds)
+                give_up_ns = deadline_ns + round(TONE_APPLY_LIMIT_S * 1e9)
                 last = None
                 continue
             self._write_tone(value, play_index, fill)
             if status is not None and abs(status.carrier_hz - self.carrier_hz) < 1e-3 and \
                     abs(status.envelope_v * 32767 / info.full_scale_v - value) <= 1.0:
                 last = status
-            if time.monotonic() >= deadline and last is not None:
+            if clock.now_ns() >= deadline_ns and last is not None:
                 return last
 
     def _start_tone(self, value: int, start_index: int, fill: int) -> None:
@@ -523,12 +520,12 @@ class AmpLink:
                    + min(fill, info.buffer_samples).to_bytes(2, "little"))
         self._start_sent = True
         link = self.link
-        link[amp_stream.LINK_START_NS] = time.monotonic_ns()  # no sample can play before this (H10)
+        link[amp_stream.LINK_START_NS] = self.clock.now_ns()  # no sample can play before this (H10)
         link[amp_stream.LINK_START_INDEX] = start_index & 0xFFFFFFFF
         link[amp_stream.LINK_ENVELOPE_HZ] = rate
         amp_stream.start_checks(link)
         self._check_start_ack(start_index, self._command(payload, codec.MSG_START, f"START at {rate} Hz"))
-        self._tone_started = time.monotonic()
+        self._tone_started_ns = self.clock.now_ns()
         self._tone_index = start_index & 0xFFFFFFFF
         self._write_tone(value, start_index, fill)
 
@@ -544,7 +541,7 @@ class AmpLink:
         info = self.info
         assert info is not None
         self.link[amp_stream.LINK_WRITTEN] = self._tone_index
-        if amp_stream.check_status(self.link, body, time.monotonic_ns()):
+        if amp_stream.check_status(self.link, body, self.clock.now_ns()):
             raise BackendError(self._report_error())
         at = codec.PAYLOAD
         faults = int(body[at + codec.STATUS_FAULTS])
@@ -593,9 +590,8 @@ class AmpLink:
         payload = (self.target.envelope_hz.to_bytes(4, "little") + (index & 0xFFFFFFFF).to_bytes(4, "little")
                    + min(self.target_fill, info.buffer_samples).to_bytes(2, "little"))
         self._start_sent = True  # even if its ACK never comes, the amplifier may have started
-        link[amp_stream.LINK_START_NS] = time.monotonic_ns()  # no sample can play before this (H10)
+        link[amp_stream.LINK_START_NS] = self.clock.now_ns()  # no sample can play before this (H10)
         self._check_start_ack(index, self._command(payload, codec.MSG_START, f"START at {self.target.envelope_hz} Hz"))
-        link[amp_stream.LINK_FD] = self._fd
         link[amp_stream.LINK_ENVELOPE_HZ] = self.target.envelope_hz
         link[amp_stream.LINK_FRAME_SAMPLES] = self.frame_samples
         link[amp_stream.LINK_TARGET_FILL] = self.target_fill
@@ -605,8 +601,8 @@ class AmpLink:
         link[amp_stream.LINK_STOP_RAMP_MS] = _ramp(ramp_ms)
         link[amp_stream.LINK_CALLBACK] = render_callback_address()
         self._track_with(track)
-        self._thread = threading.Thread(target=self._run, args=(table,), name="tpad-rt serial streamer", daemon=True)
-        self._thread.start()
+        self._stream = self._last_stream = self.line.start_stream(
+            table.table, link, self._buffers, self._envelope)  # type: ignore[attr-defined]
 
     def _track_with(self, track: bool) -> None:
         """Set the link's tracking fields: off, the model's carrier, or that locked by the measured phase."""
@@ -620,19 +616,12 @@ class AmpLink:
         link[amp_stream.LINK_CARRIER_MHZ] = round(self.carrier_hz * 1000)
         link[amp_stream.LINK_CARRIER_PENDING_NS] = -1
 
-    def _run(self, table: object) -> None:
-        self.realtime = _realtime_thread()
-        try:
-            amp_stream.stream(table.table, self.link, self._buffers, self._envelope,  # type: ignore[attr-defined]
-                              np.zeros(3))
-        except BaseException as error:  # noqa: BLE001 - reported by failure()
-            self._crash = error
-
     def failure(self) -> BaseException | None:
         """The error that ended the stream (a BackendError, the same object at every call), or None while it runs
         or after a requested stop."""
-        if self._crash is not None:
-            return self._crash
+        crash = self._last_stream.crash if self._last_stream is not None else None
+        if crash is not None:
+            return crash
         if self._failure is None:
             reason = int(self.link[amp_stream.LINK_EXIT])
             if reason in (amp_stream.EXIT_RUNNING, amp_stream.EXIT_STOPPED):
@@ -689,8 +678,13 @@ class AmpLink:
 
     @property
     def streaming(self) -> bool:
-        """True while the streamer thread runs."""
-        return self._thread is not None and self._thread.is_alive()
+        """True while the stream runs."""
+        return self._stream is not None and self._stream.alive
+
+    @property
+    def realtime(self) -> bool:
+        """Whether the stream ran with real-time scheduling (a real port's streamer thread, SCHED_FIFO)."""
+        return self._last_stream is not None and self._last_stream.realtime
 
     def stop(self, ramp_ms: float) -> None:
         """End the stream with STOP and ``ramp_ms`` (H8: the streamer sends it right after the last envelope
@@ -698,11 +692,11 @@ class AmpLink:
         ACK, and close the port. A missing ACK is not an error: the amplifier's watchdog ramps to 0 anyway
         (A4)."""
         ramp = _ramp(ramp_ms)
-        if self._thread is not None:
+        if self._stream is not None:
             self.link[amp_stream.LINK_STOP_RAMP_MS] = ramp
             publish(self.link, amp_stream.LINK_STOP, 1)
-            self._thread.join()
-            self._thread = None
+            self._stream.join()
+            self._stream = None
         elif self._start_sent:  # START went out, no stream followed (its ACK lost, or refused): STOP all the same
             try:
                 self.link[amp_stream.LINK_STOP_SEQ] = self._send(ramp.to_bytes(2, "little"), codec.MSG_STOP)
@@ -713,8 +707,8 @@ class AmpLink:
             seq = int(self.link[amp_stream.LINK_STOP_SEQ])
             if seq >= 0 and int(self.link[amp_stream.LINK_EXIT]) != amp_stream.EXIT_PORT_LOST:
                 self._rx = b""
-                deadline = time.monotonic() + STOP_ACK_TIMEOUT_S
-                while (body := self._receive(codec.MSG_ACK, deadline)) is not None:
+                deadline_ns = self._deadline_ns(STOP_ACK_TIMEOUT_S)
+                while (body := self._receive(codec.MSG_ACK, deadline_ns)) is not None:
                     if codec.get_u16(body, codec.PAYLOAD + codec.ACK_ACKED_SEQ) == seq:
                         break
         except BackendError:
@@ -723,13 +717,10 @@ class AmpLink:
             self.close()
 
     def close(self) -> None:
-        """Close the port (safe twice)."""
-        port, self._port = self._port, None
-        if port is not None:
-            try:
-                port.close()  # type: ignore[attr-defined]
-            except OSError:
-                pass  # a device that vanished: its descriptor is released all the same
+        """Close the line (safe twice)."""
+        line, self._line = self._line, None
+        if line is not None:
+            line.close()
 
     def stats(self) -> dict[str, float | int | str]:
         """The link's and the amplifier's counters (the last STATUS), by name."""
@@ -764,16 +755,6 @@ def _ramp(ramp_ms: float) -> int:
     return min(0xFFFF, max(1, round(ramp_ms)))
 
 
-def _realtime_thread() -> bool:
-    """Give the calling thread SCHED_FIFO STREAMER_PRIORITY, as audio servers give their callbacks; False where
-    the system refuses (the stream then runs at normal priority: a loaded machine can delay it)."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(STREAMER_PRIORITY))  # 0: this thread (Linux)
-    except (OSError, AttributeError):
-        return False
-    return True
-
-
 def warm_checks() -> None:
     """Compile (or load from numba's cache) the codec and the checks of the amplifier's reports that this module
     calls from Python, on scratch arrays of the types it passes: before a port is opened, so that no timed wait (the
@@ -788,7 +769,7 @@ def warm_checks() -> None:
     codec.get_u16(body, 0)
     codec.get_u32(body, 0)
     amp_stream.start_checks(link)
-    amp_stream.check_status(link, body, time.monotonic_ns())
+    amp_stream.check_status(link, body, 0)
     amp_stream.carrier_echo_ok(link, 1, 1)
     amp_stream.carrier_echo_tolerance_mhz(link, 1)
 
@@ -827,13 +808,3 @@ def _version_error(version: int) -> BackendError:
     """The error for an amplifier speaking another protocol version (H6)."""
     return BackendError(f"serial: the amplifier speaks protocol version {version}; this tpad-rt speaks version "
                         f"{codec.VERSION} (update one of them: docs/amp-protocol.md)")
-
-
-def _reason(error: BaseException) -> str:
-    """A short reason from an OSError or pyserial's SerialException (whose first argument is the errno)."""
-    number = getattr(error, "errno", None)
-    if not isinstance(number, int) and error.args and isinstance(error.args[0], int):
-        number = error.args[0]
-    if isinstance(number, int) and number > 0:
-        return os.strerror(number)
-    return str(error) or type(error).__name__
