@@ -47,7 +47,7 @@ def main(url: str, seconds: float, gil_threads: int) -> None:
     scale = link.scale  # the streamer's scale (H3), decided by the link
     assert scale is not None
     pipeline = Pipeline(device, load_compiled(GRATING), target.envelope_hz, envelope_output=True)
-    pipeline.set_drive(pipeline.drive.from_hardware(volts_per_full_scale=scale.full_scale_v, max_voltage_v=scale.max_v,
+    pipeline.set_drive(pipeline.device_drive.from_hardware(volts_per_full_scale=scale.full_scale_v, max_voltage_v=scale.max_v,
                                                     carrier_hz=link.carrier_hz, source="the Python writer's amplifier"))
     pipeline.start()
     frame = np.zeros(link.frame_samples, dtype=np.float32)
