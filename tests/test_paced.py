@@ -159,7 +159,6 @@ def test_it_renders_one_block_per_block_period_of_virtual_time(rate_hz: int, blo
 def test_a_late_wake_catches_up_in_one_burst() -> None:
     """Woken 50 ms late (less than PACED_MAX_BEHIND_S), it renders every block due at once: no underflow."""
     rate_hz, block_frames = 96000, 960  # 10 ms blocks
-    clock = VirtualClock()
     pipeline, table = _pipeline(rate_hz)
     output = Recorder(rate_hz)
     run = PacedRun(table, output, pipeline, rate_hz=rate_hz, block_frames=block_frames, started_ns=0, log=None)

@@ -116,8 +116,7 @@ class TelemetryLog:
         for chunk in chunks:
             self._pending.append(chunk)
             self._pending_rows += len(chunk["t"])
-        while self._pending_rows > MAX_PENDING_ROWS:
-            self._pending_rows -= len(self._pending.popleft()["t"])
+        self._pending_rows = _keep_newest(self._pending, self._pending_rows)
 
     def _record(self, rows: dict[str, np.ndarray], table: CallbackTable, frames: int) -> None:
         """Keep ``rows`` and the drive samples up to ``frames`` for the recording (under the lock). Past a limit
@@ -265,8 +264,8 @@ class _MeasuredBlocks:
         self.names: tuple[str, ...] = ()
         self.live = False
         self._waiting: deque[dict[str, np.ndarray]] = deque()  # rows, oldest first
-        self._t_s: deque[np.ndarray] = deque()  # measured blocks' times, oldest first
-        self._columns: deque[dict[str, np.ndarray]] = deque()  # their measurements
+        self._measured: deque[dict[str, np.ndarray]] = deque()  # measured blocks ("t" and names), oldest first
+        self._measured_rows = 0
 
     def begin(self, names: tuple[str, ...]) -> None:
         if not names or set(names) & set(TEL_NAMES) or len(set(names)) != len(names):
@@ -285,9 +284,9 @@ class _MeasuredBlocks:
             raise ValueError(f"add_measurements: need {self.names} for {len(t_s)} blocks, got "
                              f"{ {name: len(column) for name, column in columns.items()} }")
         if len(t_s):
-            self._t_s.append(t_s)
-            self._columns.append({name: np.asarray(columns[name], dtype=np.float64) for name in self.names})
-            _trim(self._t_s, self._columns)
+            self._measured.append({"t": t_s, **{name: np.asarray(columns[name], dtype=np.float64)
+                                                for name in self.names}})
+            self._measured_rows = _keep_newest(self._measured, self._measured_rows + len(t_s))
 
     def rows_in(self, rows: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
         """Take drained ``rows``; the rows now ready to read (measured, or not waiting for a measurement)."""
@@ -301,32 +300,37 @@ class _MeasuredBlocks:
         if not self._waiting:
             return []
         rows = joined(list(self._waiting))
-        t_s = np.concatenate(self._t_s) if self._t_s else np.zeros(0)
+        measured = joined(list(self._measured), ("t", *self.names))
         ready = len(rows["t"])
-        if self.live:
-            newest_s = t_s[-1] if len(t_s) else -math.inf
+        if self.live:  # wait for a measurement as new as the row, but keep at most MAX_PENDING_ROWS waiting
+            newest_s = measured["t"][-1] if len(measured["t"]) else -math.inf
             ready = max(int(np.searchsorted(rows["t"], newest_s, side="right")), ready - MAX_PENDING_ROWS)
         self._waiting = deque([{name: column[ready:] for name, column in rows.items()}] if ready < len(rows["t"])
                               else [])
         if ready == 0:
             return []
         out = {name: column[:ready] for name, column in rows.items()}
-        at = np.minimum(np.searchsorted(t_s, out["t"]), max(len(t_s) - 1, 0))
-        hit = t_s[at] == out["t"] if len(t_s) else np.zeros(ready, dtype=bool)
-        columns = {name: np.concatenate([chunk[name] for chunk in self._columns]) if self._columns else np.zeros(0)
-                   for name in self.names}
+        at = np.minimum(np.searchsorted(measured["t"], out["t"]), max(len(measured["t"]) - 1, 0))
+        hit = measured["t"][at] == out["t"] if len(measured["t"]) else np.zeros(ready, dtype=bool)
         for name in self.names:
-            measured = np.full(ready, math.nan)
-            measured[hit] = columns[name][at[hit]]
-            out[name] = measured
-        left = t_s > out["t"][-1]  # measurements of blocks not drained yet
-        self._t_s = deque([t_s[left]] if left.any() else [])
-        self._columns = deque([{name: column[left] for name, column in columns.items()}] if left.any() else [])
+            out[name] = np.full(ready, math.nan)
+            out[name][hit] = measured[name][at[hit]]
+        left = measured["t"] > out["t"][-1]  # measurements of blocks not drained yet
+        self._measured = deque([{name: column[left] for name, column in measured.items()}] if left.any() else [])
+        self._measured_rows = int(np.count_nonzero(left))
         return [out]
 
 
-def _trim(t_s: deque[np.ndarray], columns: deque[dict[str, np.ndarray]]) -> None:
-    """Drop the oldest measured chunks past MAX_PENDING_ROWS blocks."""
-    while sum(len(chunk) for chunk in t_s) > MAX_PENDING_ROWS and len(t_s) > 1:
-        t_s.popleft()
-        columns.popleft()
+def _keep_newest(chunks: deque[dict[str, np.ndarray]], rows: int) -> int:
+    """Drop the oldest rows of ``chunks`` (``rows`` in all, each chunk's ``"t"`` as long as its columns) past
+    MAX_PENDING_ROWS; the rows left."""
+    while rows > MAX_PENDING_ROWS:
+        oldest = len(chunks[0]["t"])
+        if oldest <= rows - MAX_PENDING_ROWS:
+            chunks.popleft()
+            rows -= oldest
+        else:
+            cut = rows - MAX_PENDING_ROWS
+            chunks[0] = {name: column[cut:] for name, column in chunks[0].items()}
+            rows -= cut
+    return rows
