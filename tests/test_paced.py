@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 import tracemalloc
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
@@ -343,3 +344,24 @@ def test_a_long_sim_run_keeps_bounded_memory(monkeypatch: pytest.MonkeyPatch) ->
     assert np.all(np.isfinite(rows["achieved_mu"]))
     # The leak this replaces kept two Python floats per block: 2,400 blocks after the first minute, >150 kB.
     assert three_minutes - first_minute < 50_000
+
+
+# --- the real clock (the real-time tier) ----------------------------------------------------------
+
+
+@pytest.mark.realtime
+def test_on_the_host_clock_it_keeps_real_time_and_never_runs_ahead() -> None:
+    """The thread on CLOCK_MONOTONIC for a second: never more blocks than the time passed allows (that holds on
+    any host), and at least half of them (a margin a loaded host meets: the pacing itself is checked above)."""
+    rate_hz, block_frames = 96000, 960
+    pipeline, table = _pipeline(rate_hz)
+    driver = PacedDriver(output_kind("null://")[0], device=DEVICE, rate_hz=rate_hz, block_frames=block_frames,
+                         options=RenderOptions())
+    driver.open(pipeline)
+    started_ns = time.monotonic_ns()
+    driver.start(table)
+    threading.Event().wait(1.0)
+    assert driver.close(5.0) is None
+    periods = (time.monotonic_ns() - started_ns) / 10_000_000
+    blocks = int(table.stats[tab.STAT_CALLBACKS])
+    assert 0.5 * periods <= blocks <= periods + 1

@@ -67,9 +67,11 @@ def measure(repo: Path, output: str, seconds: float) -> dict[str, Any]:
         raise RuntimeError(f"play {output} failed ({child.returncode}): {errors}")
     after_first = [rss for t_s, rss in samples if t_s >= 1.0]
     one_s = after_first[0]
+    ten_s = next(rss for t_s, rss in samples if t_s >= min(10.0, seconds))
     end = after_first[-1]
     summary = (first_line + rest).splitlines()
     return {"output": output, "seconds": seconds, "rss_at_1s_mb": one_s, "rss_at_end_mb": end,
+            "rss_at_10s_mb": ten_s, "growth_after_10s_mb": end - ten_s,
             "growth_mb": end - one_s, "peak_growth_mb": max(after_first) - one_s, "growth_mb_per_s": (end - one_s) / max(samples[-1][0] - 1.0, 1e-9),
             "peak_mb": max(rss for _, rss in samples), "samples": len(samples),
             "played": next((line for line in summary if line.startswith("played ")), "")}
@@ -90,11 +92,12 @@ def main() -> None:
     lines = [f"# tpad-rt play: resident memory over {args.seconds:g} s (`python bench/memory/play_rss.py`)", "",
              f"Checkout `{result['repo']}`; {result['cpus']} CPUs, load average "
              + " / ".join(f"{value:.1f}" for value in result["load_average"]) + " at the end.", "",
-             "| output | RSS at 1 s (MB) | RSS at the end (MB) | growth after 1 s (MB) | growth (MB/s) "
-             "| highest after 1 s, over RSS at 1 s (MB) | peak (MB) |",
-             "| --- | --- | --- | --- | --- | --- | --- |"]
-    lines += [f"| `{row['output']}` | {row['rss_at_1s_mb']:.1f} | {row['rss_at_end_mb']:.1f} | {row['growth_mb']:+.2f} "
-              f"| {row['growth_mb_per_s']:+.4f} | {row['peak_growth_mb']:+.2f} | {row['peak_mb']:.1f} |" for row in rows]
+             "| output | RSS at 1 s (MB) | at 10 s | at the end | growth after 1 s (MB) | growth after 10 s (MB) "
+             "| growth after 1 s (MB/s) | highest after 1 s, over RSS at 1 s (MB) | peak (MB) |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    lines += [f"| `{row['output']}` | {row['rss_at_1s_mb']:.1f} | {row['rss_at_10s_mb']:.1f} | {row['rss_at_end_mb']:.1f} "
+              f"| {row['growth_mb']:+.2f} | {row['growth_after_10s_mb']:+.2f} | {row['growth_mb_per_s']:+.4f} "
+              f"| {row['peak_growth_mb']:+.2f} | {row['peak_mb']:.1f} |" for row in rows]
     lines += ["", "`null://` is the same run's baseline (no plate simulated). What each run printed:", ""]
     lines += [f"- `{row['output']}`: {row['played']}" for row in rows]
     (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")

@@ -87,6 +87,7 @@ class SimOutput(Output):
         self._envelope_m = np.zeros(0)
         self._amplitude_um: list[float] = []
         self._achieved_mu: list[float] = []
+        self._latest: dict[str, float] = {}  # the last block's, taken or not
 
     def _coef(self, force_n: float) -> np.ndarray:
         """The resonator coefficients at contact force ``force_n`` (N, >= 0): recomputed when the force changes
@@ -132,6 +133,7 @@ class SimOutput(Output):
                                              device.poisson, device.psi_star)
         self._amplitude_um.append(amplitude_m * 1e6)  # both or neither: a block is measured whole
         self._achieved_mu.append(achieved_mu)
+        self._latest = {"plate_amplitude_um": amplitude_m * 1e6, "achieved_mu": achieved_mu}
 
     def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
                      blocks: Mapping[str, npt.NDArray[Any]]) -> None:
@@ -155,6 +157,8 @@ class SimOutput(Output):
                       achieved_mu)
         self._amplitude_um.extend((amplitude_m * 1e6).tolist())
         self._achieved_mu.extend(achieved_mu.tolist())
+        if count:
+            self._latest = {"plate_amplitude_um": self._amplitude_um[-1], "achieved_mu": self._achieved_mu[-1]}
 
     def warm(self, batch: bool = False) -> None:
         """Run the plate model and the friction model of :meth:`write` (with ``batch``, of :meth:`write_blocks`)
@@ -175,9 +179,7 @@ class SimOutput(Output):
 
     def latest(self) -> dict[str, float]:
         """``plate_amplitude_um`` and ``achieved_mu`` of the last block written (none before the first)."""
-        if not self._achieved_mu:
-            return {}
-        return {"plate_amplitude_um": self._amplitude_um[-1], "achieved_mu": self._achieved_mu[-1]}
+        return dict(self._latest)
 
     def take_measurements(self) -> dict[str, npt.NDArray[np.float64]]:
         """:meth:`measurements`, then forget them: the paced driver takes them after every step (into the
