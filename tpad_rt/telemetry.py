@@ -53,13 +53,16 @@ from tpad_rt.recording import Recording, write_recording
 #: most for their measurements, and as many measured blocks for their rows.
 MAX_PENDING_ROWS = 2**18
 
-#: The log of each pipeline (see :func:`log_of`).
-_LOGS: weakref.WeakKeyDictionary[Pipeline, TelemetryLog] = weakref.WeakKeyDictionary()
+#: The log of each pipeline (see :func:`log_of`), held weakly both ways: the log holds its pipeline, and neither
+#: outlives its owner (the Renderer).
+_LOGS: weakref.WeakKeyDictionary[Pipeline, weakref.ref[TelemetryLog]] = weakref.WeakKeyDictionary()
 
 
 def log_of(pipeline: Pipeline) -> TelemetryLog | None:
-    """The log that drains ``pipeline``'s telemetry (the newest made for it), None if none was made."""
-    return _LOGS.get(pipeline)
+    """The log that drains ``pipeline``'s telemetry (the newest made for it), None if none was made (or it is
+    gone)."""
+    log = _LOGS.get(pipeline)
+    return None if log is None else log()
 
 
 class TelemetryLog:
@@ -83,7 +86,7 @@ class TelemetryLog:
         self._truncated: str | None = None  # why the recording ended early, if it did
         #: The recording's limit error (see :meth:`drain`), or None.
         self.failure: TpadError | None = None
-        _LOGS[pipeline] = self
+        _LOGS[pipeline] = weakref.ref(self)
 
     def drain(self, table: CallbackTable) -> None:
         """Move new telemetry rows (and drive samples, when recording) out of ``table``'s rings.

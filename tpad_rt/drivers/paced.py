@@ -142,11 +142,11 @@ class PacedDriver(Driver):
         run = self.run(table)
         self._halt.clear()
         self._error = None
-        thread = threading.Thread(target=self._run, args=(run,), name="tpad-rt paced output", daemon=True)
+        thread = threading.Thread(target=self._loop, args=(run,), name="tpad-rt paced output", daemon=True)
         thread.start()
         self._thread = thread  # only once it runs: close() joins it
 
-    def _run(self, run: PacedRun) -> None:
+    def _loop(self, run: PacedRun) -> None:
         """Until halted: read the clock, step, sleep until the next block is due (at most PACED_POLL_NS)."""
         try:
             with run.output:
