@@ -352,7 +352,9 @@ def test_a_long_sim_run_keeps_bounded_memory(monkeypatch: pytest.MonkeyPatch) ->
 @pytest.mark.realtime
 def test_on_the_host_clock_it_keeps_real_time_and_never_runs_ahead() -> None:
     """The thread on CLOCK_MONOTONIC for a second: never more blocks than the time passed allows (that holds on
-    any host), and at least half of them (a margin a loaded host meets: the pacing itself is checked above)."""
+    any host), and a fifth of them at least (a margin a loaded host meets: with a busy loop and a load average
+    of 10 on 2 cores it rendered 40 %, skipping ahead past its stalls; the pacing itself is checked above, on the
+    virtual clock)."""
     rate_hz, block_frames = 96000, 960
     pipeline, table = _pipeline(rate_hz)
     driver = PacedDriver(output_kind("null://")[0], device=DEVICE, rate_hz=rate_hz, block_frames=block_frames,
@@ -364,4 +366,4 @@ def test_on_the_host_clock_it_keeps_real_time_and_never_runs_ahead() -> None:
     assert driver.close(5.0) is None
     periods = (time.monotonic_ns() - started_ns) / 10_000_000
     blocks = int(table.stats[tab.STAT_CALLBACKS])
-    assert 0.5 * periods <= blocks <= periods + 1
+    assert 0.2 * periods <= blocks <= periods + 1

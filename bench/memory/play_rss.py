@@ -65,14 +65,16 @@ def measure(repo: Path, output: str, seconds: float) -> dict[str, Any]:
     rest, errors = child.communicate()
     if child.returncode != 0:
         raise RuntimeError(f"play {output} failed ({child.returncode}): {errors}")
-    after_first = [rss for t_s, rss in samples if t_s >= 1.0]
-    one_s = after_first[0]
-    ten_s = next(rss for t_s, rss in samples if t_s >= min(10.0, seconds))
-    end = after_first[-1]
+    during = [(t_s, rss) for t_s, rss in samples if 1.0 <= t_s <= seconds - 1.0]  # not the stop and summary
+    one_s = during[0][1]
+    ten_s = next(rss for t_s, rss in during if t_s >= min(10.0, seconds - 1.0))
+    end = during[-1][1]
+    after_first = [rss for _, rss in during]
     summary = (first_line + rest).splitlines()
     return {"output": output, "seconds": seconds, "rss_at_1s_mb": one_s, "rss_at_end_mb": end,
             "rss_at_10s_mb": ten_s, "growth_after_10s_mb": end - ten_s,
-            "growth_mb": end - one_s, "peak_growth_mb": max(after_first) - one_s, "growth_mb_per_s": (end - one_s) / max(samples[-1][0] - 1.0, 1e-9),
+            "growth_mb": end - one_s, "peak_growth_mb": max(after_first) - one_s,
+            "growth_mb_per_s": (end - one_s) / max(during[-1][0] - 1.0, 1e-9),
             "peak_mb": max(rss for _, rss in samples), "samples": len(samples),
             "played": next((line for line in summary if line.startswith("played ")), "")}
 
@@ -92,8 +94,8 @@ def main() -> None:
     lines = [f"# tpad-rt play: resident memory over {args.seconds:g} s (`python bench/memory/play_rss.py`)", "",
              f"Checkout `{result['repo']}`; {result['cpus']} CPUs, load average "
              + " / ".join(f"{value:.1f}" for value in result["load_average"]) + " at the end.", "",
-             "| output | RSS at 1 s (MB) | at 10 s | at the end | growth after 1 s (MB) | growth after 10 s (MB) "
-             "| growth after 1 s (MB/s) | highest after 1 s, over RSS at 1 s (MB) | peak (MB) |",
+             "| output | RSS at 1 s (MB) | at 10 s | at the end - 1 s | growth after 1 s (MB) | growth after 10 s (MB) "
+             "| growth after 1 s (MB/s) | highest after 1 s, over RSS at 1 s (MB) | peak of the process (MB) |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     lines += [f"| `{row['output']}` | {row['rss_at_1s_mb']:.1f} | {row['rss_at_10s_mb']:.1f} | {row['rss_at_end_mb']:.1f} "
               f"| {row['growth_mb']:+.2f} | {row['growth_after_10s_mb']:+.2f} | {row['growth_mb_per_s']:+.4f} "
