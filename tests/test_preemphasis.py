@@ -105,7 +105,9 @@ def test_the_plate_model_maps_the_preemphasised_envelope_of_a_step_back_to_the_c
     options = RenderOptions(control_interval=ENVELOPE_CONTROL_INTERVAL, default_force_n=FORCE_N, smoothing_ms=1.0)
     pipeline = Pipeline(device, _pulses(tmp_path, 0.85), fs_hz=ENVELOPE_HZ, options=options, envelope_output=True)
     full_scale_v = 50.0
-    pipeline.set_drive_scale(full_scale_v, device.max_voltage_v, device.carrier_hz)
+    pipeline.set_drive(pipeline.device_drive.from_hardware(volts_per_full_scale=full_scale_v,
+                                                           max_voltage_v=device.max_voltage_v,
+                                                           carrier_hz=device.carrier_hz, source="a test"))
     pipeline.start()
     block = np.zeros(ENVELOPE_BLOCK, dtype=np.float32)
     drive, commanded, flags = [], [], 0
@@ -162,7 +164,9 @@ def _envelope_of_a_fall(tmp_path: Path, braking: bool) -> tuple[np.ndarray, np.n
     device = Device.default()
     options = RenderOptions(control_interval=ENVELOPE_CONTROL_INTERVAL, default_force_n=FORCE_N, braking=braking)
     pipeline = Pipeline(device, _pulses(tmp_path, 0.85), fs_hz=ENVELOPE_HZ, options=options, envelope_output=True)
-    pipeline.set_drive_scale(device.max_voltage_v, device.max_voltage_v, device.carrier_hz)
+    pipeline.set_drive(pipeline.device_drive.from_hardware(volts_per_full_scale=device.max_voltage_v,
+                                                           max_voltage_v=device.max_voltage_v,
+                                                           carrier_hz=device.carrier_hz, source="a test"))
     pipeline.start()
     block = np.zeros(ENVELOPE_BLOCK, dtype=np.float32)
     drive = []

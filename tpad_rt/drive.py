@@ -17,6 +17,7 @@ summary and ``serve``'s ``device`` message all read it, so they cannot disagree.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, replace
 from enum import Enum
 from typing import Any
@@ -56,11 +57,16 @@ class DriveSpec:
     source: str = "device file"
 
     def __post_init__(self) -> None:
+        if not isinstance(self.consumes, Consumes):
+            raise ConfigError(f"drive: consumes: must be a Consumes, got {self.consumes!r}")
         for name in ("rate_hz", "carrier_hz", "volts_per_full_scale", "max_voltage_v"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value)
-                                                                                   and value > 0):
+            number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
+            if not (math.isfinite(number) and number > 0):
                 raise ConfigError(f"drive: {name}: must be a finite number > 0, got {value!r}")
+            object.__setattr__(self, name, number)  # a NumPy number is kept as a plain float
+        if not isinstance(self.source, str):
+            raise ConfigError(f"drive: source: must be text, got {self.source!r}")
 
     @classmethod
     def from_device(cls, device: Device, consumes: Consumes, rate_hz: float) -> DriveSpec:
@@ -70,13 +76,14 @@ class DriveSpec:
     def from_hardware(self, *, volts_per_full_scale: float, max_voltage_v: float, carrier_hz: float,
                       source: str) -> DriveSpec:
         """This drive as the output's hardware reported it: its full scale (V per 1.0), its clamp (V; the
-        lower of it and this one's is kept), the carrier it makes (Hz); ``source`` names the hardware.
-        Raises ConfigError as the class does."""
+        lower of it and this one's is kept: call it on the device file's drive,
+        :attr:`tpad_rt.pipeline.Pipeline.device_drive`), the carrier it makes (Hz); ``source`` names the
+        hardware. Raises ConfigError as the class does."""
         return replace(self, volts_per_full_scale=volts_per_full_scale,
                        max_voltage_v=min(max_voltage_v, self.max_voltage_v), carrier_hz=carrier_hz, source=source)
 
     def metadata(self) -> dict[str, Any]:
-        """Its keys in a recording's metadata (docs/formats.md)."""
+        """Its keys in a recording's metadata (:mod:`tpad_rt.recording`)."""
         return {"carrier_hz": float(self.carrier_hz), "volts_per_full_scale": float(self.volts_per_full_scale),
                 "max_voltage_v": float(self.max_voltage_v), "output_consumes": self.consumes.value,
                 "drive_rate_hz": float(self.rate_hz), "drive_source": self.source}

@@ -225,7 +225,12 @@ class Renderer:
             self.check()
             return
         self._pipeline.stop()
-        silent_by = self._driver.wait_silent(table, self._ended)
+        silent_by = None  # the index by which the drive is silent, once the driver waited for it
+        interrupted: BaseException | None = None
+        try:
+            silent_by = self._driver.wait_silent(table, self._ended)
+        except BaseException as error:  # noqa: BLE001 - Ctrl-C, a driver's error: close all the same, re-raise below
+            interrupted = error
         self._halt.set()
         if self._watcher is not None:
             self._watcher.join()
@@ -243,7 +248,10 @@ class Renderer:
         finally:
             self._table = None
             self._ended.set()  # whatever failed: join() and iter_telemetry() return
-        if table.next_sample >= silent_by and (table.arrays.state[STATE_GATE] or table.arrays.state[STATE_RAMP_START]):
+        if interrupted is not None:
+            raise interrupted
+        gain_open = table.arrays.state[STATE_GATE] or table.arrays.state[STATE_RAMP_START]
+        if silent_by is not None and table.next_sample >= silent_by and gain_open:
             self._error = self._error or RuntimeError("Renderer.stop: the drive was not ramped to 0")
         self.check()
 

@@ -12,7 +12,7 @@ Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
     ``.push_finger(t_s, x_mm, y_mm, force_n=None, down=True)``, ``.lift(t_s)``: validated (SampleError)
     ``.stream_time_s``, ``.last_time_s``, ``.position_range_mm``, ``.check_time(t_s, name)``, ``.faults() -> dict``
     ``.set_texture(texture, t_s=None)``, ``.start()``, ``.stop()``
-    ``.drive``, ``.set_drive(drive)``: the drive it renders for (:class:`tpad_rt.drive.DriveSpec`)
+    ``.drive``, ``.set_drive(drive)``, ``.device_drive``: the drive it renders for (:class:`tpad_rt.drive.DriveSpec`)
     ``.recent_fingers()``: the newest samples of the finger ring, decoded
     ``.render(out)``: the next ``len(out)`` float32 samples (1.0 = ``volts_per_full_scale``)
     ``.drain_telemetry() -> dict[str, np.ndarray]``: rows since the last drain, keyed by TEL_NAMES
@@ -372,7 +372,9 @@ class Pipeline:
         dev, start_n, step_n = device_tables(device, options.track, band_hz)
         _check_rate(device, fs_hz, envelope_output, float(dev[layout.DEV_CARRIER_HZ].max()))
         self.envelope_output = envelope_output
-        self._drive = DriveSpec.from_device(device, Consumes.ENVELOPE if envelope_output else Consumes.DAC, fs_hz)
+        self._device_drive = DriveSpec.from_device(device, Consumes.ENVELOPE if envelope_output else Consumes.DAC,
+                                                   fs_hz)
+        self._drive = self._device_drive
         self.device = device
         self.options = options
         self.fs_hz = fs_hz
@@ -466,18 +468,27 @@ class Pipeline:
         """The drive the kernel renders for (carrier, full scale, clamp, rate)."""
         return self._drive
 
+    @property
+    def device_drive(self) -> DriveSpec:
+        """The drive the device file describes, at this pipeline's rate: what an output's hardware report
+        replaces (:meth:`DriveSpec.from_hardware`)."""
+        return self._device_drive
+
     def set_drive(self, drive: DriveSpec) -> None:
         """Render for ``drive`` from now on: the drive the output's hardware reported at start (its full scale,
         clamp and carrier). Raises ConfigError for a drive of another kind or rate, or a clamp above the
-        device's maximum; RuntimeError while running."""
+        device's maximum, or a carrier the rate cannot make (DAC samples); RuntimeError while running."""
         if self.running:
             raise RuntimeError("Pipeline.set_drive: stop the pipeline first")
+        if not isinstance(drive, DriveSpec):
+            raise ConfigError(f"drive: must be a DriveSpec, got {type(drive).__name__}")
         if drive.consumes is not self._drive.consumes or drive.rate_hz != self._drive.rate_hz:
-            raise ConfigError(f"drive: renders {drive.consumes.value} at {drive.rate_hz:g} Hz, but the pipeline "
+            raise ConfigError(f"drive: it is {drive.consumes.value} at {drive.rate_hz:g} Hz, but the pipeline renders "
                               f"{self._drive.consumes.value} at {self._drive.rate_hz:g} Hz")
         if drive.max_voltage_v > self.device.max_voltage_v:
             raise ConfigError(f"drive: max_voltage_v: {drive.max_voltage_v:g} V is above the device's "
                               f"{self.device.max_voltage_v:g} V")
+        _check_rate(self.device, self.fs_hz, self.envelope_output, drive.carrier_hz)
         cfg = self._arrays.cfg
         cfg[layout.CFG_VOLTS_PER_FS] = drive.volts_per_full_scale
         cfg[layout.CFG_MAX_VOLTAGE_V] = drive.max_voltage_v

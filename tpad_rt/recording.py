@@ -19,7 +19,11 @@ reads every one):
 - ``metadata_json`` (0-d str): a JSON object with at least the keys in
   :data:`REQUIRED_METADATA` (texture path and description, device label, carrier,
   volts per full scale, max voltage, power budgets, block size, tpad-rt version); a run's
-  is made by :func:`run_metadata`, for ``tpad-rt render`` and the Renderer alike.
+  is made by :func:`run_metadata`, for ``tpad-rt render`` and the Renderer alike, and also
+  holds ``input_url``, ``output_url``, ``render_options``, and the drive's
+  ``output_consumes`` (``"DAC samples"`` or ``"envelope"``), ``drive_rate_hz`` and
+  ``drive_source`` (``"device file"``, or the amplifier that reported the carrier, full
+  scale and clamp: :class:`tpad_rt.drive.DriveSpec`).
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ import math
 import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -39,9 +43,11 @@ from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import NewFile
 from tpad_rt.kernel.layout import CFG_POWER_AVG_W, CFG_POWER_CAP_W, TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_RENDER_BLOCKS
-from tpad_rt.pipeline import Pipeline
-from tpad_rt.texture import CompiledTexture
 from tpad_rt.version import __version__
+
+if TYPE_CHECKING:  # only for run_metadata's hints: reading a recording loads neither numba nor the pipeline
+    from tpad_rt.pipeline import Pipeline
+    from tpad_rt.texture import CompiledTexture
 
 FORMAT = "tpad-rt recording"
 FORMAT_VERSION = 1

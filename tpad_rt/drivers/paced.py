@@ -25,7 +25,7 @@ from tpad_rt.clock import Clock
 from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
 from tpad_rt.kernel import table as tab
-from tpad_rt.outputs import Output, open_output
+from tpad_rt.outputs import Output, open_paced
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.realtime import CallbackTable
 from tpad_rt.telemetry import TelemetryLog, log_of
@@ -126,8 +126,8 @@ class PacedDriver(Driver):
         self._error: BaseException | None = None
 
     def open(self, pipeline: Pipeline) -> None:
-        """Open the output (ConfigError, BackendError as :func:`tpad_rt.outputs.open_output`)."""
-        self._output = open_output(self.url.text, device=self.device, fs_hz=self.rate_hz)
+        """Open the output (ConfigError, BackendError as its scheme's open_url says)."""
+        self._output = open_paced(self.url, device=self.device, fs_hz=self.rate_hz)
         self._output.warm()  # compiled now, not in the pacing thread while the clock runs
         self._pipeline = pipeline
 

@@ -61,7 +61,7 @@ class SerialStreamDriver(Driver):
                                                                     max_voltage_v=self.device.max_voltage_v)
         scale = link.scale  # decided once, from the INFO the handshake took (H1, H3); the streamer clamps to it
         assert scale is not None
-        pipeline.set_drive(pipeline.drive.from_hardware(
+        pipeline.set_drive(pipeline.device_drive.from_hardware(
             volts_per_full_scale=scale.full_scale_v, max_voltage_v=scale.max_v, carrier_hz=link.carrier_hz,
             source=f"amplifier {link.info.firmware!r} on {self.target.port}" if link.info else self.target.port))
         self.block_frames = link.frame_samples

@@ -8,6 +8,8 @@ output_kind(url) -> (Url, OutputKind)
     the parsed URL and its scheme's kind: what the output consumes (DAC samples or the
     envelope), the driver that runs it in real time, its capabilities; ConfigError (showing
     the expected forms) for an unknown scheme, option or value, or a missing part
+open_paced(url, *, device, fs_hz) -> Output
+    the output the paced driver hands blocks to (what its scheme's ``open_url`` opens)
 open_output(url, *, device, fs_hz) -> Output
     an output that opens offline (``Capability.OFFLINE``: a simulator or a file, what ``tpad-rt
     render`` writes to); ConfigError as output_kind (listing those schemes), or for a real-time-only
@@ -39,6 +41,7 @@ import functools
 import importlib
 import re
 from importlib import metadata
+from collections.abc import Sequence
 from types import ModuleType
 
 from tpad_rt.device import Device
@@ -59,20 +62,31 @@ ENTRY_POINT_GROUP = "tpad_rt.outputs"
 #: What a scheme may be spelled with (RFC 3986's scheme, lower case).
 _SCHEME = re.compile(r"[a-z][a-z0-9+.-]{0,31}")
 
-_registered: dict[str, ModuleType | str] = {}
+#: The driver most outputs run on (a Python thread hands it blocks): its kinds need ``open_url``.
+PACED_DRIVER = "tpad_rt.drivers.paced:PacedDriver"
+
+_registered: dict[str, ModuleType] = {}
 
 
 def register_output(module: ModuleType | str) -> None:
     """Add the output kind ``module`` (a module, or its import name) declares, under the scheme of its URL
-    forms. Raises ConfigError for a module without ``FORMS`` and ``KIND``, forms of several or badly spelled
-    schemes, or a scheme already taken (a shipped one included)."""
-    module = importlib.import_module(module) if isinstance(module, str) else module
+    forms. Raises ConfigError for a module that does not import or lacks ``FORMS`` and ``KIND``, forms of
+    several or badly spelled schemes, or a scheme already taken (a shipped one included)."""
+    if isinstance(module, str):
+        try:
+            module = importlib.import_module(module)
+        except Exception as error:  # noqa: BLE001 - whatever its import raised, one message
+            raise ConfigError(f"register_output: module {module!r} does not import: {error}") from None
+    if not isinstance(module, ModuleType):
+        raise ConfigError(f"register_output: must be a module or its name, got {module!r}")
     problem = _declaration_problem(module)
     if problem:
         raise ConfigError(f"register_output: {module.__name__}: {problem}")
     scheme = module.FORMS[0].scheme
-    if scheme in _modules():
-        raise ConfigError(f"register_output: {scheme}:// is taken (by {_name(_modules()[scheme])})")
+    if scheme in BUILTIN_SCHEMES or scheme in _registered or scheme in _installed():
+        taken_by = BUILTIN_SCHEMES.get(scheme) or getattr(_registered.get(scheme), "__name__", None) or \
+            f"the installed package's {_installed()[scheme].value}"
+        raise ConfigError(f"register_output: {scheme}:// is taken (by {taken_by})")
     _registered[scheme] = module
 
 
@@ -93,73 +107,87 @@ def _declaration_problem(module: ModuleType) -> str:
                 f"'+', '-' or '.'; got {sorted({form.scheme for form in forms})}")
     if not isinstance(kind, OutputKind):
         return "KIND: must be an OutputKind"
-    if not re.fullmatch(r"[\w.]+:\w+", kind.driver):
-        return f"KIND.driver: must name a driver class as 'module:Class', got {kind.driver!r}"
-    if kind.can(Capability.OFFLINE) and not callable(getattr(module, "open_url", None)):
-        return "open_url: an output that opens offline must define open_url(url, *, device, fs_hz)"
+    if (kind.can(Capability.OFFLINE) or kind.driver == PACED_DRIVER) and not callable(getattr(module, "open_url",
+                                                                                                 None)):
+        return ("open_url: an output that opens offline or runs on the paced driver must define "
+                "open_url(url, *, device, fs_hz)")
     return ""
 
 
 @functools.cache
-def _installed() -> dict[str, str]:
-    """The schemes installed packages declare (entry point group ENTRY_POINT_GROUP) -> module name; read once."""
-    return {entry.name: entry.value for entry in metadata.entry_points(group=ENTRY_POINT_GROUP)
-            if _SCHEME.fullmatch(entry.name)}
-
-
-def _modules() -> dict[str, ModuleType | str]:
-    """Every scheme -> its module (or its import name, imported when used): shipped, registered, installed."""
-    return {**_installed(), **_registered, **BUILTIN_SCHEMES}  # nothing takes a shipped scheme
-
-
-def _name(module: ModuleType | str) -> str:
-    return module if isinstance(module, str) else module.__name__
+def _installed() -> dict[str, metadata.EntryPoint]:
+    """The schemes installed packages declare (entry point group ENTRY_POINT_GROUP, by name), read once; a
+    name that is no scheme (see _SCHEME) could never be typed in a URL and is left out."""
+    return {entry.name: entry for entry in metadata.entry_points(group=ENTRY_POINT_GROUP)
+            if _SCHEME.fullmatch(entry.name) and entry.name not in BUILTIN_SCHEMES}
 
 
 def output_module(scheme: str) -> ModuleType:
     """The module of the output ``scheme`` (imported now); KeyError for an unknown scheme, ConfigError for an
-    installed one that does not import or does not declare an output kind."""
-    module = _modules()[scheme]
-    if isinstance(module, ModuleType):
-        return module
+    installed one that does not import, is not a module, declares no output kind or another scheme."""
     if scheme in BUILTIN_SCHEMES:
-        return importlib.import_module(module)
+        return importlib.import_module(BUILTIN_SCHEMES[scheme])
+    if scheme in _registered:
+        return _registered[scheme]
+    entry = _installed()[scheme]
+    where = f"output {scheme}://: the installed package's {entry.value}"
     try:
-        imported = importlib.import_module(module)
-    except ImportError as error:
-        raise ConfigError(f"output {scheme}://: the installed package's module {module} does not import: "
-                          f"{error}") from None
-    problem = _declaration_problem(imported)
+        module = entry.load()
+    except Exception as error:  # noqa: BLE001 - whatever its import raised, one message
+        raise ConfigError(f"{where} does not import: {error}") from None
+    if not isinstance(module, ModuleType):
+        raise ConfigError(f"{where} is not a module")
+    problem = _declaration_problem(module)
+    if not problem and module.FORMS[0].scheme != scheme:
+        problem = f"FORMS: its scheme is {module.FORMS[0].scheme}://, not {scheme}://"
     if problem:
-        raise ConfigError(f"output {scheme}://: the package's module {module}: {problem}")
-    return imported
+        raise ConfigError(f"{where}: {problem}")
+    return module
+
+
+def _schemes(offline: bool = False) -> dict[str, Sequence[UrlForm | str]]:
+    """Every scheme -> its forms (with ``offline``, those that open offline); an installed package's scheme is
+    named, not imported (so one broken package does not stop the others), until a URL uses it."""
+    known: dict[str, Sequence[UrlForm | str]] = {}
+    for scheme in (*BUILTIN_SCHEMES, *_registered):
+        module = output_module(scheme)
+        if not offline or module.KIND.can(Capability.OFFLINE):
+            known[scheme] = module.FORMS
+    for scheme, entry in _installed().items():
+        known.setdefault(scheme, (f"{scheme}://... (from the installed package's {entry.value})",))
+    return known
 
 
 def output_forms() -> dict[str, tuple[UrlForm, ...]]:
-    """Every output scheme with the URL forms it accepts."""
-    return {scheme: output_module(scheme).FORMS for scheme in _modules()}
+    """Every output scheme with the URL forms it accepts (shipped, registered, and installed ones that import;
+    ConfigError as :func:`output_module` for an installed one that does not)."""
+    return {scheme: output_module(scheme).FORMS for scheme in (*BUILTIN_SCHEMES, *_registered, *_installed())}
 
 
 def output_kind(url: str) -> tuple[Url, OutputKind]:
     """``url`` parsed, and its scheme's :class:`OutputKind`; ConfigError as the module docstring says."""
-    parsed = parse_url(url, "output", output_forms())
+    parsed = parse_url(url, "output", _schemes())
     return parsed, output_module(parsed.scheme).KIND
 
 
 def open_output(url: str, *, device: Device, fs_hz: int) -> Output:
     """Open the output ``url`` names offline, for ``device`` at ``fs_hz`` (Hz); errors as the module docstring
     says (the messages list the offline forms only: they are what may be opened here)."""
-    forms = output_forms()
-    offline = {scheme: scheme_forms for scheme, scheme_forms in forms.items()
-               if output_module(scheme).KIND.can(Capability.OFFLINE)}
-    scheme, separator, _ = url.partition("://")
-    if separator and scheme in forms and scheme not in offline:
-        every_offline = [form for scheme_forms in offline.values() for form in scheme_forms]
-        raise Url(url, "output", scheme, "").fail(
-            f"{scheme}:// plays in real time only (tpad-rt play or a Renderer), not offline", every_offline)
+    parsed = parse_url(url, "output", {**_schemes(), **_schemes(offline=True)})
+    offline = _schemes(offline=True)
+    if not output_module(parsed.scheme).KIND.can(Capability.OFFLINE):
+        every_offline = [form for forms in offline.values() for form in forms]
+        raise parsed.fail(f"{parsed.scheme}:// plays in real time only (tpad-rt play or a Renderer), not offline",
+                          every_offline)
     parsed = parse_url(url, "output", offline)
     return output_module(parsed.scheme).open_url(parsed, device=device, fs_hz=fs_hz)
 
 
-__all__ = ["Capability", "Consumes", "Output", "OutputKind", "open_output", "output_forms", "output_kind",
+def open_paced(url: Url, *, device: Device, fs_hz: int) -> Output:
+    """Open the output of ``url`` (parsed) for the paced driver, offline or not (ConfigError, BackendError as
+    its ``open_url`` says)."""
+    return output_module(url.scheme).open_url(url, device=device, fs_hz=fs_hz)
+
+
+__all__ = ["Capability", "Consumes", "Output", "OutputKind", "open_output", "open_paced", "output_forms", "output_kind",
            "output_module", "register_output", "unregister_output"]

@@ -16,6 +16,7 @@ speed and force to say what friction the finger would feel.
 
 from __future__ import annotations
 
+import re
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -27,6 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.drive import Consumes
+from tpad_rt.errors import ConfigError
 
 
 class Capability(Flag):
@@ -48,6 +50,15 @@ class OutputKind:
     consumes: Consumes
     driver: str
     capabilities: Capability = Capability.NONE
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.consumes, Consumes):
+            raise ConfigError(f"OutputKind: consumes: must be Consumes.DAC or Consumes.ENVELOPE, got {self.consumes!r}")
+        if not (isinstance(self.driver, str) and re.fullmatch(r"[A-Za-z_][\w.]*:[A-Za-z_]\w*", self.driver)):
+            raise ConfigError(f"OutputKind: driver: must name a driver class as 'module:Class' (text, not the class), "
+                              f"got {self.driver!r}")
+        if not isinstance(self.capabilities, Capability):
+            raise ConfigError(f"OutputKind: capabilities: must be Capability flags, got {self.capabilities!r}")
 
     def can(self, capability: Capability) -> bool:
         """Whether the output has every flag of ``capability``."""
