@@ -5,7 +5,6 @@ from __future__ import annotations
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -63,20 +62,28 @@ def test_missing_portaudio_names_the_package() -> None:
 
 
 def test_sim_output_renders_in_a_paced_thread(tmp_path: Path) -> None:
+    """A Renderer on sim://: the rows carry what the simulated plate measured of every block (read once each),
+    and the recording ends in the stop's ramp to 0. It waits on the stream, not on the wall clock."""
     path = tmp_path / "sim.npz"
     renderer = Renderer(output="sim://", texture=GRATING)
     renderer.record(path)
+    chunks = []
     with renderer:
         start_s = renderer.now_s()
         for k in range(150):
             renderer.push_finger(10.0 + 0.1 * k, 20.0, t=start_s + k * 0.002)
-        deadline = time.monotonic() + 60  # the first block may wait for the simulator's kernels to compile
-        while renderer.stats()["frames"] < (start_s + 0.35) * renderer.rate_hz and time.monotonic() < deadline:
-            time.sleep(0.01)
-        telemetry = renderer.telemetry()
+        for rows in renderer.iter_telemetry(period_s=0.01):
+            chunks.append(rows)
+            if rows["t"][-1] >= start_s + 0.35:
+                break
+    chunks.append(renderer.telemetry())  # the rest, the stop's ramp included
+    telemetry = {name: np.concatenate([chunk[name] for chunk in chunks]) for name in chunks[0]}
     stats = renderer.stats()
-    assert stats["callbacks"] == stats["blocks"] > 0
+    assert stats["callbacks"] == stats["blocks"] == len(telemetry["t"]) > 0
+    assert np.all(np.diff(telemetry["t"]) > 0)
     assert telemetry["voltage_v"].max() > 1.0
+    assert np.all(np.isfinite(telemetry["achieved_mu"])) and np.all(np.isfinite(telemetry["plate_amplitude_um"]))
+    assert telemetry["plate_amplitude_um"].max() > 0.1 and telemetry["achieved_mu"].min() < 0.9  # the plate moved
     recording = read_recording(path)
     assert len(recording.drive) >= (len(recording.blocks["t"]) - 1) * renderer.block_frames
     assert np.all(recording.drive[-renderer.block_frames:] == 0.0)  # stopped with a ramp to 0
@@ -184,17 +191,19 @@ def test_the_package_offers_the_renderer_and_imports_it_only_when_asked() -> Non
 
 
 def test_telemetry_can_be_iterated_while_it_runs_until_it_stops() -> None:
-    renderer = Renderer(output="null://", texture=Path(__file__).resolve().parents[1] / "textures" / "grating.yaml")
+    """Stopped from the loop after three periods' rows: iteration yields what came after, then ends; every row
+    once, in order (on sim://, each with the plate's measurement)."""
+    renderer = Renderer(output="sim://", texture=GRATING)
     with pytest.raises(RuntimeError, match="not running"):
         next(renderer.iter_telemetry())
     renderer.start()
-    stopper = threading.Timer(0.3, renderer.stop)
-    stopper.start()
     chunks = []
     for rows in renderer.iter_telemetry(period_s=0.02):
         renderer.push_finger(30.0, 20.0)
         chunks.append(rows)
-    stopper.join()
+        if len(chunks) == 3:
+            renderer.stop()
     t = np.concatenate([rows["t"] for rows in chunks])
-    assert len(chunks) > 2 and np.all(np.diff(t) > 0)
+    assert len(chunks) >= 3 and np.all(np.diff(t) > 0)
     assert len(t) == renderer.stats()["blocks"]  # every row, once
+    assert all(np.isfinite(rows["achieved_mu"]).all() for rows in chunks)

@@ -47,13 +47,23 @@ def test_without_sound_card_or_display_it_plays_a_swipe_on_the_simulated_plate()
     assert mean_error < 0.01  # the simulated plate follows the texture under the finger (render: 0.0024)
     judged = int(friction[0].split(" over ")[1].split(" touching")[0])
     callbacks = int(lines[1].split(": ")[1].split(" callbacks")[0])
-    # It played the second (a stall skips ahead and counts an underflow: a busy machine can cost a few blocks).
-    assert callbacks >= 0.8 * 192000 / 64, lines[1]
-    assert 0.9 * callbacks <= judged <= callbacks  # every block is judged (the finger touches throughout)
+    # Every block the finger touched is judged, from what the plate measured of it (the telemetry's columns): all
+    # but those before the swipe's first sample landed. How many blocks a second plays is the paced driver's,
+    # checked on a virtual clock (tests/test_paced.py), not on this host's.
+    assert 0.5 * callbacks <= judged <= callbacks, (lines[1], friction[0])
     # The plate follows the texture but where a touch starts: the drive fades in over ramp_ms there (how many blocks
     # that covers depends on where the texture is when the first sample lands, so on the host's timing).
     departed = int(friction[0].split("departures: ")[1].split(" blocks")[0])
     assert departed == 0 or f"; {departed} of them in a touch's start ramp" in friction[0], friction[0]
+
+
+def test_an_output_that_measures_no_plate_gets_no_friction_judged() -> None:
+    """play judges friction where the run's telemetry holds the plate's measurements, whatever the URL: none
+    on null://."""
+    done = _play("textures/grating.yaml", "--duration", "0.3", "--output", "null://")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[1].startswith("played ")
+    assert "friction" not in done.stdout
 
 
 def test_blocks_the_plate_cannot_follow_are_counted_as_departures() -> None:

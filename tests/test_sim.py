@@ -157,3 +157,19 @@ def test_achieved_friction_is_the_forward_model_at_the_plate_amplitude(speed_mm_
     expected = relative_friction(amplitude_m, F0_HZ, used_mm_s * 1e-3, DEVICE.mu0, DEVICE.poisson, DEVICE.psi_star)
     assert measured["achieved_mu"][-1] == pytest.approx(float(expected), rel=1e-3)
     assert len(measured["achieved_mu"]) == len(drive) // 64
+
+
+def test_measurements_are_kept_until_taken() -> None:
+    """A SimOutput keeps what it measured until taken (the paced driver takes after every step): the names are
+    there with no block, a take hands over and forgets."""
+    output = SimOutput(DEVICE, 192000)
+    assert {name: len(values) for name, values in output.measurements().items()} == {
+        "plate_amplitude_um": 0, "achieved_mu": 0}
+    block = {"force_n": 0.5, "speed_mm_s": 100.0, "x_mm": 30.0}
+    for _ in range(3):
+        output.write(np.full(64, 0.5, dtype=np.float32), block)
+    taken = output.take_measurements()
+    assert len(taken["achieved_mu"]) == len(taken["plate_amplitude_um"]) == 3
+    assert output.latest() == {"plate_amplitude_um": taken["plate_amplitude_um"][-1],
+                               "achieved_mu": taken["achieved_mu"][-1]}
+    assert [len(values) for values in output.measurements().values()] == [0, 0]

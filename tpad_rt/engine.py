@@ -146,7 +146,6 @@ class Renderer:
         self._ended: threading.Event = threading.Event()  # set by stop() and by an error in the watcher
         self._error: BaseException | None = None
         self._reported: BaseException | None = None  # the driver's failure the watcher raised
-        self._push_ns: np.ndarray = np.zeros(self.options.finger_ring, dtype=np.int64)
         self._producer: threading.Lock = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
         self._texture: CompiledTexture = compiled
 
@@ -377,7 +376,7 @@ class Renderer:
             pushed_ns = monotonic_ns()
             index = int(self._pipeline.arrays.finger_count[0])
             self._pipeline.push_finger(t_s, x_mm, y_mm, force_n, down)
-            self._push_ns[index % len(self._push_ns)] = pushed_ns
+            self._log.note_push(index, pushed_ns)
 
     # --- measurements --------------------------------------------------------------
 
@@ -420,9 +419,7 @@ class Renderer:
         result["callback_load_p99"] = result["compute_us_p99"] * 1e-6 * self.rate_hz / self.block_frames
         dac_delay_ms = blocks[:, tab.BLOCK_DAC_DELAY_NS] * 1e-6
         result["dac_delay_ms"] = float(np.median(dac_delay_ms)) if len(dac_delay_ms) else math.nan
-        latency_ms = self._latencies_ms(blocks)
-        for name, q in (("p50", 50), ("p99", 99)):
-            result[f"latency_ms_{name}"] = float(np.percentile(latency_ms, q)) if len(latency_ms) else math.nan
+        result.update(self._log.latency_ms(blocks))
         totals = self._log.totals()
         cfg = self._pipeline.arrays.cfg
         result.update(blocks=totals["blocks"], voltage_saturated=totals["voltage_saturated"],
@@ -433,19 +430,6 @@ class Renderer:
                       over_cap_blocks=self._pipeline.over_cap_blocks)
         result.update(self._pipeline.faults())
         return result
-
-    def _latencies_ms(self, blocks: np.ndarray) -> np.ndarray:
-        """Push-to-DAC latency (ms) of each finger sample first read by one of ``blocks`` (oldest first)."""
-        counts = blocks[:, tab.BLOCK_FINGER_COUNT]
-        if len(counts) < 2:
-            return np.zeros(0)
-        first_seen = np.flatnonzero(np.diff(counts) > 0) + 1
-        new = counts[first_seen] - counts[first_seen - 1]
-        samples = np.repeat(counts[first_seen], new) - (np.arange(new.sum()) - np.repeat(np.cumsum(new) - new, new)) - 1
-        out_ns = np.repeat(blocks[first_seen, tab.BLOCK_ENTRY_NS] + blocks[first_seen, tab.BLOCK_DAC_DELAY_NS], new)
-        pushed = int(self._pipeline.arrays.finger_count[0])
-        kept = samples >= pushed - len(self._push_ns)  # their push times are still in the ring
-        return (out_ns[kept] - self._push_ns[samples[kept] % len(self._push_ns)]) * 1e-6
 
     def telemetry(self) -> dict[str, np.ndarray]:
         """The telemetry rows since the last call (at most tpad_rt.telemetry.MAX_PENDING_ROWS, the newest), by TEL_NAMES column."""

@@ -1,36 +1,68 @@
-"""The renderer's telemetry: rows drained from the kernel's ring, totals, and the recording of a run.
+"""The renderer's telemetry: rows drained from the kernel's ring, what the output measured per block, totals,
+push-to-DAC latency, and the recording of a run.
 
 API map
 -------
 TelemetryLog(pipeline, rate_hz)
     ``drain(table)`` (the watcher, and readers, call it), ``take()`` (the rows since the
-    last take, by TEL_NAMES column), ``totals()``, ``record(path)``, ``recording``,
-    ``failure`` (a recording's limit error), ``write_recording(metadata)``
-joined(chunks) -> dict[str, ndarray]
+    last take, by TEL_NAMES column, and the output's measured columns), ``totals()``,
+    ``record(path)``, ``recording``, ``failure`` (a recording's limit error),
+    ``write_recording(metadata)``;
+    measurements: ``begin_measurements(names)``, ``add_measurements(t_s, columns)``,
+    ``end_measurements()``, ``measured_names``;
+    latency: ``note_push(index, pushed_ns)``, ``latency_ms(blocks)``
+log_of(pipeline) -> TelemetryLog | None
+    the log draining ``pipeline``'s telemetry (there is at most one: draining takes the rows)
+joined(chunks, names=TEL_NAMES) -> dict[str, ndarray]
     telemetry chunks concatenated column by column
 
-One lock orders the drains: any thread may call any method.
+An output that measures something per block (``sim://``: the simulated plate's amplitude
+and friction) has its driver hand the measurements here, each block's with the block's
+time ``t``: :meth:`TelemetryLog.take` gives them as more columns of the same rows, and
+holds a row back until its measurement came (or the measuring ended), so a reader sees
+every block once, measured. Everything kept between takes is bounded (MAX_PENDING_ROWS
+rows each), whoever reads or not.
+
+One lock orders the drains: any thread may call any method (:meth:`TelemetryLog.note_push`
+takes none: one producer at a time, the Renderer's).
 """
 
 from __future__ import annotations
 
+import math
 import threading
+import weakref
 from collections import deque
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from tpad_rt.errors import ConfigError, TpadError
 from tpad_rt.files import check_writable_target
+from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES
 from tpad_rt.pipeline import Pipeline
 from tpad_rt.realtime import CallbackTable
 from tpad_rt.recording import Recording, write_recording
 
-#: Telemetry rows kept for :meth:`TelemetryLog.take` between calls (the oldest go first).
+#: Telemetry rows kept for :meth:`TelemetryLog.take` between calls (the oldest go first); as many rows wait at
+#: most for their measurements, and as many measured blocks for their rows.
 MAX_PENDING_ROWS = 2**18
+
+#: The log of each pipeline (see :func:`log_of`), held weakly both ways: the log holds its pipeline, and neither
+#: outlives its owner (the Renderer).
+_LOGS: weakref.WeakKeyDictionary[Pipeline, weakref.ref[TelemetryLog]] = weakref.WeakKeyDictionary()
+
+
+def log_of(pipeline: Pipeline) -> TelemetryLog | None:
+    """The log that drains ``pipeline``'s telemetry (the newest made for it), None if none was made (or it is
+    gone)."""
+    log = _LOGS.get(pipeline)
+    return None if log is None else log()
 
 
 class TelemetryLog:
@@ -42,6 +74,8 @@ class TelemetryLog:
         self._lock = threading.Lock()
         self._pending: deque[dict[str, np.ndarray]] = deque()
         self._pending_rows = 0
+        self._measured = _MeasuredBlocks()
+        self._push_ns = np.zeros(len(pipeline.arrays.finger), dtype=np.int64)  # by finger ring row
         self._totals: dict[str, Any] = {"blocks": 0, "voltage_saturated": 0, "power_saturated": 0,
                                         "fault_blocks": 0, "energy_w": 0.0, "peak_w": 0.0, "plate_peak_w": 0.0}
         self._record_path: Path | None = None
@@ -52,6 +86,7 @@ class TelemetryLog:
         self._truncated: str | None = None  # why the recording ended early, if it did
         #: The recording's limit error (see :meth:`drain`), or None.
         self.failure: TpadError | None = None
+        _LOGS[pipeline] = weakref.ref(self)
 
     def drain(self, table: CallbackTable) -> None:
         """Move new telemetry rows (and drive samples, when recording) out of ``table``'s rings.
@@ -75,12 +110,16 @@ class TelemetryLog:
             totals["energy_w"] += float(rows["power_w"].sum())
             totals["peak_w"] = max(totals["peak_w"], float(rows["power_w"].max()))
             totals["plate_peak_w"] = max(totals["plate_peak_w"], float(rows["plate_w"].max()))
-            self._pending.append(rows)
-            self._pending_rows += count
-            while self._pending_rows > MAX_PENDING_ROWS:
-                self._pending_rows -= len(self._pending.popleft()["t"])
+            self._keep(self._measured.rows_in(rows))
             if self._record_path is not None:
                 self._record(rows, table, frames)
+
+    def _keep(self, chunks: list[dict[str, np.ndarray]]) -> None:
+        """Keep ``chunks`` (rows ready to read) for :meth:`take`, at most MAX_PENDING_ROWS (under the lock)."""
+        for chunk in chunks:
+            self._pending.append(chunk)
+            self._pending_rows += len(chunk["t"])
+        self._pending_rows = _keep_newest(self._pending, self._pending_rows)
 
     def _record(self, rows: dict[str, np.ndarray], table: CallbackTable, frames: int) -> None:
         """Keep ``rows`` and the drive samples up to ``frames`` for the recording (under the lock). Past a limit
@@ -106,10 +145,69 @@ class TelemetryLog:
         self._drive_from = max(self._drive_from, frames)
 
     def take(self) -> dict[str, np.ndarray]:
-        """The rows drained since the last take (at most MAX_PENDING_ROWS, the newest), by TEL_NAMES column."""
+        """The rows drained since the last take (at most MAX_PENDING_ROWS, the newest), by TEL_NAMES column and
+        :attr:`measured_names` column (NaN for a block the output did not measure); a row whose measurement has
+        not come yet stays for the next take."""
         with self._lock:
             chunks, self._pending, self._pending_rows = list(self._pending), deque(), 0
-        return joined(chunks)
+            names = (*TEL_NAMES, *self._measured.names)
+        return joined(chunks, names)
+
+    # --- what the output measured per block ------------------------------------------
+
+    @property
+    def measured_names(self) -> tuple[str, ...]:
+        """The columns the output measures per block (as :meth:`begin_measurements` named them; none before)."""
+        return self._measured.names
+
+    def begin_measurements(self, names: Sequence[str]) -> None:
+        """From now on an output measures ``names`` per block (:meth:`add_measurements`): rows wait for theirs.
+        Raises ValueError for no names, a name of the telemetry's, or other names than a previous run's (a
+        reader's columns stay the same)."""
+        with self._lock:
+            self._measured.begin(tuple(names))
+
+    def add_measurements(self, t_s: npt.NDArray[np.float64], columns: Mapping[str, npt.NDArray[np.float64]]) -> None:
+        """The measurements of the blocks starting at stream times ``t_s`` (s, each its telemetry row's ``t``,
+        oldest first): ``columns`` by :attr:`measured_names` name, as long as ``t_s``. Raises ValueError for
+        columns of other names or lengths, or before :meth:`begin_measurements`."""
+        with self._lock:
+            self._measured.add(np.asarray(t_s, dtype=np.float64), columns)
+            self._keep(self._measured.release())
+
+    def end_measurements(self) -> None:
+        """The output measures no more blocks (it closed or failed): rows stop waiting (a row drained from now
+        on without a measurement has NaN in the measured columns)."""
+        with self._lock:
+            self._measured.end()
+            self._keep(self._measured.release())
+
+    # --- latency ---------------------------------------------------------------------
+
+    def note_push(self, index: int, pushed_ns: int) -> None:
+        """Finger sample number ``index`` (the pipeline's count before it) was pushed at CLOCK_MONOTONIC
+        ``pushed_ns`` (ns). Takes no lock: one producer at a time."""
+        self._push_ns[index % len(self._push_ns)] = pushed_ns
+
+    def latency_ms(self, blocks: np.ndarray) -> dict[str, float]:
+        """``latency_ms_p50``, ``latency_ms_p99`` (ms; NaN without any): from the push of each finger sample to
+        the DAC time of the first of ``blocks`` (block records, oldest first: CallbackTable.recent_blocks) that
+        read it, over the samples whose push time is still kept (the newest ``finger_ring``)."""
+        latency = self._latencies_ms(blocks)
+        return {f"latency_ms_p{q}": float(np.percentile(latency, q)) if len(latency) else math.nan for q in (50, 99)}
+
+    def _latencies_ms(self, blocks: np.ndarray) -> np.ndarray:
+        """Push-to-DAC latency (ms) of each finger sample first read by one of ``blocks`` (oldest first)."""
+        counts = blocks[:, tab.BLOCK_FINGER_COUNT]
+        if len(counts) < 2:
+            return np.zeros(0)
+        first_seen = np.flatnonzero(np.diff(counts) > 0) + 1
+        new = counts[first_seen] - counts[first_seen - 1]
+        samples = np.repeat(counts[first_seen], new) - (np.arange(new.sum()) - np.repeat(np.cumsum(new) - new, new)) - 1
+        out_ns = np.repeat(blocks[first_seen, tab.BLOCK_ENTRY_NS] + blocks[first_seen, tab.BLOCK_DAC_DELAY_NS], new)
+        pushed = int(self._pipeline.arrays.finger_count[0])
+        kept = samples >= pushed - len(self._push_ns)  # their push times are still in the ring
+        return (out_ns[kept] - self._push_ns[samples[kept] % len(self._push_ns)]) * 1e-6
 
     def totals(self) -> dict[str, Any]:
         """``blocks``, ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (counts), ``energy_w`` (the
@@ -149,8 +247,93 @@ class TelemetryLog:
         write_recording(path, Recording(self.rate_hz, drive, joined(recorded), {**metadata, "truncated": truncated}))
 
 
-def joined(chunks: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    """Telemetry chunks concatenated column by column (empty columns when there are none)."""
-    if not chunks:
-        return {name: np.zeros(0, dtype=np.int64 if name == "saturated" else np.float64) for name in TEL_NAMES}
-    return {name: np.concatenate([chunk[name] for chunk in chunks]) for name in TEL_NAMES}
+def joined(chunks: list[dict[str, np.ndarray]], names: Sequence[str] = TEL_NAMES) -> dict[str, np.ndarray]:
+    """Telemetry chunks concatenated column by column, for ``names`` (empty columns when there are no chunks; NaN
+    for a chunk without one of the names)."""
+    return {name: np.concatenate([np.zeros(0, dtype=np.int64 if name == "saturated" else np.float64)]
+                                 + [chunk.get(name, np.full(len(chunk["t"]), math.nan)) for chunk in chunks])
+            for name in names}
+
+
+class _MeasuredBlocks:
+    """Telemetry rows joined with what the output measured of the same blocks, by the block's time ``t`` (s).
+
+    The watcher may drain a block's row before its driver hands in the block's measurement:
+    while measuring (``live``) rows wait until a measurement as new as they are came. Not
+    thread-safe (the log's lock guards it); each queue holds at most MAX_PENDING_ROWS rows.
+    """
+
+    def __init__(self) -> None:
+        self.names: tuple[str, ...] = ()
+        self.live = False
+        self._waiting: deque[dict[str, np.ndarray]] = deque()  # rows, oldest first
+        self._measured: deque[dict[str, np.ndarray]] = deque()  # measured blocks ("t" and names), oldest first
+        self._measured_rows = 0
+
+    def begin(self, names: tuple[str, ...]) -> None:
+        if not names or set(names) & set(TEL_NAMES) or len(set(names)) != len(names):
+            raise ValueError(f"measured columns: need distinct names that are not the telemetry's, got {names}")
+        if self.names and names != self.names:
+            raise ValueError(f"measured columns: {names}, but the log's readers have {self.names}")
+        self.names, self.live = names, True
+
+    def end(self) -> None:
+        self.live = False
+
+    def add(self, t_s: np.ndarray, columns: Mapping[str, npt.NDArray[np.float64]]) -> None:
+        if not self.names:
+            raise ValueError("add_measurements: begin_measurements() first")
+        if set(columns) != set(self.names) or any(len(columns[name]) != len(t_s) for name in self.names):
+            raise ValueError(f"add_measurements: need {self.names} for {len(t_s)} blocks, got "
+                             f"{ {name: len(column) for name, column in columns.items()} }")
+        if len(t_s):
+            self._measured.append({"t": t_s, **{name: np.asarray(columns[name], dtype=np.float64)
+                                                for name in self.names}})
+            self._measured_rows = _keep_newest(self._measured, self._measured_rows + len(t_s))
+
+    def rows_in(self, rows: dict[str, np.ndarray]) -> list[dict[str, np.ndarray]]:
+        """Take drained ``rows``; the rows now ready to read (measured, or not waiting for a measurement)."""
+        if not self.names:
+            return [rows]
+        self._waiting.append(rows)
+        return self.release()
+
+    def release(self) -> list[dict[str, np.ndarray]]:
+        """The waiting rows that are ready, with their measured columns; drops measurements of rows gone by."""
+        if not self._waiting:
+            return []
+        rows = joined(list(self._waiting))
+        measured = joined(list(self._measured), ("t", *self.names))
+        ready = len(rows["t"])
+        if self.live:  # wait for a measurement as new as the row, but keep at most MAX_PENDING_ROWS waiting
+            newest_s = measured["t"][-1] if len(measured["t"]) else -math.inf
+            ready = max(int(np.searchsorted(rows["t"], newest_s, side="right")), ready - MAX_PENDING_ROWS)
+        self._waiting = deque([{name: column[ready:] for name, column in rows.items()}] if ready < len(rows["t"])
+                              else [])
+        if ready == 0:
+            return []
+        out = {name: column[:ready] for name, column in rows.items()}
+        at = np.minimum(np.searchsorted(measured["t"], out["t"]), max(len(measured["t"]) - 1, 0))
+        hit = measured["t"][at] == out["t"] if len(measured["t"]) else np.zeros(ready, dtype=bool)
+        for name in self.names:
+            out[name] = np.full(ready, math.nan)
+            out[name][hit] = measured[name][at[hit]]
+        left = measured["t"] > out["t"][-1]  # measurements of blocks not drained yet
+        self._measured = deque([{name: column[left] for name, column in measured.items()}] if left.any() else [])
+        self._measured_rows = int(np.count_nonzero(left))
+        return [out]
+
+
+def _keep_newest(chunks: deque[dict[str, np.ndarray]], rows: int) -> int:
+    """Drop the oldest rows of ``chunks`` (``rows`` in all, each chunk's ``"t"`` as long as its columns) past
+    MAX_PENDING_ROWS; the rows left."""
+    while rows > MAX_PENDING_ROWS:
+        oldest = len(chunks[0]["t"])
+        if oldest <= rows - MAX_PENDING_ROWS:
+            chunks.popleft()
+            rows -= oldest
+        else:
+            cut = rows - MAX_PENDING_ROWS
+            chunks[0] = {name: column[cut:] for name, column in chunks[0].items()}
+            rows -= cut
+    return rows

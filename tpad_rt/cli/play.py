@@ -5,12 +5,13 @@ device first, then the default output), else the simulated plate ``sim://``;
 ``--input auto`` picks ``mouse://`` when an X display answers, else endless
 back-and-forth swipes (:data:`AUTO_SWIPE`). The first line says both choices and why.
 A :class:`~tpad_rt.inputs.live.LiveFeed` feeds the input into the renderer; a status
-panel (finger, target friction and, on ``sim://``, the texture under the finger and
-the friction of a simulated plate driven by the drive samples, volts, power,
+panel (finger, target friction and, on an output that simulates the plate (``sim://``),
+the texture under the finger and the friction the simulated plate gave, volts, power,
 underflows, callback load, time) refreshes :data:`STATUS_HZ` times a second on a
-terminal (nothing on a pipe). On ``sim://`` every rendered block is judged: the plate,
-simulated over the drive block by block, against the texture under the finger at the
-block's middle; the panel and the summary count the blocks further than
+terminal (nothing on a pipe). When the run's telemetry holds the plate's measurements
+(:data:`PLATE_FRICTION`, which the output measured of every block it played) every
+block is judged: that friction against the texture under the finger at the block's
+middle; the panel and the summary count the blocks further than
 DEPARTURE_TOLERANCE_MU (as ``tpad-rt render`` does). Play
 ends at ``--duration``, when a finite input ends, or on Ctrl-C (exit status 0): the
 drive ramps to 0 (``Renderer.stop``), a summary follows, and ``--record`` writes the
@@ -59,7 +60,6 @@ from tpad_rt.kernel.render import render_block
 from tpad_rt.kernel.texture_eval import eval_texture_points
 from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
 from tpad_rt.outputs import audio
-from tpad_rt.outputs.sim import SimOutput
 
 if TYPE_CHECKING:
     from tpad_rt.engine import Renderer
@@ -68,8 +68,8 @@ if TYPE_CHECKING:
 AUTO_SWIPE = "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1"
 #: Status refreshes per second.
 STATUS_HZ = 5
-#: Drive (s) the status's simulated plate rings up over before the first block it judges (and after a gap).
-PROBE_WARMUP_S = 0.02
+#: The telemetry column of the friction a simulated plate gave each block (``sim://`` measures it).
+PLATE_FRICTION = "achieved_mu"
 
 
 @dataclass(frozen=True)
@@ -159,8 +159,6 @@ def run(args: argparse.Namespace) -> int:
                 renderer.record(args.record)
             announce_if_uncached(render_block, eval_texture_points)  # every argument checked: say it at once
             renderer.texture.evaluate(np.zeros(1), np.zeros(1))  # the status line's texture under the finger
-            if renderer.output_url.startswith("sim"):
-                SimOutput(device, renderer.rate_hz).warm(batch=True)  # the status line judges blocks with it
             renderer.start()
             compiling.close()
             with renderer, LiveFeed(source, _pusher(renderer, args.force), renderer.lift,
@@ -218,8 +216,8 @@ def _loop(session: Session, feed: LiveFeed, interrupted: threading.Event, durati
 @dataclass
 class Session:
     """A running play (from when the renderer and the feed run): the renderer, the last telemetry row, the
-    peak volts, and on sim:// the simulated plate's friction, the texture under the finger, and their
-    differences."""
+    peak volts, and where the telemetry holds it the simulated plate's friction, the texture under the finger,
+    and their differences."""
 
     renderer: Renderer
     console: Console
@@ -228,8 +226,6 @@ class Session:
     peak_v: float = 0.0
     achieved: float | None = None
     felt: float | None = None
-    plate: SimOutput | None = None  # the blocks' simulated plate, continuous while the drive ring holds them
-    plate_next: int = -1  # the sample it takes next
     judged_blocks: int = 0
     departed_blocks: int = 0
     ramp_departed_blocks: int = 0  # of departed_blocks, those in a touch's start ramp (start_ramps)
@@ -255,34 +251,18 @@ class Session:
         self.judge(self.take_telemetry())
 
     def judge(self, rows: dict[str, np.ndarray]) -> None:
-        """On ``sim://``: simulate the plate over the drive of the blocks of ``rows`` (telemetry, oldest first)
-        and judge each against the texture under the finger at its middle (felt.departures: touching blocks,
-        the texture clamped to the floor the kernel renders). A gap in the blocks (the drive ring overwritten
-        while the status stalled) restarts the plate after PROBE_WARMUP_S of the drive before it."""
-        renderer, table = self.renderer, self.renderer.callback_table
-        if not renderer.output_url.startswith("sim") or table is None or not len(rows["t"]):
+        """When ``rows`` (telemetry, oldest first) hold the friction the simulated plate gave each block
+        (:data:`PLATE_FRICTION`), judge each block against the texture under the finger at its middle
+        (felt.departures: touching, measured blocks, the texture clamped to the floor the kernel renders)."""
+        if PLATE_FRICTION not in rows or not len(rows["t"]):
             return
-        rate_hz, block, ring = renderer.rate_hz, renderer.block_frames, len(table.drive)
-        starts = np.rint(rows["t"] * rate_hz).astype(np.int64)
-        first, end = int(starts[0]), int(starts[-1]) + block
-        if end > table.next_sample or first < table.next_sample - ring:
-            self.plate = None  # not all of it in the ring: judge the next blocks afresh
-            return
-        if self.plate is None or first != self.plate_next:
-            self.plate = SimOutput(renderer.device, rate_hz)
-            ring_up = max(first - round(PROBE_WARMUP_S * rate_hz), table.next_sample - ring, 0)
-            if ring_up < first:
-                self.plate.write(table.drive[np.arange(ring_up, first) % ring], {name: float(column[0])
-                                                                               for name, column in rows.items()})
-            self.plate.take_measurements()
-        self.plate.write_blocks(table.drive[np.arange(first, end) % ring], block, rows)
-        self.plate_next = end
-        achieved = self.plate.take_measurements()["achieved_mu"]
-        middle_s = (starts + 0.5 * block) / rate_hz
+        renderer = self.renderer
+        achieved = rows[PLATE_FRICTION]
+        middle_s = rows["t"] + 0.5 * renderer.block_frames / renderer.rate_hz
         felt, known = texture_at_finger(renderer.recent_fingers(), renderer.texture, middle_s, renderer.texture_t0_s())
         felt = np.clip(felt, renderer.options.mu_floor, 1.0)
         touching = (rows["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0
-        judged = known & touching
+        judged = known & touching & np.isfinite(achieved)  # NaN: a block the output did not measure (it failed)
         errors = np.abs(felt - achieved)[judged]
         departed = departures(felt, achieved, judged)
         ramping, self.touch_start_s = start_ramps(rows["t"], touching, self.ramp_window_s(), self.touch_start_s,
@@ -294,7 +274,7 @@ class Session:
         if len(errors):
             self.error_sum += float(errors.sum())
             self.error_max = max(self.error_max, float(errors.max()))
-        self.achieved = float(achieved[-1])
+        self.achieved = float(achieved[-1]) if np.isfinite(achieved[-1]) else None
         self.felt = float(felt[-1]) if known[-1] else None
 
     def ramp_window_s(self) -> float:
@@ -347,7 +327,7 @@ class Session:
         return f"; the output stalled for {missing_s:.2f} s"
 
     def summary(self, interrupted: bool) -> list[str]:
-        """The end-of-play summary from the renderer's stats (and the friction samples, on sim://)."""
+        """The end-of-play summary from the renderer's stats (and the judged friction, where measured)."""
         stats = self.renderer.stats()
         blocks = max(stats["blocks"], 1)
         amplifier = stats.get("amplifier")

@@ -1,17 +1,25 @@
 """The driver of paced outputs (``sim://``, ``wav://``, ``null://``): a Python thread runs the callback.
 
 The thread calls the same native render callback as PortAudio does, no faster than
-real time, and hands each block to the output's :meth:`tpad_rt.outputs.Output.write`
-with its telemetry row. It holds the GIL: a simulator or a recorder, not a real-time
-path (docs/realtime.md).
+real time on the driver's clock, and hands each block to the output's
+:meth:`tpad_rt.outputs.Output.write` with its telemetry row. It holds the GIL: a
+simulator or a recorder, not a real-time path (docs/realtime.md).
+
+The pacing is a step, :meth:`PacedRun.pace_once`: given the time, render the blocks due
+by then (skipping ahead past a stall) and say when the next falls due. The thread only
+reads the clock, calls the step and sleeps, so tests drive the step on a
+:class:`tpad_rt.clock.VirtualClock` with no thread and no sleep. What the output measures
+per block (``sim://``: the plate's amplitude and friction) goes to the pipeline's
+telemetry log after every step (:func:`tpad_rt.telemetry.log_of`); the output keeps none.
 """
 
 from __future__ import annotations
 
 import threading
-import time
+from typing import Protocol, runtime_checkable
 
 import numpy as np
+import numpy.typing as npt
 
 from tpad_rt.clock import Clock
 from tpad_rt.device import Device
@@ -20,11 +28,88 @@ from tpad_rt.kernel import table as tab
 from tpad_rt.outputs import Output, open_paced
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.realtime import CallbackTable
+from tpad_rt.telemetry import TelemetryLog, log_of
 from tpad_rt.urls import Url
 
 #: An output further behind real time than this (s) skips ahead instead of catching up in a burst, and counts
 #: an underflow.
 PACED_MAX_BEHIND_S = 0.1
+#: The thread sleeps at most this long (ns) between two steps: a stop is seen within it.
+PACED_POLL_NS = 5_000_000
+
+
+@runtime_checkable
+class TakesMeasurements(Protocol):
+    """An output that hands over its per-block measurements and forgets them (``sim://``)."""
+
+    def take_measurements(self) -> dict[str, npt.NDArray[np.float64]]:
+        """The per-block measurements since the last take, by name; then forget them."""
+
+
+class PacedRun:
+    """One run of a paced output: block ``k`` of ``table``'s callback falls due at ``started_ns + k`` block
+    periods (ns on the driver's clock); :meth:`pace_once` renders the blocks due and hands them to ``output``
+    with their telemetry rows, and their measurements to ``log`` (None: they are dropped)."""
+
+    def __init__(self, table: CallbackTable, output: Output, pipeline: Pipeline, *, rate_hz: int, block_frames: int,
+                 started_ns: int, log: TelemetryLog | None):
+        self.table = table
+        self.output = output
+        self.pipeline = pipeline
+        self.rate_hz = rate_hz
+        self.block_frames = block_frames
+        self.started_ns = started_ns
+        #: Block periods accounted for: rendered, or skipped after a stall.
+        self.blocks_due = 0
+        #: The most blocks one step renders to catch up; more behind is a stall: skip ahead.
+        self.most_behind = max(1, round(PACED_MAX_BEHIND_S * rate_hz / block_frames))
+        self._block = np.zeros(block_frames, dtype=np.float32)
+        self._log = log
+        self._measuring: TakesMeasurements | None = None  # the output, when it measures blocks
+        if isinstance(output, TakesMeasurements):
+            names = tuple(output.take_measurements())  # what it measures (and nothing from before this run)
+            if names:
+                self._measuring = output
+                if log is not None:
+                    log.begin_measurements(names)
+
+    def due_at_ns(self, block: int) -> int:
+        """When block number ``block`` (0: the first) falls due (ns on the driver's clock)."""
+        return self.started_ns - (-block * self.block_frames * 1_000_000_000 // self.rate_hz)
+
+    def pace_once(self, now_ns: int) -> int:
+        """Render and hand to the output every block due by ``now_ns`` (ns); when more than
+        PACED_MAX_BEHIND_S are due (a stall), count an underflow and render only the newest. Returns when the
+        next block falls due (ns). Raises what the output's write raises (a full disk...), the blocks written
+        before it measured."""
+        due = max(0, (now_ns - self.started_ns) * self.rate_hz // (self.block_frames * 1_000_000_000) + 1)
+        if due - self.blocks_due > self.most_behind:
+            self.table.stats[tab.STAT_UNDERFLOWS] += 1
+            self.blocks_due = due - 1
+        written_t_s: list[float] = []
+        try:
+            while self.blocks_due < due:
+                self.table.call(self._block)
+                row = self.pipeline.last_telemetry_row()
+                self.output.write(self._block, row)
+                written_t_s.append(row["t"])
+                self.blocks_due += 1
+        finally:
+            self._hand_measurements(written_t_s)
+        return self.due_at_ns(self.blocks_due)
+
+    def _hand_measurements(self, t_s: list[float]) -> None:
+        """Move what the output measured of the blocks starting at ``t_s`` (s) to the log."""
+        if self._measuring is None:
+            return
+        measured = self._measuring.take_measurements()
+        if self._log is not None and t_s:
+            self._log.add_measurements(np.array(t_s), measured)
+
+    def finish(self) -> None:
+        """The run ended: its rows stop waiting for measurements."""
+        if self._measuring is not None and self._log is not None:
+            self._log.end_measurements()
 
 
 class PacedDriver(Driver):
@@ -46,41 +131,32 @@ class PacedDriver(Driver):
         self._output.warm()  # compiled now, not in the pacing thread while the clock runs
         self._pipeline = pipeline
 
+    def run(self, table: CallbackTable) -> PacedRun:
+        """The run's pacing from now on :attr:`clock` (block 0 due now), handing blocks to the opened output."""
+        assert self._output is not None and self._pipeline is not None, "open() first"
+        return PacedRun(table, self._output, self._pipeline, rate_hz=self.rate_hz, block_frames=self.block_frames,
+                        started_ns=self.clock.now_ns(), log=log_of(self._pipeline))
+
     def start(self, table: CallbackTable) -> None:
         """Start the pacing thread."""
-        assert self._output is not None, "open() first"
+        run = self.run(table)
         self._halt.clear()
         self._error = None
-        thread = threading.Thread(target=self._run, args=(table, self._output), name="tpad-rt paced output",
-                                  daemon=True)
+        thread = threading.Thread(target=self._loop, args=(run,), name="tpad-rt paced output", daemon=True)
         thread.start()
         self._thread = thread  # only once it runs: close() joins it
 
-    def _run(self, table: CallbackTable, output: Output) -> None:
+    def _loop(self, run: PacedRun) -> None:
+        """Until halted: read the clock, step, sleep until the next block is due (at most PACED_POLL_NS)."""
         try:
-            with output:
-                self._pace(table, output)
+            with run.output:
+                while not self._halt.is_set():
+                    now_ns = self.clock.now_ns()
+                    self.clock.sleep_until_ns(min(run.pace_once(now_ns), now_ns + PACED_POLL_NS))
         except BaseException as error:  # noqa: BLE001 - reported by poll()
             self._error = error
-
-    def _pace(self, table: CallbackTable, output: Output) -> None:
-        """Call the render callback one block at a time, no faster than real time; hand blocks to ``output``."""
-        pipeline = self._pipeline
-        assert pipeline is not None
-        block = np.zeros(self.block_frames, dtype=np.float32)
-        most_behind = max(1, round(PACED_MAX_BEHIND_S * self.rate_hz / self.block_frames))
-        started = time.monotonic()
-        rendered = 0
-        while not self._halt.is_set():
-            due = int((time.monotonic() - started) * self.rate_hz / self.block_frames) + 1
-            if due - rendered > most_behind:  # stalled (e.g. compiling): skip ahead, count an underflow
-                table.stats[tab.STAT_UNDERFLOWS] += 1
-                rendered = due - 1
-            for _ in range(due - rendered):
-                table.call(block)
-                output.write(block, pipeline.last_telemetry_row())
-            rendered = max(rendered, due)
-            time.sleep(min(0.005, self.block_frames / self.rate_hz))
+        finally:
+            run.finish()
 
     def poll(self, table: CallbackTable) -> BaseException | None:
         """The error the output or the thread met (a full disk...), or None."""

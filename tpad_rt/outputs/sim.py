@@ -12,6 +12,10 @@ relative friction the finger would feel, ``achieved_mu``: the forward friction m
 to the device's speed floor when slower (or unknown). The amplitude under the finger is
 the antinode's times :meth:`Device.mode_gain` at the block's ``x_mm`` on a device with a
 mode shape (the standing wave averaged over the contact patch), the antinode's without.
+
+It keeps the measurements until taken (:meth:`SimOutput.take_measurements`): an offline
+render reads them all at its end, the paced driver moves them into the run's telemetry
+log after every step (:mod:`tpad_rt.drivers.paced`), where ``tpad-rt play`` reads them.
 """
 
 from __future__ import annotations
@@ -83,6 +87,7 @@ class SimOutput(Output):
         self._envelope_m = np.zeros(0)
         self._amplitude_um: list[float] = []
         self._achieved_mu: list[float] = []
+        self._latest: dict[str, float] = {}  # the last block's, taken or not
 
     def _coef(self, force_n: float) -> np.ndarray:
         """The resonator coefficients at contact force ``force_n`` (N, >= 0): recomputed when the force changes
@@ -124,9 +129,11 @@ class SimOutput(Output):
         speed_m_s = float(block["speed_mm_s"]) * 1e-3
         speed_m_s = max(speed_m_s, device.speed_floor_m_s) if math.isfinite(speed_m_s) else device.speed_floor_m_s
         under_finger_m = amplitude_m * float(self._mode_gains(block))
-        self._amplitude_um.append(amplitude_m * 1e6)
-        self._achieved_mu.append(relative_friction_core(
-            under_finger_m, device.carrier_hz, speed_m_s, device.mu0, device.poisson, device.psi_star))
+        achieved_mu = relative_friction_core(under_finger_m, device.carrier_hz, speed_m_s, device.mu0,
+                                             device.poisson, device.psi_star)
+        self._amplitude_um.append(amplitude_m * 1e6)  # both or neither: a block is measured whole
+        self._achieved_mu.append(achieved_mu)
+        self._latest = {"plate_amplitude_um": amplitude_m * 1e6, "achieved_mu": achieved_mu}
 
     def write_blocks(self, samples: npt.NDArray[np.float32], block_frames: int,
                      blocks: Mapping[str, npt.NDArray[Any]]) -> None:
@@ -150,6 +157,8 @@ class SimOutput(Output):
                       achieved_mu)
         self._amplitude_um.extend((amplitude_m * 1e6).tolist())
         self._achieved_mu.extend(achieved_mu.tolist())
+        if count:
+            self._latest = {"plate_amplitude_um": self._amplitude_um[-1], "achieved_mu": self._achieved_mu[-1]}
 
     def warm(self, batch: bool = False) -> None:
         """Run the plate model and the friction model of :meth:`write` (with ``batch``, of :meth:`write_blocks`)
@@ -170,18 +179,18 @@ class SimOutput(Output):
 
     def latest(self) -> dict[str, float]:
         """``plate_amplitude_um`` and ``achieved_mu`` of the last block written (none before the first)."""
-        if not self._achieved_mu:
-            return {}
-        return {"plate_amplitude_um": self._amplitude_um[-1], "achieved_mu": self._achieved_mu[-1]}
+        return dict(self._latest)
 
     def take_measurements(self) -> dict[str, npt.NDArray[np.float64]]:
-        """:meth:`measurements`, then forget them (a caller running for long keeps memory flat)."""
+        """:meth:`measurements`, then forget them: the paced driver takes them after every step (into the
+        telemetry log), so a real-time run keeps none here."""
         taken = self.measurements()
         self._amplitude_um, self._achieved_mu = [], []
         return taken
 
     def measurements(self) -> dict[str, npt.NDArray[np.float64]]:
-        """``plate_amplitude_um`` (mean envelope, um) and ``achieved_mu`` per block written."""
+        """``plate_amplitude_um`` (mean envelope, um) and ``achieved_mu`` per block written since the last
+        :meth:`take_measurements` (both names, empty before a block)."""
         return {
             "plate_amplitude_um": np.array(self._amplitude_um, dtype=np.float64),
             "achieved_mu": np.array(self._achieved_mu, dtype=np.float64),

@@ -1,0 +1,174 @@
+"""The telemetry log: an output's per-block measurements joined to the rows by block time (whichever comes
+first), bounded; push-to-DAC latency from the block records. Real pipeline, real callback, no clock."""
+
+from __future__ import annotations
+
+import gc
+import weakref
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tpad_rt.telemetry
+from tpad_rt.device import Device
+from tpad_rt.kernel import table as tab
+from tpad_rt.kernel.layout import TEL_NAMES
+from tpad_rt.pipeline import Pipeline
+from tpad_rt.realtime import CallbackTable
+from tpad_rt.telemetry import TelemetryLog, log_of
+from tpad_rt.texture import load_compiled
+
+GRATING = Path(__file__).resolve().parents[1] / "textures" / "grating.yaml"
+RATE_HZ, BLOCK = 96000, 96
+NAMES = ("plate_amplitude_um", "achieved_mu")
+
+
+def _setup() -> tuple[Pipeline, CallbackTable, TelemetryLog]:
+    pipeline = Pipeline(Device.default(), load_compiled(GRATING), fs_hz=RATE_HZ)
+    return pipeline, CallbackTable(pipeline.arrays, load_compiled(GRATING)), TelemetryLog(pipeline, RATE_HZ)
+
+
+def _render(table: CallbackTable, blocks: int) -> np.ndarray:
+    """Render ``blocks`` blocks; their start times (s)."""
+    t_s = []
+    for _ in range(blocks):
+        t_s.append(table.next_sample / RATE_HZ)
+        table.call(np.zeros(BLOCK, dtype=np.float32))
+    return np.array(t_s)
+
+
+def _measured(t_s: np.ndarray) -> dict[str, np.ndarray]:
+    """Measurements that say which block they are of: 1000 x its time, and its index + 0.5."""
+    return {"plate_amplitude_um": 1000 * t_s, "achieved_mu": t_s * RATE_HZ / BLOCK + 0.5}
+
+
+def test_the_log_of_a_pipeline_is_the_one_made_for_it_and_keeps_neither_alive() -> None:
+    pipeline, table, log = _setup()
+    assert log_of(pipeline) is log
+    assert log_of(Pipeline(Device.default(), load_compiled(GRATING), fs_hz=RATE_HZ)) is None
+    gone = weakref.ref(pipeline), weakref.ref(log)
+    del pipeline, table, log
+    gc.collect()
+    assert gone[0]() is None and gone[1]() is None  # a Renderer's arrays go with it (60 runs once leaked 64 MB)
+
+
+def test_rows_wait_for_their_measurements_and_every_row_is_read_once() -> None:
+    """Rows drained before their blocks' measurements come wait; measurements that come first wait for their
+    rows; each row is read once, with its own block's values."""
+    _, table, log = _setup()
+    log.begin_measurements(NAMES)
+    first = _render(table, 5)
+    log.add_measurements(first[:2], _measured(first[:2]))  # blocks 0-1 measured before their rows are drained
+    log.drain(table)
+    taken = log.take()
+    assert np.array_equal(taken["t"], first[:2])  # 2-4 wait: not measured yet
+    log.add_measurements(first[2:], _measured(first[2:]))
+    second = _render(table, 3)
+    log.add_measurements(second, _measured(second))
+    log.drain(table)
+    rest = log.take()
+    assert np.array_equal(rest["t"], np.r_[first[2:], second])
+    everything = {name: np.r_[taken[name], rest[name]] for name in taken}
+    assert set(everything) == {*TEL_NAMES, *NAMES}
+    assert np.array_equal(everything["plate_amplitude_um"], 1000 * everything["t"])
+    assert np.allclose(everything["achieved_mu"], np.arange(8) + 0.5, rtol=0, atol=1e-9)
+    assert len(log.take()["t"]) == 0 and set(log.take()) == {*TEL_NAMES, *NAMES}
+
+
+def test_once_the_measuring_ends_rows_without_one_come_with_nan() -> None:
+    """A block the output never measured (it failed on it) does not hold the rows back once the run ended."""
+    _, table, log = _setup()
+    log.begin_measurements(NAMES)
+    t_s = _render(table, 4)
+    log.add_measurements(t_s[:3], _measured(t_s[:3]))
+    log.drain(table)
+    assert len(log.take()["t"]) == 3
+    log.end_measurements()
+    last = log.take()
+    assert np.array_equal(last["t"], t_s[3:]) and np.isnan(last["achieved_mu"]).all()
+    _render(table, 2)  # rendered with no one measuring: read at once
+    log.drain(table)
+    assert np.isnan(log.take()["plate_amplitude_um"]).all()
+
+
+def test_without_measurements_the_rows_are_the_telemetry_s() -> None:
+    _, table, log = _setup()
+    _render(table, 3)
+    log.drain(table)
+    rows = log.take()
+    assert set(rows) == set(TEL_NAMES) and len(rows["t"]) == 3 and log.measured_names == ()
+
+
+def test_what_waits_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Rows whose measurements do not come, measurements whose rows are not drained and rows no one takes are
+    each kept at most MAX_PENDING_ROWS (the oldest go first)."""
+    monkeypatch.setattr(tpad_rt.telemetry, "MAX_PENDING_ROWS", 10)
+    _, table, log = _setup()
+    log.begin_measurements(NAMES)
+    _render(table, 25)
+    log.drain(table)  # no measurement: 15 rows go on unmeasured, the newest 10 wait
+    rows = log.take()
+    assert np.array_equal(np.rint(rows["t"] * RATE_HZ / BLOCK), np.arange(5, 15))  # the newest 10 of the 15
+    assert np.isnan(rows["achieved_mu"]).all()
+    ahead = (np.arange(100) + 1000) * BLOCK / RATE_HZ  # measurements of blocks 1000-1099, not rendered yet
+    for k in range(0, 100, 5):
+        log.add_measurements(ahead[k:k + 5], _measured(ahead[k:k + 5]))  # the first releases the 10 waiting
+    rows = log.take()
+    assert np.array_equal(np.rint(rows["t"] * RATE_HZ / BLOCK), np.arange(15, 25))
+    assert np.isnan(rows["achieved_mu"]).all()
+    _render(table, 1095 - 25)
+    log.drain(table)
+    rows = log.take()  # blocks 1085-1094; of the measurements only those of 1090-1099 were kept
+    assert np.array_equal(np.rint(rows["t"] * RATE_HZ / BLOCK), np.arange(1085, 1095))
+    assert np.isnan(rows["achieved_mu"][:5]).all()
+    assert np.allclose(rows["achieved_mu"][5:], np.arange(1090, 1095) + 0.5, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize(("names", "problem"), [
+    ((), "need distinct names"), (("t",), "need distinct names"), (("a", "a"), "need distinct names"),
+])
+def test_bad_measured_names_are_refused(names: tuple[str, ...], problem: str) -> None:
+    _, _, log = _setup()
+    with pytest.raises(ValueError, match=problem):
+        log.begin_measurements(names)
+
+
+def test_measurements_must_match_the_names_and_blocks() -> None:
+    _, _, log = _setup()
+    with pytest.raises(ValueError, match="begin_measurements"):
+        log.add_measurements(np.zeros(1), {"a": np.zeros(1)})
+    log.begin_measurements(NAMES)
+    with pytest.raises(ValueError, match="for 2 blocks"):
+        log.add_measurements(np.zeros(2), {"plate_amplitude_um": np.zeros(2), "achieved_mu": np.zeros(1)})
+    with pytest.raises(ValueError, match="but the log's readers have"):
+        log.begin_measurements(("other",))
+
+
+def test_latency_is_from_each_push_to_the_dac_time_of_the_first_block_that_read_it() -> None:
+    """Samples pushed between blocks: each one's latency is the next block's DAC time minus its push time (the
+    Renderer notes pushes; the block records are the callback's own)."""
+    pipeline, table, log = _setup()
+    pushed_ns = {}
+    expected_ms = []
+    for k in range(6):
+        for j in range(k % 3):  # 0, 1 or 2 samples before each block
+            index = int(pipeline.arrays.finger_count[0])
+            pipeline.push_finger((k + 0.5 * j) * BLOCK / RATE_HZ, 30.0, 20.0)
+            pushed_ns[index] = 1_000 * (10 * k + j)  # any push time: the log takes what it is told
+            log.note_push(index, pushed_ns[index])
+        table.call(np.zeros(BLOCK, dtype=np.float32))
+        record = table.recent_blocks()[-1]
+        out_ns = int(record[tab.BLOCK_ENTRY_NS] + record[tab.BLOCK_DAC_DELAY_NS])
+        expected_ms += [(out_ns - pushed_ns[index]) * 1e-6 for index in sorted(pushed_ns)[len(expected_ms):]]
+    latency = log.latency_ms(table.recent_blocks())
+    assert latency == {"latency_ms_p50": pytest.approx(float(np.percentile(expected_ms, 50)), abs=1e-9),
+                       "latency_ms_p99": pytest.approx(float(np.percentile(expected_ms, 99)), abs=1e-9)}
+    assert len(expected_ms) == 6
+
+
+def test_latency_without_pushes_is_nan() -> None:
+    _, table, log = _setup()
+    _render(table, 3)
+    latency = log.latency_ms(table.recent_blocks())
+    assert np.isnan(latency["latency_ms_p50"]) and np.isnan(latency["latency_ms_p99"])
