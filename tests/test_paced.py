@@ -311,6 +311,7 @@ def test_a_long_sim_run_keeps_bounded_memory(monkeypatch: pytest.MonkeyPatch) ->
     pipeline, table = _pipeline(rate_hz)
     log = TelemetryLog(pipeline, rate_hz)
     driver = _driver("sim://", rate_hz, block_frames, clock)
+    driver.log = log
     driver.open(pipeline)
     run = driver.run(table)
     assert isinstance(run.output, SimOutput)

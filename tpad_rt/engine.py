@@ -139,6 +139,7 @@ class Renderer:
                                   envelope_output=self._driver.consumes is Consumes.ENVELOPE)
         self.rate_hz: int = self._driver.rate_hz
         self._log: TelemetryLog = TelemetryLog(self._pipeline, self.rate_hz)
+        self._driver.log = self._log  # what the output measures per block goes to the log
         self._table: CallbackTable | None = None  # while running
         self._last_table: CallbackTable | None = None  # the last run's, for stats() after stop()
         self._watcher: threading.Thread | None = None

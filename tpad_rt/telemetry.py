@@ -11,8 +11,6 @@ TelemetryLog(pipeline, rate_hz)
     measurements: ``begin_measurements(names)``, ``add_measurements(t_s, columns)``,
     ``end_measurements()``, ``measured_names``;
     latency: ``note_push(index, pushed_ns)``, ``latency_ms(blocks)``
-log_of(pipeline) -> TelemetryLog | None
-    the log draining ``pipeline``'s telemetry (there is at most one: draining takes the rows)
 joined(chunks, names=TEL_NAMES) -> dict[str, ndarray]
     telemetry chunks concatenated column by column
 
@@ -31,7 +29,6 @@ from __future__ import annotations
 
 import math
 import threading
-import weakref
 from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -52,18 +49,6 @@ from tpad_rt.recording import Recording, write_recording
 #: Telemetry rows kept for :meth:`TelemetryLog.take` between calls (the oldest go first); as many rows wait at
 #: most for their measurements, and as many measured blocks for their rows.
 MAX_PENDING_ROWS = 2**18
-
-#: The log of each pipeline (see :func:`log_of`), held weakly both ways: the log holds its pipeline, and neither
-#: outlives its owner (the Renderer).
-_LOGS: weakref.WeakKeyDictionary[Pipeline, weakref.ref[TelemetryLog]] = weakref.WeakKeyDictionary()
-
-
-def log_of(pipeline: Pipeline) -> TelemetryLog | None:
-    """The log that drains ``pipeline``'s telemetry (the newest made for it), None if none was made (or it is
-    gone)."""
-    log = _LOGS.get(pipeline)
-    return None if log is None else log()
-
 
 class TelemetryLog:
     """Telemetry of ``pipeline``'s runs at ``rate_hz`` (Hz: the drive's sample rate, for recordings)."""
@@ -86,7 +71,6 @@ class TelemetryLog:
         self._truncated: str | None = None  # why the recording ended early, if it did
         #: The recording's limit error (see :meth:`drain`), or None.
         self.failure: TpadError | None = None
-        _LOGS[pipeline] = weakref.ref(self)
 
     def drain(self, table: CallbackTable) -> None:
         """Move new telemetry rows (and drive samples, when recording) out of ``table``'s rings.

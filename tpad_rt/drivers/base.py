@@ -24,6 +24,7 @@ from tpad_rt.kernel.layout import STATE_GATE, STATE_RAMP_START
 from tpad_rt.outputs.base import Consumes
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.realtime import CallbackTable
+from tpad_rt.telemetry import TelemetryLog
 from tpad_rt.urls import Url
 
 
@@ -55,6 +56,9 @@ class Driver(ABC):
         self.options = options
         self.stall_timeout_s = stall_timeout_s
         self.clock: Clock = MonotonicClock() if clock is None else clock
+        #: The run's telemetry log (the Renderer sets it): a driver whose output measures blocks hands it
+        #: their measurements (:meth:`tpad_rt.telemetry.TelemetryLog.add_measurements`).
+        self.log: TelemetryLog | None = None
         self.channels = 1
         self.channel = 0
 

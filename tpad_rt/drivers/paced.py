@@ -10,16 +10,14 @@ by then (skipping ahead past a stall) and say when the next falls due. The threa
 reads the clock, calls the step and sleeps, so tests drive the step on a
 :class:`tpad_rt.clock.VirtualClock` with no thread and no sleep. What the output measures
 per block (``sim://``: the plate's amplitude and friction) goes to the pipeline's
-telemetry log after every step (:func:`tpad_rt.telemetry.log_of`); the output keeps none.
+telemetry log after every step (:attr:`Driver.log`); the output keeps none.
 """
 
 from __future__ import annotations
 
 import threading
-from typing import Protocol, runtime_checkable
 
 import numpy as np
-import numpy.typing as npt
 
 from tpad_rt.clock import Clock
 from tpad_rt.device import Device
@@ -28,7 +26,7 @@ from tpad_rt.kernel import table as tab
 from tpad_rt.outputs import Output, open_paced
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.realtime import CallbackTable
-from tpad_rt.telemetry import TelemetryLog, log_of
+from tpad_rt.telemetry import TelemetryLog
 from tpad_rt.urls import Url
 
 #: An output further behind real time than this (s) skips ahead instead of catching up in a burst, and counts
@@ -36,14 +34,6 @@ from tpad_rt.urls import Url
 PACED_MAX_BEHIND_S = 0.1
 #: The thread sleeps at most this long (ns) between two steps: a stop is seen within it.
 PACED_POLL_NS = 5_000_000
-
-
-@runtime_checkable
-class TakesMeasurements(Protocol):
-    """An output that hands over its per-block measurements and forgets them (``sim://``)."""
-
-    def take_measurements(self) -> dict[str, npt.NDArray[np.float64]]:
-        """The per-block measurements since the last take, by name; then forget them."""
 
 
 class PacedRun:
@@ -65,13 +55,10 @@ class PacedRun:
         self.most_behind = max(1, round(PACED_MAX_BEHIND_S * rate_hz / block_frames))
         self._block = np.zeros(block_frames, dtype=np.float32)
         self._log = log
-        self._measuring: TakesMeasurements | None = None  # the output, when it measures blocks
-        if isinstance(output, TakesMeasurements):
-            names = tuple(output.take_measurements())  # what it measures (and nothing from before this run)
-            if names:
-                self._measuring = output
-                if log is not None:
-                    log.begin_measurements(names)
+        names = tuple(output.take_measurements())  # what it measures (and nothing from before this run)
+        self._measuring: Output | None = output if names else None  # the output, when it measures blocks
+        if names and log is not None:
+            log.begin_measurements(names)
 
     def due_at_ns(self, block: int) -> int:
         """When block number ``block`` (0: the first) falls due (ns on the driver's clock)."""
@@ -135,7 +122,7 @@ class PacedDriver(Driver):
         """The run's pacing from now on :attr:`clock` (block 0 due now), handing blocks to the opened output."""
         assert self._output is not None and self._pipeline is not None, "open() first"
         return PacedRun(table, self._output, self._pipeline, rate_hz=self.rate_hz, block_frames=self.block_frames,
-                        started_ns=self.clock.now_ns(), log=log_of(self._pipeline))
+                        started_ns=self.clock.now_ns(), log=self.log)
 
     def start(self, table: CallbackTable) -> None:
         """Start the pacing thread."""

@@ -97,6 +97,11 @@ class Output(ABC):
         """Per-block arrays the output measured so far, by name (none by default)."""
         return {}
 
+    def take_measurements(self) -> dict[str, npt.NDArray[np.float64]]:
+        """The per-block arrays measured since the last take, by name, then forgotten (none by default): a
+        real-time driver takes them after every step into the run's telemetry log, so the output keeps none."""
+        return {}
+
     def latest(self) -> dict[str, float]:
         """The last block's measurements, by name (none by default); cheap, for status lines."""
         return {}
