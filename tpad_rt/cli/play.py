@@ -59,6 +59,7 @@ from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
 from tpad_rt.kernel.render import render_block
 from tpad_rt.kernel.texture_eval import eval_texture_points
 from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
+from tpad_rt.drive import Consumes
 from tpad_rt.outputs import audio
 
 if TYPE_CHECKING:
@@ -308,7 +309,7 @@ class Session:
                 grid.add_row("simulated plate", f"{self.achieved:.2f}  (the friction the simulated plate gives now)")
                 grid.add_row("departures", f"{self.departed_blocks} of {self.judged_blocks} touching blocks further "
                              f"than {DEPARTURE_TOLERANCE_MU:g} from the texture under the finger{self.ramp_text()}")
-            grid.add_row("drive", f"{row['voltage_v']:5.1f} V of {self.renderer.device.max_voltage_v:g} V"
+            grid.add_row("drive", f"{row['voltage_v']:5.1f} V of {self.renderer.drive.max_voltage_v:g} V"
                          + ("  SATURATED" if int(row["saturated"]) & (FLAG_VOLTAGE | FLAG_POWER) else ""))
         grid.add_row("power", f"now {row.get('power_w', 0.0):.3f} W, mean {stats['power_mean_w']:.3f} W, "
                      f"peak {stats['power_peak_w']:.3f} W of {stats['power_budget_w']:g} W")
@@ -330,7 +331,7 @@ class Session:
         """The end-of-play summary from the renderer's stats (and the judged friction, where measured)."""
         stats = self.renderer.stats()
         blocks = max(stats["blocks"], 1)
-        amplifier = stats.get("amplifier")
+        amplifier = self.renderer.drive.consumes is Consumes.ENVELOPE  # frames to an amplifier that makes the carrier
         block, output = ("frame", "amplifier") if amplifier else ("callback", "DAC")
         lines = [
             f"played {stats['played_s']:.2f} s of drive in {self.elapsed_s():.2f} s"
@@ -343,7 +344,9 @@ class Session:
             f"push-to-output latency: p50 {stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms"
             + (f" (of which the host reports {stats['dac_delay_ms']:.2f} ms from {block} to {output})"
                if stats["dac_delay_ms"] > 0 else ""),
-            f"drive: peak {self.peak_v:.2f} V of {self.renderer.device.max_voltage_v:g} V max; saturated "
+            f"drive: peak {self.peak_v:.2f} V of {self.renderer.drive.max_voltage_v:g} V max"
+            + ("" if self.renderer.drive.source == "device file" else f" ({self.renderer.drive.source}'s clamp)")
+            + "; saturated "
             f"{100 * stats['voltage_saturated'] / blocks:.1f} % of blocks (voltage), "
             f"{100 * stats['power_saturated'] / blocks:.1f} % (power)",
             f"power: mean {stats['power_mean_w']:.3f} W, peak {stats['power_peak_w']:.3f} W "
@@ -356,18 +359,6 @@ class Session:
                          f"{stats['fault_blocks']} blocks; {', '.join(stats['fault_causes'])}): the drive ramped to 0 "
                          "each time and came back with the next valid data (docs/kernel.md \"Faults\")")
         lines += self.renderer.driver.summary_lines(stats)
-        if amplifier:
-            lines.append(
-                f"amplifier: {amplifier['firmware']}, carrier {amplifier['carrier_hz']:.2f} Hz, envelope "
-                f"{amplifier['envelope_hz']} Hz; frames {amplifier['amp_frames_ok']} applied, {amplifier['amp_frames_bad']} "
-                f"bad, {amplifier['amp_frames_rejected']} refused, {amplifier['amp_sequence_gaps']} sequence gaps; "
-                f"{amplifier['amp_underruns']} samples underrun, {amplifier['amp_watchdog_trips']} watchdog trips"
-                + ("" if amplifier["realtime"] else " (no real-time priority for the streamer here)"))
-            if amplifier["tracking"] != "off":
-                lines.append(f"tracking ({amplifier['tracking']}): carrier now {amplifier['tracked_carrier_hz']:.2f} Hz "
-                             f"after {amplifier['carrier_sets']} SET_CARRIER ({amplifier['carrier_refused']} refused); "
-                             f"lock correction {amplifier['lock_offset_hz']:+.2f} Hz over {amplifier['lock_updates']} "
-                             "STATUS frames")
         if self.judged_blocks:
             lines.append(f"friction |texture under the finger - simulated plate| over {self.judged_blocks} touching "
                          f"blocks: mean {self.error_sum / self.judged_blocks:.4f}, max {self.error_max:.4f}; "

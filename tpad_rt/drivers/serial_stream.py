@@ -92,6 +92,24 @@ class SerialStreamDriver(Driver):
         link.stop(ramp_ms)
         return failure
 
+    def summary_lines(self, stats: dict[str, Any]) -> list[str]:
+        """The amplifier's counters, and the tracking's carrier and lock, for the end of ``tpad-rt play``."""
+        amplifier = stats.get("amplifier")
+        if not amplifier:
+            return []
+        lines = [
+            f"amplifier: {amplifier['firmware']}, carrier {amplifier['carrier_hz']:.2f} Hz, envelope "
+            f"{amplifier['envelope_hz']} Hz; frames {amplifier['amp_frames_ok']} applied, {amplifier['amp_frames_bad']} "
+            f"bad, {amplifier['amp_frames_rejected']} refused, {amplifier['amp_sequence_gaps']} sequence gaps; "
+            f"{amplifier['amp_underruns']} samples underrun, {amplifier['amp_watchdog_trips']} watchdog trips"
+            + ("" if amplifier["realtime"] else " (no real-time priority for the streamer here)")]
+        if amplifier["tracking"] != "off":
+            lines.append(f"tracking ({amplifier['tracking']}): carrier now {amplifier['tracked_carrier_hz']:.2f} Hz "
+                         f"after {amplifier['carrier_sets']} SET_CARRIER ({amplifier['carrier_refused']} refused); "
+                         f"lock correction {amplifier['lock_offset_hz']:+.2f} Hz over {amplifier['lock_updates']} "
+                         "STATUS frames")
+        return lines
+
     def stats(self) -> dict[str, Any]:
         """``amplifier``: the link's and the amplifier's counters (AmpLink.stats), once it was opened."""
         result = super().stats()
