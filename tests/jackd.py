@@ -3,7 +3,8 @@
 The real-time stand-in for a sound card that the tests and the latency benchmark use
 (docs/testing.md says why each flag): ``dummy_server(rate_hz,
 period_frames)`` starts ``jackd -n NAME -p 16 -d dummy -r RATE -p PERIOD``, waits for
-it with ``jack_wait -s NAME -w`` and yields a :class:`RunningServer` (point clients at
+it with ``jack_wait -s NAME -w``, then until a client of it lists its playback ports (a client
+attached: :func:`wait_until_serving`), and yields a :class:`RunningServer` (point clients at
 it with ``JACK_DEFAULT_SERVER=NAME``); on exit it sends SIGTERM to the PID and waits.
 
 ``sync=True`` adds ``-S``: JACK's synchronous mode, in which the server waits for its
@@ -28,6 +29,7 @@ import shutil
 import signal
 import subprocess
 import tempfile
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,6 +68,24 @@ def playback_latency_frames(server_name: str) -> int | None:
                              capture_output=True, text=True, timeout=10).stdout
     match = re.search(r"port playback latency = \[ (\d+) (\d+) \]", listing)
     return int(match.group(2)) if match else None
+
+
+#: Seconds between two looks at a starting server's ports.
+_PORTS_POLL_S = 0.02
+
+
+def wait_until_serving(server_name: str, process: subprocess.Popen, timeout_s: float = START_TIMEOUT_S) -> bool:
+    """Wait until a client of server ``server_name`` (``jack_lsp``) attaches and lists its ``system:playback_1``
+    port: the server's engine and driver are up, not only its process (``jack_wait -w``). False when ``process``
+    ends first or ``timeout_s`` (a start-up failure bound) passes."""
+    deadline = time.monotonic() + timeout_s
+    while process.poll() is None and time.monotonic() < deadline:
+        listing = subprocess.run([program("jack_lsp"), "-s", server_name, "system:playback_1"], capture_output=True,
+                                 text=True, timeout=timeout_s).stdout
+        if "system:playback_1" in listing.splitlines():
+            return True
+        time.sleep(_PORTS_POLL_S)
+    return False
 
 
 def stop_process(process: subprocess.Popen) -> None:
@@ -117,7 +137,7 @@ def dummy_server(rate_hz: int = 192000, period_frames: int = 64, *, sync: bool =
     try:
         waited = subprocess.run([jack_wait, "-s", name, "-w", "-t", str(START_TIMEOUT_S)],
                                 capture_output=True, text=True, timeout=START_TIMEOUT_S + 5)
-        if waited.returncode != 0 or process.poll() is not None:
+        if waited.returncode != 0 or not wait_until_serving(name, process):
             sink.seek(0)
             raise BackendError(f"jackd {name} did not start: {sink.read().decode(errors='replace')[-2000:]}")
         yield RunningServer(name, process)

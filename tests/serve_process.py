@@ -21,6 +21,7 @@ from typing import Any
 from websockets.sync.client import ClientConnection, connect
 
 from cli_run import REPO
+from tpad_rt.clock import Clock
 
 #: Longest wait for the server's first line (a first run in a fresh numba cache compiles the kernels).
 START_TIMEOUT_S = 120.0
@@ -167,9 +168,11 @@ def stopped_by_signal_cleanly(serve: Serve, sig: int = signal.SIGINT) -> str:
 class ServeThread:
     """``tpad-rt serve``'s Server in this process, on an asyncio loop in a thread, in front of a started
     Renderer on ``null://`` (loopback, free ports): for tests that reach into the server (a gate in its texture
-    loading) while its clients are real sockets. ``server``, ``port``, ``osc_port``; a context manager."""
+    loading, its counters) while its clients are real sockets. ``clock``: the server's (its budgets'; a
+    VirtualClock stands still until the test advances it). ``server``, ``port``, ``osc_port``; a context
+    manager."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Clock | None = None) -> None:
         import asyncio
 
         from tpad_rt.engine import Renderer
@@ -178,7 +181,7 @@ class ServeThread:
 
         self.renderer = Renderer(output="null://", texture=TEXTURES_DIR / "grating.yaml")
         self.renderer.start()
-        self.server = Server(self.renderer, Settings(port=0, osc_port=0, texture_dirs=(TEXTURES_DIR,)))
+        self.server = Server(self.renderer, Settings(port=0, osc_port=0, texture_dirs=(TEXTURES_DIR,)), clock=clock)
         self.loop = asyncio.new_event_loop()
         self._stop = asyncio.Event()
         self._ready = threading.Event()

@@ -26,7 +26,8 @@ from pythonosc.osc_message_builder import build_msg
 from websockets.exceptions import ConnectionClosedError, InvalidStatus
 
 from cli_run import REPO, tpad_rt
-from serve_process import Client, Serve, osc_socket, stopped_by_signal_cleanly
+from serve_process import Client, Serve, ServeThread, osc_socket, stopped_by_signal_cleanly
+from tpad_rt.clock import VirtualClock
 from tpad_rt.recording import read_recording
 from tpad_rt.serve import protocol
 from tpad_rt.texture import load_compiled
@@ -172,20 +173,28 @@ def test_a_corpus_of_bad_messages_each_gets_an_error_and_the_connection_keeps_se
         assert client.request({"type": "device"}, "device")["type"] == "device"
 
 
-def test_a_flood_is_rate_limited_without_starving_another_client(server: Serve) -> None:
-    with Client(server.ws_url) as flooder, Client(server.ws_url) as other:
+def test_a_flood_is_rate_limited_without_starving_another_client() -> None:
+    """The server's budgets on a VirtualClock standing still: a burst of MESSAGES_BURST messages is taken, every
+    one after it dropped (one notice, then one per LIMIT_NOTICE_S, each counting the drops), another client is
+    served from its own budget, and the flooder's comes back at MESSAGES_PER_S, a message a millisecond."""
+    from tpad_rt.serve.server import MESSAGES_BURST, MESSAGES_PER_S
+
+    clock = VirtualClock()
+    with ServeThread(clock) as serve, Client(serve.ws_url) as flooder, Client(serve.ws_url) as other:
         for _ in range(3000):  # lifts nobody needed: no reply, so only the limit answers
             flooder.send({"type": "lift"})
-        limited = flooder.expect("error", lambda m: m["code"] == "rate_limited")
-        assert "dropped" in limited["message"]
+        first = flooder.expect("error", lambda m: m["code"] == "rate_limited")
+        assert first["message"] == "too many messages (at most 1000 a second): 1 message dropped"
+        # A request with an id always gets an answer: rate_limited naming it, with the drops since the notice.
+        limited = flooder.request({"type": "ping", "t": 2.5}, "pong")
+        assert (limited["type"], limited["code"]) == ("error", "rate_limited")
+        assert limited["message"].endswith(f": {3000 - int(MESSAGES_BURST)} messages dropped")
         assert other.request({"type": "ping", "t": 1.5}, "pong")["t"] == 1.5
-        # A request with an id always gets an answer: its pong, or rate_limited naming it; the flooder is
-        # served again as its budget comes back (a message a millisecond).
-        replies = [flooder.request({"type": "ping", "t": 2.5}, "pong")]
-        while replies[-1]["type"] != "pong":
-            assert replies[-1]["code"] == "rate_limited"
-            replies.append(flooder.request({"type": "ping", "t": 2.5}, "pong"))
-        assert replies[-1]["t"] == 2.5
+        clock.advance_by(round(1e9 / MESSAGES_PER_S))  # one message's worth of budget comes back
+        pong = flooder.request({"type": "ping", "t": 2.5}, "pong")
+        assert (pong["type"], pong["t"]) == ("pong", 2.5)
+        assert flooder.request({"type": "ping"}, "pong")["code"] == "rate_limited"
+        assert serve.server.counters["rate_limited"] == 3000 - MESSAGES_BURST + 2
 
 
 def test_a_message_past_the_frame_limit_closes_that_connection_only(server: Serve) -> None:
@@ -388,10 +397,18 @@ def test_connections_beyond_the_limit_are_refused_until_one_leaves(server: Serve
             client.close()
 
 
-def test_device_and_stats_requests_have_their_own_budget(server: Serve) -> None:
-    with Client(server.ws_url) as client:
-        replies = [client.request({"type": "stats"}, "stats") for _ in range(40)]
-        kinds = [reply["type"] for reply in replies]
-        assert kinds.count("stats") >= 20 and "error" in kinds  # a burst of 20, then 20 a second
-        assert {reply["code"] for reply in replies if reply["type"] == "error"} == {"rate_limited"}
-        assert client.request({"type": "ping"}, "pong")["type"] == "pong"  # other requests are not held
+def test_device_and_stats_requests_have_their_own_budget() -> None:
+    """On a VirtualClock standing still: a burst of HEAVY_PER_S device and stats requests, then each refused
+    until the clock gives one back (1 / HEAVY_PER_S s later); other requests are not held."""
+    from tpad_rt.serve.server import HEAVY_PER_S
+
+    clock = VirtualClock()
+    with ServeThread(clock) as serve, Client(serve.ws_url) as client:
+        kinds = [client.request({"type": kind}, kind)["type"] for kind in ("stats", "device") * 20]
+        assert kinds == ["stats", "device"] * 10 + ["error"] * 20
+        assert client.request({"type": "ping"}, "pong")["type"] == "pong"
+        clock.advance_by(round(1e9 / HEAVY_PER_S) - 1)
+        assert client.request({"type": "stats"}, "stats")["code"] == "rate_limited"
+        clock.advance_by(1)
+        assert client.request({"type": "stats"}, "stats")["type"] == "stats"
+        assert serve.server.counters["rate_limited"] == 21

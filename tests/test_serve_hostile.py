@@ -1,8 +1,8 @@
 """tpad-rt serve against a hostile client, on real sockets: raw handshakes (repeated, case-varied, empty, huge
 and non-ASCII headers), malformed OSC datagrams and floods of them, extreme numbers, and a large texture
 being parsed. Each gets a clean refusal, counted; other clients' pings are answered meanwhile (shown by
-order, never by time: a gate holds the parse, counters show the flood arriving); and the server's stderr
-stays free of tracebacks and library warnings."""
+order, never by time: a gate holds the parse, counters show the flood arriving; the flood's budget on a
+VirtualClock); and the server's stderr stays free of tracebacks and library warnings."""
 
 from __future__ import annotations
 
@@ -25,6 +25,7 @@ from pythonosc.osc_message_builder import OscMessageBuilder
 
 from serve_process import REPLY_TIMEOUT_S, Client, Serve, ServeThread, osc_socket
 from test_config_parse_cost import unknown_keys_text
+from tpad_rt.clock import VirtualClock
 from tpad_rt.config.messages import MAX_LISTED_ERRORS
 from tpad_rt.serve import osc as osc_limits
 
@@ -210,13 +211,14 @@ FLOOD_SEEN = 2000
 def test_pings_are_answered_while_bad_bundles_stream_in() -> None:
     """A sender floods the OSC port with bad bundles (of the kinds that hung or slowed the loop) as fast as it
     can; meanwhile a WebSocket client's pings are each answered, until the server's counters show FLOOD_SEEN
-    datagrams arrived between the first and the last, and the flood gone over the server-wide budget (dropped
-    unread, counted)."""
+    datagrams arrived between the first and the last. The server's clock (a VirtualClock) stands still: past
+    its burst, every datagram is over the server-wide budget, dropped unread and counted, however fast the
+    host sends them."""
     flood = [datagram for _, datagram, _ in BAD_DATAGRAMS] + \
         [bundle(*[osc_message("/tpad/warp", (1.0, "f"))] * osc_limits.MAX_DATAGRAM_MESSAGES)]
-    serve = Serve("--output", "null://")
-    with serve, osc_socket() as sock, Client(serve.ws_url) as client:
+    with ServeThread(VirtualClock()) as serve, osc_socket() as sock, Client(serve.ws_url) as client:
         assert serve.osc_port is not None
+        counters = serve.server.counters
         stop = threading.Event()
 
         def send() -> None:
@@ -231,23 +233,16 @@ def test_pings_are_answered_while_bad_bundles_stream_in() -> None:
         sender = threading.Thread(target=send, daemon=True)
         sender.start()
         seen: list[int] = []  # osc_datagrams after each ping
-        counters: dict[str, Any] = {}
-        deadline = time.monotonic() + REPLY_TIMEOUT_S
         try:
-            while len(seen) < 12 or seen[-1] - seen[0] < FLOOD_SEEN or not counters.get("osc_dropped"):
-                assert time.monotonic() < deadline, f"the flood was not dropped: {counters}"
+            while len(seen) < 12 or seen[-1] - seen[0] < FLOOD_SEEN:
                 assert client.request({"type": "ping", "t": 1.5}, "pong")["t"] == 1.5
-                stats = client.request({"type": "stats"}, "stats")  # or rate_limited: 20 a second
-                if stats["type"] == "stats":
-                    counters = stats["server"]
-                    seen.append(counters.get("osc_datagrams", 0))
+                seen.append(counters["osc_datagrams"])
         finally:
             stop.set()
-            sender.join(REPLY_TIMEOUT_S)
-        client.close()
-        out = stopped_clean(serve)
-    assert counters["error_bad_message"] > 0, counters
-    assert "OSC messages" in out
+            sender.join()
+        burst = osc_limits.DATAGRAMS_PER_S / 10
+        assert counters["osc_dropped"] >= counters["osc_datagrams"] - burst > 0, counters
+        assert 0 < counters["error_bad_message"] <= burst, counters
 
 
 # --- numbers --------------------------------------------------------------------------------------------------
@@ -382,9 +377,7 @@ def test_a_parser_process_that_dies_costs_its_texture_one_line_and_the_next_is_r
     with ServeThread() as serve, Client(serve.ws_url) as client:
         others = parser_processes()  # earlier servers' (in this process), on their way out
         client.send({"type": "texture", "yaml": BIG_YAML, "id": "big"})
-        deadline = time.monotonic() + REPLY_TIMEOUT_S
-        while not (parsers := parser_processes() - others):
-            assert time.monotonic() < deadline, "no parser process started"
+        while not (parsers := parser_processes() - others):  # it starts (pytest's timeout bounds the wait)
             time.sleep(0.01)
         for pid in parsers:
             os.kill(pid, signal.SIGKILL)

@@ -181,12 +181,12 @@ def stream_native(callback: str, block: int, seconds: float, gil_threads: int) -
     }
     if renderer is not None:
         result.update(_latency(rows, pushes, cb))
+        result["output_latency_s"] = renderer.driver.stream.output_latency_s  # PortAudio's, read while it runs
         renderer.stop()
         stats = renderer.stats()
         result["renderer_stats"] = {key: stats[key] for key in (
-            "latency_ms_p50", "latency_ms_p99", "output_latency_s", "compute_us_p50", "compute_us_p99",
-            "compute_us_max", "underflows", "callbacks")}
-        result["output_latency_s"] = stats["output_latency_s"]
+            "latency_ms_p50", "latency_ms_p99", "compute_us_p50", "compute_us_p99", "compute_us_max", "underflows",
+            "callbacks")}
     else:
         result["output_latency_s"] = stream.output_latency_s
         stream.stop()

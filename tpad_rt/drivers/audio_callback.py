@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from typing import Any
 
 from tpad_rt.clock import Clock
 from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
+from tpad_rt.drivers.stall_watch import StallWatch
 from tpad_rt.errors import BackendError
 from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel import table as tab
@@ -48,7 +48,7 @@ class AudioCallbackDriver(Driver):
         self.stream: audio.AudioStream | None = None  # while started
         self._stalled = False
         self._failure: BackendError | None = None  # what poll() found, returned again by close()
-        self._seen_callbacks, self._seen_at = -1, 0.0
+        self._watch: StallWatch | None = None  # made by start()
 
     def stall_limit_s(self) -> float:
         """Seconds without a callback after which the stream counts as stalled."""
@@ -78,7 +78,7 @@ class AudioCallbackDriver(Driver):
         assert self.audio_device is not None, "prepare() first"
         self._stalled = False
         self._failure = None
-        self._seen_callbacks, self._seen_at = -1, time.monotonic()
+        self._watch = StallWatch(round(self.stall_limit_s() * 1e9), self.clock)
         address = cb.render_callback.address
         assert address is not None
         self.stream = audio.AudioStream(self.audio_device, self.rate_hz, self.block_frames, self.channels,
@@ -86,22 +86,19 @@ class AudioCallbackDriver(Driver):
         self.stream.start()
 
     def poll(self, table: CallbackTable) -> BaseException | None:
-        """A BackendError when the stream stopped by itself, or made no callback for the stall limit (clocked
-        with time.monotonic, read before the count and again on an advance: the gap measured never exceeds
-        the time without a callback, however late the watcher runs)."""
-        stream = self.stream
-        if stream is None or self._failure is not None:
+        """A BackendError when the stream stopped by itself, or made no callback for the stall limit (a
+        :class:`StallWatch` on the driver's clock: the gap measured never exceeds the time without a callback,
+        however late the watcher runs)."""
+        stream, watch = self.stream, self._watch
+        if stream is None or watch is None or self._failure is not None:
             return self._failure
         if not stream.active():
             self._failure = _lost_error(stream.device)
             return self._failure
-        now = time.monotonic()
-        count = int(table.stats[tab.STAT_CALLBACKS])
-        if count != self._seen_callbacks:
-            self._seen_callbacks, self._seen_at = count, time.monotonic()
-        elif now - self._seen_at >= self.stall_limit_s():
+        still_ns = watch.still_for_ns(lambda: int(table.stats[tab.STAT_CALLBACKS]))
+        if still_ns is not None:
             self._stalled = True
-            self._failure = _stall_error(stream.device, f"no callback for {now - self._seen_at:.2f} s")
+            self._failure = _stall_error(stream.device, f"no callback for {still_ns * 1e-9:.2f} s")
         return self._failure
 
     def close(self, ramp_ms: float) -> BaseException | None:

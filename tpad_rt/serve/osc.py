@@ -2,7 +2,7 @@
 
 API map
 -------
-OscEndpoint.open(loop, host, port, handle, counters) -> OscEndpoint
+OscEndpoint.open(loop, host, port, handle, counters, clock) -> OscEndpoint
     listen on ``host:port`` (port 0: any free one, then ``.port``); ``close()``
 ADDRESSES
     the OSC addresses read, and the request each becomes
@@ -39,6 +39,7 @@ from pythonosc.osc_message import OscMessage
 from pythonosc.osc_message_builder import build_msg
 from pythonosc.osc_packet import OscPacket
 
+from tpad_rt.clock import Clock
 from tpad_rt.serve.core import TokenBucket
 from tpad_rt.serve.protocol import ProtocolError
 
@@ -158,11 +159,13 @@ def _string_end(data: bytes, start: int, end: int, what: str) -> int:
 
 class OscEndpoint(asyncio.DatagramProtocol):
     """The UDP endpoint (module docstring): ``counters`` gets ``osc_datagrams``, ``osc_dropped`` (over a budget,
-    unread), ``osc_replies_dropped`` and ``error_bad_message`` (a datagram it does not read)."""
+    unread), ``osc_replies_dropped`` and ``error_bad_message`` (a datagram it does not read); its budgets run on
+    ``clock`` (the server's)."""
 
-    def __init__(self, handle: Handle, counters: Counter[str]):
+    def __init__(self, handle: Handle, counters: Counter[str], clock: Clock):
         self._handle = handle
         self._counters = counters
+        self._clock = clock
         self._transport: asyncio.DatagramTransport | None = None
         self._pending: set[asyncio.Task[None]] = set()
         self._datagrams = TokenBucket(DATAGRAMS_PER_S, DATAGRAMS_PER_S / 10)
@@ -173,9 +176,9 @@ class OscEndpoint(asyncio.DatagramProtocol):
 
     @classmethod
     async def open(cls, loop: asyncio.AbstractEventLoop, host: str, port: int, handle: Handle,
-                   counters: Counter[str]) -> OscEndpoint:
+                   counters: Counter[str], clock: Clock) -> OscEndpoint:
         """Listen on ``host:port``; OSError when the port cannot be bound."""
-        transport, endpoint = await loop.create_datagram_endpoint(lambda: cls(handle, counters),
+        transport, endpoint = await loop.create_datagram_endpoint(lambda: cls(handle, counters, clock),
                                                                   local_addr=(host, port))
         endpoint.port = transport.get_extra_info("sockname")[1]
         return endpoint
@@ -191,7 +194,7 @@ class OscEndpoint(asyncio.DatagramProtocol):
 
     def datagram_received(self, data: bytes, sender: tuple[str, int]) -> None:
         """Budget, check, then parse and handle ``data`` (module docstring)."""
-        now_s = asyncio.get_running_loop().time()
+        now_s = self._clock.now_ns() * 1e-9
         self._counters["osc_datagrams"] += 1
         if len(self._pending) >= MAX_PENDING or not self._datagrams.take(1, now_s) or \
                 not self._bytes.take(len(data), now_s):
@@ -227,7 +230,7 @@ class OscEndpoint(asyncio.DatagramProtocol):
 
     def _reply(self, sender: tuple[str, int], address: str, values: list[Any]) -> None:
         """Send ``address values`` to ``sender``, within the server-wide reply budget (else counted)."""
-        if not self._replies.take(1, asyncio.get_running_loop().time()):
+        if not self._replies.take(1, self._clock.now_ns() * 1e-9):
             self._counters["osc_replies_dropped"] += 1
             return
         if self._transport is not None and not self._transport.is_closing():

@@ -5,7 +5,7 @@ API map
 -------
 Settings(host, port, osc_port, token, allowed_origins, texture_dirs)
     where to listen and who may connect
-Server(renderer, settings, texture_label)
+Server(renderer, settings, texture_label, clock=None)
     ``await run(stop)``: serve until ``stop`` is set or the renderer fails (re-raised);
     ``port``, ``osc_port`` (bound, also when 0 was asked), ``counters``
 
@@ -53,6 +53,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request as HttpRequest
 from websockets.http11 import Response
 
+from tpad_rt.clock import Clock, MonotonicClock
 from tpad_rt.version import __version__
 from tpad_rt.errors import SampleError, printable
 from tpad_rt.serve import protocol
@@ -148,8 +149,12 @@ class Client:
 class Server:
     """The API of ``tpad-rt serve`` in front of a started ``renderer`` (module docstring)."""
 
-    def __init__(self, renderer: Renderer, settings: Settings, texture_label: str | None = None):
+    def __init__(self, renderer: Renderer, settings: Settings, texture_label: str | None = None, *,
+                 clock: Clock | None = None):
         self.renderer = renderer
+        #: What the clients' budgets, the finger's idle time and OSC's budgets run on (default: the host's
+        #: monotonic clock; tests give a VirtualClock to judge the budgets exactly).
+        self.clock: Clock = MonotonicClock() if clock is None else clock
         self.settings = settings
         self.library = TextureLibrary(list(settings.texture_dirs), self._parse_inline)
         self._parsers: ProcessPoolExecutor | None = None
@@ -172,6 +177,10 @@ class Server:
         self._static = {path: (resources.files("tpad_rt.serve").joinpath("static", name).read_bytes(), kind)
                         for path, (name, kind) in STATIC_FILES.items()}
 
+    def now_s(self) -> float:
+        """The server's :attr:`clock` (s)."""
+        return self.clock.now_ns() * 1e-9
+
     # --- running ---------------------------------------------------------------------------------
 
     async def run(self, stop: asyncio.Event, ready: asyncio.Event | None = None) -> None:
@@ -190,7 +199,7 @@ class Server:
             osc = None
             if self.settings.osc_port is not None:
                 osc = await OscEndpoint.open(loop, "127.0.0.1", self.settings.osc_port, self._osc_message,
-                                           self.counters)
+                                           self.counters, self.clock)
                 self.osc_port = osc.port
             tasks = [asyncio.create_task(self._pump()), asyncio.create_task(self._watch(stop))]
             if ready is not None:
@@ -340,7 +349,7 @@ class Server:
 
     async def _handle(self, client: Client, raw: str | bytes) -> dict[str, Any] | None:
         """Act on one message; the reply (an error included), or None."""
-        now_s = time.monotonic()
+        now_s = self.now_s()
         self.counters["messages"] += 1
         size = len(raw) if isinstance(raw, bytes) or raw.isascii() else len(raw.encode("utf-8", "surrogatepass"))
         try:
@@ -424,7 +433,7 @@ class Server:
         """Push ``samples`` for ``client`` (it takes the finger if free), their times mapped onto the stream
         clock; ProtocolError ``finger_busy`` or ``bad_sample`` (the renderer's SampleError: nothing of the
         message after the bad sample is pushed)."""
-        now_s = time.monotonic()
+        now_s = self.now_s()
         if not self.owner.free_for(client, now_s):
             raise ProtocolError("finger_busy", f"another client ({getattr(self.owner.holder, 'name', '?')}) has the "
                                 f"finger until it lifts, disconnects or sends nothing for {OWNER_IDLE_S:g} s",
@@ -451,7 +460,7 @@ class Server:
         """The holder's finger leaves the plate (at client time ``t``); from another client ignored when nobody
         holds it (or its holder is idle), ``finger_busy`` when another does."""
         if self.owner.holder is not client:
-            if self.owner.holder_at(time.monotonic()) is not None:
+            if self.owner.holder_at(self.now_s()) is not None:
                 raise ProtocolError("finger_busy", "another client has the finger: only it can lift it",
                                     request_id, "lift")
             return
@@ -475,7 +484,7 @@ class Server:
             self._announce_owner()
 
     def _finger_state(self, client: Client) -> dict[str, Any]:
-        holder = self.owner.holder_at(time.monotonic())
+        holder = self.owner.holder_at(self.now_s())
         return {"held": holder is not None, "yours": holder is client,
                 "holder": getattr(holder, "name", None), "policy": "first-come, until lift, disconnect or "
                 f"{OWNER_IDLE_S:g} s idle"}
@@ -594,7 +603,7 @@ class Server:
                 _, forgotten = self._osc_senders.popitem(last=False)
                 self._let_go(forgotten)
         self._osc_senders.move_to_end(sender)
-        now_s = time.monotonic()
+        now_s = self.now_s()
         self.counters["osc_messages"] += 1
         if not client.messages.take(1, now_s):
             client.dropped += 1
