@@ -3,7 +3,7 @@ renderer takes samples in process and from a WebSocket client in another process
 client sent is tied to the block that read it (the worker refuses a phase where the counts disagree); and a
 client's pings are timed idle, under large inline textures and under bad OSC bundles, each load shown to
 have run (the server counted its refusals). Figures are the benchmark's to report, not the test's to judge
-(docs/testing.md)."""
+(docs/testing.md "Three tiers"), how many samples and pings a run timed included: a loaded machine times fewer."""
 
 from __future__ import annotations
 
@@ -26,12 +26,12 @@ def test_the_serve_latency_bench_measures_both_ways_of_pushing(tmp_path: Path) -
     report = json.loads((tmp_path / "latency_serve.json").read_text())
     for phase in ("in-process", "websocket"):
         row = report["summary"][phase]
-        assert row["n"] > 100 and math.isfinite(row["p50_ms"]) and 0 < row["p50_ms"] <= row["p99_ms"]
+        assert row["n"] > 0 and math.isfinite(row["p50_ms"]) and 0 < row["p50_ms"] <= row["p99_ms"]
     assert report["result"]["server"]["samples"] >= report["summary"]["websocket"]["n"]  # all pushed, most timed
     pings = report["summary"]["ping"]
     for phase in ("idle", "texture", "osc-20", "osc-flood"):
         row = pings[phase]
-        assert row["n"] > 10 and 0 < row["p50_ms"] <= row["p99_ms"] <= row["max_ms"] and row["ratio_to_idle"]["p50"] > 0
+        assert row["n"] > 0 and 0 < row["p50_ms"] <= row["p99_ms"] <= row["max_ms"] and row["ratio_to_idle"]["p50"] > 0
     assert sum(server.get("error_texture", 0) for server in pings["texture"]["server"]) >= 1
     assert all(server.get("error_bad_message", 0) > 0 for server in pings["osc-20"]["server"])
     assert sum(server.get("osc_dropped", 0) for server in pings["osc-flood"]["server"]) > 0
