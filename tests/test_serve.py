@@ -253,6 +253,22 @@ def test_one_client_owns_the_finger_until_it_lifts_or_leaves(server: Serve) -> N
         telemetry_until(first, lambda m: not m["touching"] and m["voltage_v"] == 0.0)
 
 
+def test_an_idle_holder_keeps_the_finger_for_its_idle_time_on_the_servers_clock_and_no_longer() -> None:
+    from tpad_rt.serve.server import OWNER_IDLE_S
+
+    clock = VirtualClock()
+    with ServeThread(clock) as serve, Client(serve.ws_url) as first, Client(serve.ws_url) as second:
+        first.send({"type": "finger", "x_mm": 30.0, "y_mm": 30.0})
+        assert first.expect("finger")["yours"] is True
+        clock.advance_by(round(OWNER_IDLE_S * 1e9))  # idle for exactly its idle time: still the holder's
+        busy = second.request({"type": "finger", "x_mm": 90.0, "y_mm": 30.0}, "finger")
+        assert (busy["type"], busy["code"]) == ("error", "finger_busy")
+        clock.advance_by(1)
+        second.send({"type": "finger", "x_mm": 90.0, "y_mm": 30.0})
+        assert second.expect("finger", lambda m: m["held"] and m["yours"])["holder"] == second.hello["client"]
+        assert first.expect("finger", lambda m: m["held"])["yours"] is False
+
+
 def test_textures_by_name_path_and_yaml_reach_every_client_and_the_renderer(server: Serve, texture_dir: Path) -> None:
     with Client(server.ws_url) as setter, Client(server.ws_url) as watcher:
         watcher.request({"type": "subscribe", "rate_hz": 50}, "subscribed")
