@@ -199,14 +199,22 @@ def assert_kept_up(run: tuple[int, int], control: tuple[int, int]) -> None:
 
 @pytest.mark.realtime
 def test_renderer_is_called_in_every_cycle_the_server_runs(jack: str) -> None:
+    """Realtime: called in the cycles the control client is called in, late in few more, and its compute time's
+    p99 within the period (a starved machine preempts a callback mid-block)."""
     with ControlClient() as control, Renderer(output="audio://", texture=GRATING) as renderer:
         stats, run, control_run = renderer_run(renderer, control, RUN_S,
                                                lambda: live_swipe(renderer, 10.0, 50.0, RUN_S))
     print(stats, f"(callbacks, underflows) in the run: {run}, the control client's {control_run}")
     assert_kept_up(run, control_run)
-    assert stats["frames"] == stats["callbacks"] * BLOCK
-    assert stats["compute_us_p50"] > 0 and stats["compute_us_max"] >= stats["compute_us_p99"]
     assert 0 < stats["callback_load_p99"] < 1
+
+
+def test_stats_count_the_frames_compute_power_and_push_to_dac_latency(jack: str) -> None:
+    with Renderer(output="audio://", texture=GRATING) as renderer:
+        live_swipe(renderer, 10.0, 50.0, 0.3)
+        stats = renderer.stats()
+    assert stats["callbacks"] > 0 and stats["frames"] == stats["callbacks"] * BLOCK
+    assert stats["compute_us_p50"] > 0 and stats["compute_us_max"] >= stats["compute_us_p99"]
     assert stats["blocks"] > 0 and stats["power_peak_w"] <= stats["power_budget_w"]
     assert 0 < stats["latency_ms_p50"] <= stats["latency_ms_p99"]
     # the host's callback-to-DAC delay is the playback latency the server declares (2 periods: async mode)
