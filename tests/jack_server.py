@@ -26,8 +26,7 @@ from collections.abc import Iterator
 from typing import Any
 
 from conftest import require_program, require_system
-from jackd import RunningServer, dummy_server, wait_until_serving
-from tpad_rt.errors import BackendError
+from jackd import RunningServer, dummy_server
 from tpad_rt.outputs import audio
 
 
@@ -74,31 +73,13 @@ def jack_server(rate_hz: int = 192000, period_frames: int = 64, *, sync: bool = 
         sounddevice._initialize()
 
 
-#: Tries at initialising PortAudio onto a server that is up (component start-up, not a test retrying).
-ATTACH_TRIES = 3
-
-
 def _attach_portaudio(server: RunningServer) -> None:
-    """Re-initialise PortAudio so that its JACK host API opens on ``server``, which :func:`jackd.dummy_server`
-    has already seen serve a client (its ports listed). A JACK client opened just after the server came up has
-    failed to attach its shared memory while the server ran (a CI run: "JackShmReadWritePtr::~JackShmReadWritePtr
-    - Init not done for -1"): then PortAudio is initialised again once another client of the server has listed
-    its ports (:func:`jackd.wait_until_serving`), at most ATTACH_TRIES times in all. Raises PortAudioError after
-    the last (PortAudio uninitialised), BackendError when the server stops serving."""
-    import sounddevice
-
-    for attempt in range(1, ATTACH_TRIES + 1):
-        try:
-            if attempt == 1:
-                audio.rescan_devices()  # terminates PortAudio, then initialises it
-            else:
-                sounddevice._initialize()  # the failed try left it uninitialised
-            return
-        except sounddevice.PortAudioError:
-            if attempt == ATTACH_TRIES:
-                raise
-            if not wait_until_serving(server.name, server.process):
-                raise BackendError(f"JACK server {server.name} stopped serving while PortAudio attached") from None
+    """Re-initialise PortAudio so that its JACK host API opens on ``server``. Once, on a condition: a JACK client
+    opened just as the server's process came up has failed to attach its shared memory while the server ran (a CI
+    run: "JackShmReadWritePtr::~JackShmReadWritePtr - Init not done for -1"), so :func:`jackd.dummy_server` has
+    already waited until another client of the server listed its ports (:func:`jackd.wait_until_serving`).
+    Raises PortAudioError when PortAudio cannot initialise (left uninitialised)."""
+    audio.rescan_devices()  # terminates PortAudio, then initialises it
 
 
 def kill_server_under(command: list[str], **popen: Any) -> subprocess.CompletedProcess[str]:

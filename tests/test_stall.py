@@ -142,8 +142,8 @@ def test_a_stall_watch_refuses_a_limit_that_is_not_a_positive_whole_ns(limit_ns:
 
 
 def test_the_audio_driver_watches_on_the_host_clock_for_at_least_four_blocks() -> None:
-    assert isinstance(AudioCallbackDriver.clock, MonotonicClock)
     renderer = Renderer(output="audio://?rate=192000&block=4096", stall_timeout_s=0.01)
+    assert isinstance(renderer.driver, AudioCallbackDriver) and isinstance(renderer.driver.clock, MonotonicClock)
     assert renderer.driver.stall_limit_s() == STALL_MIN_BLOCKS * 4096 / 192000
     assert Renderer(output="audio://", stall_timeout_s=2.5).driver.stall_limit_s() == 2.5
 
