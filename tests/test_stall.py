@@ -30,7 +30,7 @@ from jack_server import jack_server, server_process, wait_until_playing
 from tpad_rt.clock import MonotonicClock, VirtualClock
 from tpad_rt.drivers.audio_callback import STALL_MIN_BLOCKS, AudioCallbackDriver
 from tpad_rt.drivers.stall_watch import StallWatch
-from tpad_rt.engine import Renderer
+from tpad_rt.engine import WATCH_PERIOD_S, Renderer
 from tpad_rt.limits import MAX_STALL_TIMEOUT_S
 from tpad_rt.errors import ConfigError
 from jackd import RunningServer, stop_process
@@ -283,9 +283,15 @@ def test_a_server_stopping_while_the_stream_stops_is_a_stall_and_stop_returns() 
     assert lines[1] == "stopped False"
 
 
+#: The holder's break between two holds (s): five of the Renderer's watcher periods, in which the watcher drains
+#: the telemetry a hold left (a 10 ms break, half a period, was missed three times in a row on a loaded machine:
+#: 9191 rows undrained overflowed the 8192-row ring).
+HOLD_BREAK_S = 5 * WATCH_PERIOD_S
+
+
 class GilHolder:
     """A thread that holds the GIL for ``hold_s`` at a time (libc's usleep called through ctypes.PyDLL, which
-    keeps the GIL), with short breaks, until the block ends; ``.holds`` counts the holds completed."""
+    keeps the GIL), with HOLD_BREAK_S breaks, until the block ends; ``.holds`` counts the holds completed."""
 
     def __init__(self, hold_s: float):
         self.hold_us = round(hold_s * 1e6)
@@ -295,7 +301,7 @@ class GilHolder:
 
     def _hold(self) -> None:
         usleep = ctypes.PyDLL(None).usleep
-        while not self._stop.wait(0.01):
+        while not self._stop.wait(HOLD_BREAK_S):
             usleep(self.hold_us)
             self.holds += 1
 
