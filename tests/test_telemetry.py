@@ -13,9 +13,10 @@ import pytest
 import tpad_rt.telemetry
 from tpad_rt.device import Device
 from tpad_rt.kernel import table as tab
-from tpad_rt.kernel.layout import TEL_NAMES
+from tpad_rt.kernel.layout import STATE_NEXT_INDEX, TEL_NAMES
 from tpad_rt.pipeline import Pipeline
 from tpad_rt.realtime import CallbackTable
+from tpad_rt.recording import read_recording, run_metadata
 from tpad_rt.telemetry import TelemetryLog
 from tpad_rt.texture import load_compiled
 
@@ -170,3 +171,27 @@ def test_latency_without_pushes_is_nan() -> None:
     _render(table, 3)
     latency = log.latency_ms(table.recent_blocks())
     assert np.isnan(latency["latency_ms_p50"]) and np.isnan(latency["latency_ms_p99"])
+
+
+def test_a_recording_takes_the_drive_up_to_the_last_finished_block_not_the_published_index(tmp_path: Path) -> None:
+    """A block's index is published while it renders and its samples reach the drive ring after: a drain in
+    between (the watcher, on another core) must not copy the ring's stale samples from its previous lap. Here the
+    kernel's published index is put ahead of the finished blocks, as a drain would find it mid-block."""
+    pipeline, table, log = _setup()
+    assert table.drive_end() is None  # no block finished yet
+    log.record(tmp_path / "run.npz")
+    pipeline.start()
+    pipeline.push_finger(0.0, 30.0, 20.0)
+    _render(table, 4)
+    assert table.drive_end() == 4 * BLOCK == table.next_sample
+    table.drive[4 * BLOCK:5 * BLOCK] = 0.75  # the ring's stale lap, where block 4 will go
+    table.arrays.state[STATE_NEXT_INDEX] = 5 * BLOCK  # block 4 published, its samples not yet in the ring
+    log.drain(table)
+    table.arrays.state[STATE_NEXT_INDEX] = 4 * BLOCK
+    _render(table, 2)
+    log.drain(table)
+    log.write_recording(run_metadata(pipeline, load_compiled(GRATING), texture_path=None, block_frames=BLOCK,
+                                     input_url="api", output_url="null://"))
+    drive = read_recording(tmp_path / "run.npz").drive
+    assert len(drive) == 6 * BLOCK and not np.any(drive == 0.75)
+    assert np.array_equal(drive, table.drive[:6 * BLOCK])

@@ -9,7 +9,8 @@ CallbackTable(arrays, texture, *, channels=1, channel=0, scratch_frames=4096, dr
     shared, not copied), two texture slots, the output scratch, the drive ring, the
     statistics (``.stats``) and the per-block records (``.blocks``)
     ``.user_data``: the address to pass as ``userData``; ``.set_texture(texture, t0_s, running)``;
-    ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.copy()``; ``.call(out, callback=None)``
+    ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.drive_end()``; ``.copy()``;
+    ``.call(out, callback=None)``
 monotonic_ns() -> int
     the clock the callback stamps blocks with (CLOCK_MONOTONIC, ns)
 
@@ -154,6 +155,16 @@ class CallbackTable:
         row = self.blocks[(callbacks - 1) % self.blocks.shape[0]]
         since_s = (now_ns - row[tab.BLOCK_ENTRY_NS] - row[tab.BLOCK_DAC_DELAY_NS]) * 1e-9
         return float(row[tab.BLOCK_SAMPLE_INDEX]) + since_s * float(self.arrays.cfg[CFG_FS_HZ])
+
+    def drive_end(self) -> int | None:
+        """The stream index after the last sample of the newest block the callback finished: the drive ring holds
+        every sample before it (a block's index is published as it renders, its samples reach the ring after);
+        None before the first block."""
+        callbacks = int(self.stats[tab.STAT_CALLBACKS])  # released last by finish_block
+        if callbacks == 0:
+            return None
+        row = self.blocks[(callbacks - 1) % len(self.blocks)]
+        return int(row[tab.BLOCK_SAMPLE_INDEX] + row[tab.BLOCK_FRAMES])
 
     @property
     def next_sample(self) -> int:

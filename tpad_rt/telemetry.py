@@ -80,7 +80,7 @@ class TelemetryLog:
         saying so (for the renderer's watcher to end the run with; drain itself never raises).
         """
         with self._lock:
-            frames = table.next_sample
+            frames = table.drive_end()  # not the next index: a block's samples reach the ring after it is published
             rows = self._pipeline.drain_telemetry()
             count = len(rows["t"])
             if count == 0:
@@ -105,14 +105,16 @@ class TelemetryLog:
             self._pending_rows += len(chunk["t"])
         self._pending_rows = _keep_newest(self._pending, self._pending_rows)
 
-    def _record(self, rows: dict[str, np.ndarray], table: CallbackTable, frames: int) -> None:
-        """Keep ``rows`` and the drive samples up to ``frames`` for the recording (under the lock). Past a limit
+    def _record(self, rows: dict[str, np.ndarray], table: CallbackTable, frames: int | None) -> None:
+        """Keep ``rows`` and the drive samples up to ``frames`` (None: none yet) for the recording (under the
+        lock). Past a limit
         the recording ends where it was whole (the metadata says why: ``truncated``) and :attr:`failure` says
         so."""
         if self._truncated is not None:
             return
         if not self._recorded:
             self._drive_from = self._record_from = round(float(rows["t"][0]) * self.rate_hz)
+        frames = self._drive_from if frames is None else frames
         problem = None
         if frames - self._drive_from > len(table.drive):
             problem = (f"{frames - self._drive_from} drive samples were due but the ring holds {len(table.drive)}: "

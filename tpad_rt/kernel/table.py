@@ -56,7 +56,7 @@ import numpy as np
 
 from tpad_rt.kernel.jit import njit
 from tpad_rt.kernel import atomics, libc, render
-from tpad_rt.kernel.atomics import load_acquire
+from tpad_rt.kernel.atomics import load_acquire, store_release
 from tpad_rt.kernel.libc import monotonic_ns, pointer
 from tpad_rt.kernel.layout import CFG_TEXTURE_T0_S, FINGER_COLS, STATE_NEXT_INDEX, TEL_COLS, TEX_PROG_COLS
 from tpad_rt.kernel.render import render_block
@@ -156,7 +156,9 @@ def finish_block(stats, row, entry_ns, frames, underflow, priming):  # type: ign
         stats[STAT_PRIMING] += 1
     stats[STAT_FRAMES] += frames
     row[BLOCK_COMPUTE_NS] = monotonic_ns() - entry_ns
-    stats[STAT_CALLBACKS] += 1
+    # Last, released: a reader that acquires the count sees this block's record and the drive ring's samples
+    # of it written (CallbackTable.drive_end).
+    store_release(stats, STAT_CALLBACKS, stats[STAT_CALLBACKS] + 1)
 
 
 @njit(inline="always", nogil=True, error_model="numpy")
