@@ -23,6 +23,7 @@ a new server takes the same name. jackd logs to a file, never to a pipe nobody r
 from __future__ import annotations
 
 import contextlib
+import os
 import ctypes
 import re
 import shutil
@@ -128,7 +129,8 @@ def dummy_server(rate_hz: int = 192000, period_frames: int = 64, *, sync: bool =
     server the caller already stopped is fine.
     """
     jackd, jack_wait = program("jackd"), program("jack_wait")
-    name = free_server_name(jack_wait, prefix)
+    # Each pytest-xdist worker names its servers apart: two workers never race for one free name.
+    name = free_server_name(jack_wait, prefix + os.environ.get("PYTEST_XDIST_WORKER", ""))
     sink = open(log, "w+b") if log is not None else tempfile.TemporaryFile()  # noqa: SIM115
     mode = ["-S"] if sync else []
     process = subprocess.Popen(
