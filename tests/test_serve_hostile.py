@@ -14,7 +14,7 @@ import socket
 import struct
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -204,8 +204,17 @@ def test_each_malformed_datagram_gets_one_error_and_python_osc_never_sees_it(ser
         assert replies == ["/tpad/error", "/tpad/pong", "/tpad/pong"]  # nested, well formed: each message handled
 
 
-#: Bad datagrams the server must have received while one client's pings were answered.
+#: Bad datagrams the server must have received while one client's pings were answered, and the pings.
 FLOOD_SEEN = 2000
+PINGS = 12
+
+
+def _wait_for(condition: Callable[[], bool]) -> None:
+    """Until ``condition()`` holds; AssertionError after REPLY_TIMEOUT_S (a failure bound, never what is judged)."""
+    deadline = time.monotonic() + REPLY_TIMEOUT_S
+    while not condition():
+        assert time.monotonic() < deadline, "the condition never held"
+        threading.Event().wait(0.001)
 
 
 def test_pings_are_answered_while_bad_bundles_stream_in() -> None:
@@ -234,12 +243,18 @@ def test_pings_are_answered_while_bad_bundles_stream_in() -> None:
         sender.start()
         seen: list[int] = []  # osc_datagrams after each ping
         try:
-            while len(seen) < 12 or seen[-1] - seen[0] < FLOOD_SEEN:
-                assert client.request({"type": "ping", "t": 1.5}, "pong")["t"] == 1.5
+            # PINGS pings, each once the flood has moved on by its share of FLOOD_SEEN: as many pings on a slow
+            # host as on a fast one (the server's clock stands still, so the client's own message budget, burst
+            # MESSAGES_BURST, never refills: a ping count that grew with the host's slowness would exhaust it).
+            for k in range(PINGS):
+                _wait_for(lambda: counters["osc_datagrams"] >= (seen[0] if seen else 0) + k * FLOOD_SEEN // (PINGS - 1))
+                reply = client.request({"type": "ping", "t": 1.5}, "pong")
+                assert reply["type"] == "pong" and reply["t"] == 1.5, reply
                 seen.append(counters["osc_datagrams"])
         finally:
             stop.set()
             sender.join()
+        assert seen[-1] - seen[0] >= FLOOD_SEEN
         burst = osc_limits.DATAGRAMS_PER_S / 10
         assert counters["osc_dropped"] >= counters["osc_datagrams"] - burst > 0, counters
         assert 0 < counters["error_bad_message"] <= burst, counters
