@@ -433,7 +433,9 @@ class Renderer:
         return result
 
     def telemetry(self) -> dict[str, np.ndarray]:
-        """The telemetry rows since the last call (at most tpad_rt.telemetry.MAX_PENDING_ROWS, the newest), by TEL_NAMES column."""
+        """The telemetry rows since the last call (at most tpad_rt.telemetry.MAX_PENDING_ROWS, the newest), by TEL_NAMES
+        column, and by the columns the output measured per block (``sim://``: ``plate_amplitude_um``,
+        ``achieved_mu``; NaN for a block it did not measure)."""
         if self._table is not None:
             self._log.drain(self._table)
         return self._log.take()
