@@ -269,6 +269,7 @@ def test_capture_carrier_envelope_and_stop_ramp(jack: str, tmp_path: Path) -> No
     assert np.all(samples[(end + 2) * window:] == 0.0)
 
 
+@pytest.mark.realtime  # the swap is made from the host's thread mid-touch: a host held up moves it to the touch's end
 def test_set_texture_keeps_the_carrier_phase(jack: str, tmp_path: Path) -> None:
     """The carrier's phase across set_texture, read from the recording of the samples the callback made
     (lossless, unlike a capture client, which an xrun of the shared machine slips by whole periods)."""

@@ -47,10 +47,10 @@ def test_without_sound_card_or_display_it_plays_a_swipe_on_the_simulated_plate()
     assert mean_error < 0.01  # the simulated plate follows the texture under the finger (render: 0.0024)
     judged = int(friction[0].split(" over ")[1].split(" touching")[0])
     callbacks = int(lines[1].split(": ")[1].split(" callbacks")[0])
-    # Every block the finger touched is judged, from what the plate measured of it (the telemetry's columns): all
-    # but those before the swipe's first sample landed. How many blocks a second plays is the paced driver's,
-    # checked on a virtual clock (tests/test_paced.py), not on this host's.
-    assert 0.5 * callbacks <= judged <= callbacks, (lines[1], friction[0])
+    # Blocks the finger touched are judged, from what the plate measured of them (the telemetry's columns). How many
+    # a second plays, and so how many the swipe touches, is the host's: the pacing is checked on a virtual clock
+    # (tests/test_paced.py), and that every row is measured and read once in tests/test_telemetry.py.
+    assert 0 < judged <= callbacks, (lines[1], friction[0])
     # The plate follows the texture but where a touch starts: the drive fades in over ramp_ms there (how many blocks
     # that covers depends on where the texture is when the first sample lands, so on the host's timing).
     departed = int(friction[0].split("departures: ")[1].split(" blocks")[0])

@@ -204,6 +204,28 @@ def test_a_lost_silent_or_deaf_amplifier_ends_the_run_in_one_line(fault: str, me
         assert run.stats()["tx_blocked"] > 0
 
 
+def test_after_a_failed_read_nothing_more_goes_to_the_port() -> None:
+    """A read that fails loses the port (H7): the bytes still queued for it (an amplifier that read nothing for a
+    while left the line full) are not written after it, and no STOP follows, though the line would take them."""
+    link = VirtualLink.emulating(DEVICE)
+    run = swiped(link, 0.2)
+    link.stop_reading()
+    run.run_for(0.1)  # the line fills; frames wait in the host's queue (within the 120 ms stall limit)
+    queued = run.amp_link.link  # type: ignore[union-attr]
+    assert queued[amp_stream.LINK_TX_END] > queued[amp_stream.LINK_TX_FIRST]
+    link.lose_reads()
+    link.resume_reading()  # the line has room again
+    written_after: list[int] = []
+    put = link.put
+    link.put = lambda data: written_after.append(len(data)) or put(data)  # type: ignore[method-assign]
+    run.run_for(0.2)
+    failure = run.driver.poll(run.table)
+    assert isinstance(failure, BackendError) and "Input/output error" in str(failure)
+    assert written_after == []  # not a byte after the failed read
+    assert queued[amp_stream.LINK_STOP_SEQ] == -1
+    assert run.stop() is failure
+
+
 def test_an_overcurrent_fault_ends_the_run_with_stop() -> None:
     link = VirtualLink.emulating(DEVICE)
     run = swiped(link, 0.2)

@@ -121,6 +121,7 @@ class VirtualLink:
         self.reading = True
         self.alive = True
         self.lost = False
+        self.reads_lost = False  # the host's reads fail (EIO) while its writes still go out
         self.frozen_until_ns = -1
         self.closed = False
 
@@ -186,6 +187,10 @@ class VirtualLink:
         """The port is lost: the host's reads and writes fail with EIO."""
         self.lost = True
 
+    def lose_reads(self) -> None:
+        """Half a lost port: the host's reads fail with EIO, its writes still reach the amplifier."""
+        self.reads_lost = True
+
     def recording(self) -> dict[str, np.ndarray]:
         """The samples the amplifier applied so far (the emulator's RECORDED_COLUMNS); ValueError without a
         recorder."""
@@ -205,8 +210,9 @@ class VirtualLink:
         return data
 
     def take(self, limit: int) -> bytes | None:
-        """At most ``limit`` of the bytes that reached the host by now; None when the port is lost."""
-        if self.lost or self.closed:
+        """At most ``limit`` of the bytes that reached the host by now; None when the port (or its reading) is
+        lost."""
+        if self.lost or self.reads_lost or self.closed:
             return None
         now_ns = self.clock.now_ns()
         chunks: list[bytes] = []

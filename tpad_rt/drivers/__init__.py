@@ -7,7 +7,7 @@ open_driver(url, *, device, rate_hz, block_frames, options, stall_timeout_s) -> 
     ConfigError as :func:`tpad_rt.outputs.output_kind`, or for a kind whose driver is no Driver
 Driver
     base class: ``rate_hz``, ``block_frames``, ``options``, ``consumes``, ``channels``,
-    ``channel``, ``drive``, ``clock``; ``prepare()``, ``warm(table)``, ``open(pipeline)``,
+    ``channel``, ``clock``, ``log``; ``prepare()``, ``warm(table)``, ``open(pipeline)``,
     ``start(table)``, ``poll(table)``, ``wait_silent(table, ended)``, ``close(ramp_ms)``,
     ``stats()``, ``summary_lines(stats)``, ``stream_time_s()``
 
@@ -34,7 +34,7 @@ def driver_class(name: str) -> type[Driver]:
     module_name, _, class_name = name.partition(":")
     try:
         found = getattr(importlib.import_module(module_name), class_name)
-    except (ImportError, AttributeError) as error:
+    except Exception as error:  # noqa: BLE001 - a package's driver module may raise anything on import: one message
         raise ConfigError(f"output driver {name}: not found ({error})") from None
     if not (isinstance(found, type) and issubclass(found, Driver)):
         raise ConfigError(f"output driver {name}: not a tpad_rt.drivers.Driver")

@@ -833,6 +833,7 @@ def _begin_stop(link: np.ndarray, buffers: np.ndarray) -> None:
     link[LINK_STOP_SEQ] = -1
     if link[LINK_REASON] == EXIT_PORT_LOST:
         _finish(link, False)
+        link[LINK_TX_FIRST] = link[LINK_TX_END] = 0  # nothing more goes to a lost port, queued frames included
         return
     codec.put_u16(buffers[BUF_FRAME], PAYLOAD, min(max(link[LINK_STOP_RAMP_MS], 1), 0xFFFF))
     link[LINK_STOP_SEQ] = link[LINK_SEQ]

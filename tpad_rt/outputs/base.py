@@ -69,7 +69,8 @@ class Output(ABC):
     """Base class of output backends (pyserial model: state what a backend must implement).
 
     A backend implements :meth:`write`; one that measures something per block returns it
-    from :meth:`measurements`; one that holds a resource (a file, a stream) overrides
+    from :meth:`measurements` (all so far: the offline render) and :meth:`take_measurements`
+    (since the last take, then forgotten: the real-time driver, after every step); one that holds a resource (a file, a stream) overrides
     :meth:`close`, which must be safe to call twice. Outputs are context managers that
     close on exit. ``fs_hz`` is the sample rate (Hz) the blocks are played at.
     """
