@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pytest
+from test_audio_engine import wait_for_stream
 
 from tpad_rt import outputs
 from tpad_rt.device import Device
@@ -83,21 +84,14 @@ def registered() -> Iterator[None]:
 
 def _slide(renderer: Renderer, x_mm: np.ndarray, dt_s: float) -> None:
     """Push a finger at each of ``x_mm`` (y = 20 mm), ``dt_s`` apart on the stream clock, each once the stream
-    has rendered up to it (waiting on the samples rendered, not on the wall clock), then lift it."""
+    has rendered up to it (waiting on the samples rendered, not on the wall clock: wait_for_stream), then lift
+    it."""
     t0_s = renderer.now_s() + 0.01
     for k, x in enumerate(x_mm):
         renderer.push_finger(float(x), 20.0, t=t0_s + k * dt_s)
-        _wait_rendered(renderer, t0_s + k * dt_s)
+        wait_for_stream(renderer, t0_s + k * dt_s)
     renderer.lift(t=t0_s + len(x_mm) * dt_s)
-    _wait_rendered(renderer, t0_s + len(x_mm) * dt_s + 0.02)
-
-
-def _wait_rendered(renderer: Renderer, t_s: float) -> None:
-    """Until the stream has rendered past stream time ``t_s`` (s); the run's error, if one ends it."""
-    table = renderer.callback_table
-    assert table is not None
-    while table.next_sample < t_s * renderer.rate_hz:
-        renderer.join(0.005)
+    wait_for_stream(renderer, t0_s + len(x_mm) * dt_s + 0.02)
 
 
 def test_a_registered_output_kind_plays_through_the_renderer(registered: None) -> None:

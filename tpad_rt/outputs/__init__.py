@@ -174,17 +174,13 @@ def open_output(url: str, *, device: Device, fs_hz: int) -> Output:
     """Open the output ``url`` names offline, for ``device`` at ``fs_hz`` (Hz); errors as the module docstring
     says (the messages list the offline forms only: they are what may be opened here)."""
     offline = _schemes(offline=True)  # an installed package's scheme is among them until it is imported
-    every_offline = [form for forms in offline.values() for form in forms]
     scheme, separator, _ = url.partition("://")
-    if separator and scheme in _schemes() and scheme not in offline:
+    if separator and scheme in _schemes() and not output_module(scheme).KIND.can(Capability.OFFLINE):
         raise Url(url, "output", scheme, "").fail(
-            f"{scheme}:// plays in real time only (tpad-rt play or a Renderer), not offline", every_offline)
+            f"{scheme}:// plays in real time only (tpad-rt play or a Renderer), not offline",
+            [form for forms in offline.values() for form in forms])
     parsed = parse_url(url, "output", offline)
-    module = output_module(parsed.scheme)
-    if not module.KIND.can(Capability.OFFLINE):
-        raise parsed.fail(f"{parsed.scheme}:// plays in real time only (tpad-rt play or a Renderer), not offline",
-                          every_offline)
-    return module.open_url(parsed, device=device, fs_hz=fs_hz)
+    return output_module(parsed.scheme).open_url(parsed, device=device, fs_hz=fs_hz)
 
 
 def open_paced(url: Url, *, device: Device, fs_hz: int) -> Output:
