@@ -12,6 +12,9 @@ G4_CFLAGS := $(CFLAGS_COMMON) $(G4_CPU) -O2 -ffunction-sections -fdata-sections 
 G4_LDFLAGS := -nostartfiles -T$(G4_DIR)/link.ld -Wl,--gc-sections -Wl,-Map=$(G4_OUT)/tpad-amp.map \
   --specs=nano.specs --specs=nosys.specs
 G4_TEST := $(BUILD)/test/g4-registers
+# The flashing tools (the names can be overridden: `make flash-nucleo-g474re G4_OPENOCD=...`).
+G4_OPENOCD := openocd
+G4_STFLASH := st-flash
 
 .PHONY: nucleo-g474re flash-nucleo-g474re test-nucleo-g474re
 nucleo-g474re: $(G4_OUT)/tpad-amp.elf $(G4_OUT)/tpad-amp.bin
@@ -26,12 +29,12 @@ $(G4_OUT)/tpad-amp.bin: $(G4_OUT)/tpad-amp.elf
 
 # Flash over the board's ST-LINK: Debian's openocd, else st-flash (stlink-tools).
 flash-nucleo-g474re: $(G4_OUT)/tpad-amp.elf $(G4_OUT)/tpad-amp.bin
-	@if command -v openocd >/dev/null; then \
-	  openocd -f interface/stlink.cfg -f target/stm32g4x.cfg -c "program $(G4_OUT)/tpad-amp.elf verify reset exit"; \
-	elif command -v st-flash >/dev/null; then \
-	  st-flash --reset write $(G4_OUT)/tpad-amp.bin 0x08000000; \
+	@if command -v $(G4_OPENOCD) >/dev/null; then \
+	  $(G4_OPENOCD) -f interface/stlink.cfg -f target/stm32g4x.cfg -c "program $(G4_OUT)/tpad-amp.elf verify reset exit"; \
+	elif command -v $(G4_STFLASH) >/dev/null; then \
+	  $(G4_STFLASH) --reset write $(G4_OUT)/tpad-amp.bin 0x08000000; \
 	else \
-	  echo "flash-nucleo-g474re: neither openocd nor st-flash found (Debian: apt install openocd, or stlink-tools)" >&2; exit 1; \
+	  echo "flash-nucleo-g474re: neither $(G4_OPENOCD) nor $(G4_STFLASH) found (Debian: apt install openocd, or stlink-tools)" >&2; exit 1; \
 	fi
 
 # The register test: the set-up and board layer built for the host on RAM (-DG4_REGISTER_TEST).

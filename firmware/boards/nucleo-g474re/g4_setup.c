@@ -198,14 +198,14 @@ static void adc_setup(void)
     }
     delay_us(ADC_AFTER_CAL_US);
     for (int i = 0; i < 2; i++) {
-        G4_REG(adcs[i], ADC_ISR) = ADC_ISR_ADRDY;
-        G4_REG(adcs[i], ADC_CR) |= ADC_CR_ADEN;
-        wait_for(adcs[i], ADC_ISR, ADC_ISR_ADRDY, ADC_ISR_ADRDY);
+        /* Configured while disabled (every field below may be written with ADEN = 0). */
         G4_REG(adcs[i], ADC_CFGR) = ADC_CFGR_JQDIS | ADC_CFGR_OVRMOD
             | ADC_CFGR_EXTEN_RISING << ADC_CFGR_EXTEN_SHIFT
             | ADC_CFGR_EXTSEL_TIM6_TRGO << ADC_CFGR_EXTSEL_SHIFT | ADC_CFGR_DMACFG | ADC_CFGR_DMAEN;
         G4_REG(adcs[i], ADC_SMPR1) = ADC_SMP_47_5 << (3u * channels[i]);
         G4_REG(adcs[i], ADC_SQR1) = channels[i] << ADC_SQR1_SQ1_SHIFT; /* L = 0: one conversion */
+        G4_REG(adcs[i], ADC_CR) |= ADC_CR_ADEN; /* ADRDY is 0 from reset until then */
+        wait_for(adcs[i], ADC_ISR, ADC_ISR_ADRDY, ADC_ISR_ADRDY);
     }
 }
 
