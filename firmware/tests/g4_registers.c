@@ -107,7 +107,7 @@ static void power_on(void)
     *reg(G4_RCC, 0x48) = 0x00000100u;      /* RCC_AHB1ENR: FLASHEN */
     *reg(G4_RCC, 0x58) = 0x00000400u;      /* RCC_APB1ENR1: RTCAPBEN */
     *reg(G4_PWR, 0x80) = 0x00000100u;      /* PWR_CR5: R1MODE (range 1 normal) (§6.4) */
-    *reg(G4_FLASH_IF, 0x00) = 0x00000600u; /* FLASH_ACR: ICEN, DCEN (§3.7) */
+    *reg(G4_FLASH_IF, 0x00) = 0x00040600u; /* FLASH_ACR: DBG_SWEN, ICEN, DCEN (§3.7) */
     *reg(G4_GPIOA, 0x00) = 0xABFFFFFFu;    /* GPIOA_MODER: analog, PA13-15 debug (§9.4) */
     *reg(G4_GPIOA, 0x0C) = 0x64000000u;    /* GPIOA_PUPDR */
     *reg(G4_GPIOA, 0x10) = 1u << 9;        /* IDR: the fault line PA9 high (no fault) */
@@ -139,6 +139,7 @@ static void test_clock(void)
     check("PWR_CR5.R1MODE (boost)", field(G4_PWR, 0x80, 8, 1), 0u, "RM0440 §6.1.5, §6.4 PWR_CR5");
     check("FLASH_ACR.LATENCY (4 WS)", field(G4_FLASH_IF, 0x00, 0, 4), 4u, "RM0440 §3.3.3 wait states table");
     check("FLASH_ACR.PRFTEN/ICEN/DCEN", field(G4_FLASH_IF, 0x00, 8, 3), 7u, "RM0440 §3.7 FLASH_ACR");
+    check("FLASH_ACR.DBG_SWEN (debugger kept)", field(G4_FLASH_IF, 0x00, 18, 1), 1u, "RM0440 §3.7 FLASH_ACR");
     /* The order of §6.1.5 "range 1 boost mode": AHB /2, R1MODE = 0 and the wait states set
      * before the switch to the higher frequency (seen by the model when SW became PLL). */
     check("switched to the PLL", (uint64_t)switched, 1u, "RM0440 §7.4 RCC_CFGR.SWS");

@@ -59,6 +59,7 @@ extern uint32_t g4_test_blocks[G4_BLOCK_COUNT][G4_BLOCK_BYTES / 4u];
 #define FLASH_ACR_PRFTEN (1u << 8)   /* prefetch */
 #define FLASH_ACR_ICEN (1u << 9)     /* instruction cache */
 #define FLASH_ACR_DCEN (1u << 10)    /* data cache */
+/* bit 18 DBG_SWEN (1 from reset) lets the debugger in: the set-up keeps it */
 
 /* --- RM0440 §6.4 PWR registers; §6.1 "Dynamic voltage scaling management" (range 1 boost) --- */
 #define PWR_CR5 0x80u

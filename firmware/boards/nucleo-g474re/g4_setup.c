@@ -97,8 +97,8 @@ static void clock_setup(void)
      * 3. the wait states of the new frequency, read back before the switch (RM0440 §3.3.3). */
     set_field(RCC_BASE, RCC_CFGR, RCC_CFGR_HPRE_SHIFT, 4u, RCC_CFGR_HPRE_DIV2);
     G4_REG(PWR_BASE, PWR_CR5) &= ~PWR_CR5_R1MODE;
-    G4_REG(FLASH_IF_BASE, FLASH_ACR) = FLASH_WAIT_STATES << FLASH_ACR_LATENCY_SHIFT
-        | FLASH_ACR_PRFTEN | FLASH_ACR_ICEN | FLASH_ACR_DCEN;
+    set_field(FLASH_IF_BASE, FLASH_ACR, FLASH_ACR_LATENCY_SHIFT, 4u, FLASH_WAIT_STATES);
+    G4_REG(FLASH_IF_BASE, FLASH_ACR) |= FLASH_ACR_PRFTEN | FLASH_ACR_ICEN | FLASH_ACR_DCEN; /* DBG_SWEN kept */
     wait_for(FLASH_IF_BASE, FLASH_ACR, FLASH_ACR_LATENCY_MASK, FLASH_WAIT_STATES);
     /* HSI16 (on from reset) feeds the PLL, which is set up while off (RM0440 §7.4.4). */
     G4_REG(RCC_BASE, RCC_CR) |= RCC_CR_HSION;
