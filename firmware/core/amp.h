@@ -161,6 +161,7 @@ typedef struct amp {
     uint32_t inc_carrier_mhz, inc_q, inc_r; /* increment for that carrier: inc_q + inc_r / phase_den */
     amp_played_t played[AMP_SYNTH_QUEUE];
     uint32_t played_head, played_tail, played_done; /* done: output samples made of the tail one */
+    uint8_t output_cut;           /* a fault began: the board is to drop its queued output */
     /* measurement */
     uint32_t measure_phase[AMP_MEASURE_RING];
     uint32_t written, measured;   /* output samples synthesised / measured, free-running */
@@ -203,6 +204,11 @@ size_t amp_transmit(amp_t *amp, uint8_t *out, size_t cap);
  * takes fewer than are made loses the oldest beyond AMP_SYNTH_QUEUE envelope samples (the phase
  * runs on). 0 when output_rate_hz is 0. */
 size_t amp_synthesize(amp_t *amp, int16_t *out, size_t cap);
+
+/* 1 once after a fault began (A6): the board drops the output it has queued (hal_output_off);
+ * amp_run does so. From the fault on, amp_synthesize makes the carrier at 0 (the applied envelope,
+ * what STATUS and the observer report, still ramps as A6 says). */
+int amp_take_output_cut(amp_t *amp);
 
 /* `n` ADC pairs (hal_adc_read's), the k-th taken while the k-th sample amp_synthesize gave
  * played. Synchronous demodulation against each sample's own phase, over windows of whole
