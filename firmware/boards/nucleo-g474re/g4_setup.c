@@ -14,8 +14,8 @@
 /* Most polls of a ready flag (well over the longest wait, the PLL's lock, at 170 MHz). */
 #define G4_WAIT_POLLS 1000000u
 
-/* PLL (RM0440 §7.2.4 "PLL"): VCO input = HSI16 / M (2.66..8 MHz), VCO = input * N (96..344 MHz),
- * SYSCLK = VCO / R: 16 MHz / 4 = 4 MHz, * 85 = 340 MHz, / 2 = 170 MHz. */
+/* PLL (RM0440 §7.2 "PLL", RCC_PLLCFGR's field notes): VCO input = HSI16 / M (2.66..8 MHz),
+ * VCO = input * N (96..344 MHz), SYSCLK = VCO / R: 16 MHz / 4 = 4 MHz, * 85 = 340 MHz, / 2 = 170 MHz. */
 #define PLL_M 4u
 #define PLL_N 85u
 #define PLL_R 2u
@@ -26,11 +26,13 @@
 /* The DAC's start-up ramp from 0 V to mid-scale: one code every 25 us, 51 ms in all, so that
  * the AC-coupled power stage (docs/firmware.md) sees no step. */
 #define DAC_RAMP_STEP_US 25u
-/* ADC (RM0440 §21.4.6): the voltage regulator's start-up time (t_ADCVREG_STUP, 20 us), and
- * the 4 ADC clocks after calibration before ADEN (1 us covers them at HCLK / 4). */
+/* ADC (RM0440 §21.4, its voltage regulator and calibration): the regulator's start-up time
+ * (t_ADCVREG_STUP, 20 us in the datasheet), and the 4 ADC clocks after calibration before ADEN
+ * (1 us covers them at HCLK / 4). */
 #define ADC_REGULATOR_US 20u
 #define ADC_AFTER_CAL_US 1u
-/* IWDG: LSI (32 kHz) / 4 = 8 kHz, 40 counts = 5 ms (4.7..5.4 ms over the LSI's 29.5..34 kHz). */
+/* IWDG: LSI (32 kHz) / 4 = 8 kHz, 40 counts = 5 ms (4.7..5.4 ms over the LSI's 29.5..34 kHz,
+ * datasheet DS12288). */
 #define IWDG_PRESCALER_CODE 0u
 #define IWDG_RELOAD 39u
 /* Interrupt priorities (upper 4 bits count on the G4): the UART first, so no byte is lost. */
@@ -38,7 +40,8 @@
 #define PRIORITY_DMA1_CH1 0x40u
 #define PRIORITY_TIM2 0x80u
 
-/* The pins (RM0440 §9; NUCLEO-G474RE user manual UM2505 for where they go). */
+/* The pins: their alternate and analog functions from the STM32G474 datasheet (DS12288,
+ * pin and alternate-function tables), where they go on the board from its user manual (UM2505). */
 #define PIN_VOLTAGE 0u   /* PA0 = ADC12_IN1 (Arduino A0): the voltage divider */
 #define PIN_CURRENT 1u   /* PA1 = ADC12_IN2 (Arduino A1): the current-sense amplifier */
 #define PIN_TX 2u        /* PA2 = USART2_TX, AF7: the ST-LINK virtual COM port */
