@@ -136,16 +136,16 @@ static void test_clock(void)
     check("RCC_CFGR.PPRE1 (/1)", field(G4_RCC, 0x08, 8, 3) & 4u, 0u, "RM0440 §7.4 RCC_CFGR");
     check("RCC_CFGR.PPRE2 (/1)", field(G4_RCC, 0x08, 11, 3) & 4u, 0u, "RM0440 §7.4 RCC_CFGR");
     /* 170 MHz needs range 1 boost: R1MODE = 0; 4 wait states (HCLK 136..170 MHz). */
-    check("PWR_CR5.R1MODE (boost)", field(G4_PWR, 0x80, 8, 1), 0u, "RM0440 §6.1.5, §6.4 PWR_CR5");
-    check("FLASH_ACR.LATENCY (4 WS)", field(G4_FLASH_IF, 0x00, 0, 4), 4u, "RM0440 §3.3.3 wait states table");
+    check("PWR_CR5.R1MODE (boost)", field(G4_PWR, 0x80, 8, 1), 0u, "RM0440 §6.1 range 1 boost, §6.4 PWR_CR5");
+    check("FLASH_ACR.LATENCY (4 WS)", field(G4_FLASH_IF, 0x00, 0, 4), 4u, "RM0440 §3.3 read access latency");
     check("FLASH_ACR.PRFTEN/ICEN/DCEN", field(G4_FLASH_IF, 0x00, 8, 3), 7u, "RM0440 §3.7 FLASH_ACR");
     check("FLASH_ACR.DBG_SWEN (debugger kept)", field(G4_FLASH_IF, 0x00, 18, 1), 1u, "RM0440 §3.7 FLASH_ACR");
-    /* The order of §6.1.5 "range 1 boost mode": AHB /2, R1MODE = 0 and the wait states set
+    /* The order of §6.1's "range 1 boost mode": AHB /2, R1MODE = 0 and the wait states set
      * before the switch to the higher frequency (seen by the model when SW became PLL). */
     check("switched to the PLL", (uint64_t)switched, 1u, "RM0440 §7.4 RCC_CFGR.SWS");
-    check("HPRE at the switch (/2)", at_switch_hpre, 8u, "RM0440 §6.1.5 step 1");
-    check("R1MODE at the switch", at_switch_r1mode, 0u, "RM0440 §6.1.5 step 2");
-    check("LATENCY at the switch", at_switch_latency, 4u, "RM0440 §6.1.5 step 3");
+    check("HPRE at the switch (/2)", at_switch_hpre, 8u, "RM0440 §6.1 range 1 boost, step 1");
+    check("R1MODE at the switch", at_switch_r1mode, 0u, "RM0440 §6.1 range 1 boost, step 2");
+    check("LATENCY at the switch", at_switch_latency, 4u, "RM0440 §6.1 range 1 boost, step 3");
     check("PLLRDY at the switch", at_switch_pllrdy, 1u, "RM0440 §7.4 RCC_CR");
     /* The clocks of the peripherals used. */
     check("RCC_AHB1ENR DMA1EN, DMAMUX1EN", *reg(G4_RCC, 0x48) & 0x5u, 0x5u, "RM0440 §7.4 RCC_AHB1ENR");
@@ -195,7 +195,7 @@ static void test_dac(void)
 {
     check("DAC_CR.EN1", field(G4_DAC1, 0x00, 0, 1), 1u, "RM0440 §22.7 DAC_CR");
     check("DAC_CR.TEN1", field(G4_DAC1, 0x00, 1, 1), 1u, "RM0440 §22.7 DAC_CR");
-    check("DAC_CR.TSEL1 (dac_ch1_trg7 = TIM6_TRGO)", field(G4_DAC1, 0x00, 2, 4), 7u, "RM0440 §22.4.2");
+    check("DAC_CR.TSEL1 (dac_ch1_trg7 = TIM6_TRGO)", field(G4_DAC1, 0x00, 2, 4), 7u, "RM0440 §22.4 DAC trigger table");
     check("DAC_CR.DMAEN1", field(G4_DAC1, 0x00, 12, 1), 1u, "RM0440 §22.7 DAC_CR");
     check("DAC_CR.WAVE1 (none)", field(G4_DAC1, 0x00, 6, 2), 0u, "RM0440 §22.7 DAC_CR");
     check("DAC_MCR.HFSEL (AHB > 160 MHz)", field(G4_DAC1, 0x3C, 14, 2), 2u, "RM0440 §22.7 DAC_MCR");
@@ -210,9 +210,9 @@ static void test_dma(void)
 {
     /* DMAMUX channel 0..2 serve DMA1 channel 1..3; request ids from the table "DMAMUX:
      * assignment of multiplexer inputs to resources": ADC1 5, DAC1_CH1 6, ADC2 36. */
-    check("DMAMUX_C0CR (DAC1_CH1)", field(G4_DMAMUX, 0x00, 0, 7), 6u, "RM0440 §13.3.2");
-    check("DMAMUX_C1CR (ADC1)", field(G4_DMAMUX, 0x04, 0, 7), 5u, "RM0440 §13.3.2");
-    check("DMAMUX_C2CR (ADC2)", field(G4_DMAMUX, 0x08, 0, 7), 36u, "RM0440 §13.3.2");
+    check("DMAMUX_C0CR (DAC1_CH1)", field(G4_DMAMUX, 0x00, 0, 7), 6u, "RM0440 §13.3 DMAMUX request table");
+    check("DMAMUX_C1CR (ADC1)", field(G4_DMAMUX, 0x04, 0, 7), 5u, "RM0440 §13.3 DMAMUX request table");
+    check("DMAMUX_C2CR (ADC2)", field(G4_DMAMUX, 0x08, 0, 7), 36u, "RM0440 §13.3 DMAMUX request table");
     /* CCR: EN 0, TCIE 1, HTIE 2, DIR 4, CIRC 5, MINC 7, PSIZE 9:8, MSIZE 11:10, PL 13:12.
      * DAC: memory (16 bits) -> DHR12R1 (32 bits), circular, very high priority, both halves. */
     check("DMA1_CCR1", *reg(G4_DMA1, 0x08), 0x1u | 0x2u | 0x4u | 0x10u | 0x20u | 0x80u | 2u << 8 | 1u << 10 | 3u << 12,
@@ -248,7 +248,7 @@ static void test_adc(void)
         unsigned channel = (unsigned)i + 1u; /* ADC1_IN1 = PA0, ADC2_IN2 = PA1 */
 #define ADC_CHECK(label, got, want, source) \
         (snprintf(what, sizeof what, "%s %s", names[i], label), check(what, got, want, source))
-        ADC_CHECK("CFGR.EXTSEL (adc_ext_trg13 = TIM6_TRGO)", field(adcs[i], 0x0C, 5, 5), 13u, "RM0440 §21.4.2");
+        ADC_CHECK("CFGR.EXTSEL (adc_ext_trg13 = TIM6_TRGO)", field(adcs[i], 0x0C, 5, 5), 13u, "RM0440 §21.4 ADC1/2 trigger table");
         ADC_CHECK("CFGR.EXTEN (rising)", field(adcs[i], 0x0C, 10, 2), 1u, "RM0440 §21.7 ADC_CFGR");
         ADC_CHECK("CFGR.DMAEN, DMACFG (circular)", field(adcs[i], 0x0C, 0, 2), 3u, "RM0440 §21.7 ADC_CFGR");
         ADC_CHECK("CFGR.RES (12 bits)", field(adcs[i], 0x0C, 3, 2), 0u, "RM0440 §21.7 ADC_CFGR");
