@@ -61,8 +61,8 @@ static const hal_board_t board = {
 
 /* The DMA rings (g4_setup.h). */
 uint16_t g4_dac_ring[G4_RING_SAMPLES];
-uint16_t g4_voltage_ring[G4_RING_SAMPLES];
-uint16_t g4_current_ring[G4_RING_SAMPLES];
+volatile uint16_t g4_voltage_ring[G4_RING_SAMPLES];
+volatile uint16_t g4_current_ring[G4_RING_SAMPLES];
 
 /* A write that finds the DMA within OUTPUT_MARGIN samples of it starts OUTPUT_LEAD ahead. */
 #define OUTPUT_MARGIN 8u
@@ -180,6 +180,7 @@ size_t hal_uart_read(uint8_t *data, size_t cap)
     size_t n = 0;
     uint32_t head = rx_head;
     while (n < cap && rx_tail != head) {
+        g4_barrier();
         data[n++] = rx_ring[rx_tail % RX_BYTES];
         rx_tail++;
     }
@@ -191,6 +192,7 @@ size_t hal_uart_write(const uint8_t *data, size_t n)
     size_t taken = 0;
     while (taken < n && tx_head - tx_tail < TX_BYTES) {
         tx_ring[tx_head % TX_BYTES] = data[taken++];
+        g4_barrier();
         tx_head++;
     }
     if (taken > 0u) {
@@ -210,6 +212,7 @@ void g4_usart2_irq(void)
         uint8_t byte = (uint8_t)G4_REG(USART2_BASE, USART_RDR);
         if (rx_head - rx_tail < RX_BYTES) { /* full: the newest bytes are dropped (hal.h) */
             rx_ring[rx_head % RX_BYTES] = byte;
+            g4_barrier();
             rx_head++;
         }
     }

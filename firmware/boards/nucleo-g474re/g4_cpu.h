@@ -5,6 +5,10 @@
 #ifndef TPAD_G4_CPU_H
 #define TPAD_G4_CPU_H
 
+/* A compiler barrier: the ring's bytes are stored before its index says so (the M4 itself
+ * keeps the order of its own stores, as seen by its interrupts). */
+static inline void g4_barrier(void) { __asm__ volatile("" ::: "memory"); }
+
 #ifdef G4_REGISTER_TEST
 /* The test's model of the hardware: it sets the ready flags a polled register waits for. */
 void g4_test_poll(void);

@@ -212,7 +212,7 @@ static void adc_setup(void)
     }
 }
 
-static void dma_channel(uint32_t n, uint32_t request, uintptr_t peripheral, uint16_t *ring, uint32_t ccr)
+static void dma_channel(uint32_t n, uint32_t request, uintptr_t peripheral, volatile uint16_t *ring, uint32_t ccr)
 {
     G4_REG(DMA1_BASE, DMA_CCR(n)) = 0u;
     G4_REG(DMAMUX_BASE, DMAMUX_CCR(n - 1u)) = request;

@@ -19,8 +19,8 @@
 #define G4_HALF_SAMPLES (G4_RING_SAMPLES / 2u)
 /* The rings themselves (board.c): DAC codes, and ADC1's and ADC2's conversions (12 bits). */
 extern uint16_t g4_dac_ring[G4_RING_SAMPLES];
-extern uint16_t g4_voltage_ring[G4_RING_SAMPLES];
-extern uint16_t g4_current_ring[G4_RING_SAMPLES];
+extern volatile uint16_t g4_voltage_ring[G4_RING_SAMPLES];
+extern volatile uint16_t g4_current_ring[G4_RING_SAMPLES];
 #define G4_DAC_MID 2048u          /* the 12-bit DAC's mid-scale: output sample 0 */
 #define G4_FAULT_PIN 9u           /* PA9 (Arduino D8): the power stage's fault line, active low */
 
