@@ -86,7 +86,7 @@ def test_play_through_the_microbit_firmware_under_qemu_has_no_bad_frames() -> No
     # most of them played: the firmware ran the stream, not only the handshake.
     frames = int(rendered["frames"])
     assert firmware["frames_ok"] + firmware["frames_rejected"] >= frames, (frames, firmware)
-    assert firmware["frames_ok"] > frames / 2, (frames, firmware)
+    assert firmware["frames_ok"] > frames / 2, (frames, firmware, seen.group(0))
 
 
 def run_qemu(*args: str, env: dict[str, str] | None = None, script: Path = RUN_QEMU) -> Run:

@@ -4,13 +4,16 @@
  * interrupts, numbered by peripheral ID: nRF51 RM "Peripheral interface").
  *
  * The reset handler copies .data from flash, zeroes .bss and calls main(). An unexpected
- * exception (a fault, an interrupt nobody enabled) stops here in a loop: the watchdog, which
- * nothing kicks any more, then resets the chip with its output at 0 (A7).
+ * exception (a fault, an interrupt nobody enabled) stops here, asleep: the watchdog, which
+ * nothing kicks any more, then resets the chip with its output at 0 (A7). Asleep, not
+ * spinning: no interrupt can preempt a fault handler, so WFI does not return (ARMv6-M ARM
+ * B1.5.18), and QEMU's CPU thread, which run-qemu runs at real-time priority, stays idle.
  */
 #include <stdint.h>
 #include <string.h>
 
 #include "board_irq.h"
+#include "cortex_m0.h"
 #include "nrf51.h"
 
 /* The table below places uart0_irq at entry 2 and timer0_irq at entry 8: their peripheral IDs. */
@@ -22,19 +25,18 @@ extern uint32_t _stack_top, _data_load, _data_start, _data_end, _bss_start, _bss
 
 int main(void);
 
+static void unexpected_exception(void)
+{
+    for (;;)
+        wait_for_interrupt();
+}
+
 static void reset_handler(void)
 {
     memcpy(&_data_start, &_data_load, (size_t)((uintptr_t)&_data_end - (uintptr_t)&_data_start));
     memset(&_bss_start, 0, (size_t)((uintptr_t)&_bss_end - (uintptr_t)&_bss_start));
-    (void)main();
-    for (;;) {
-    }
-}
-
-static void unexpected_exception(void)
-{
-    for (;;) {
-    }
+    (void)main();  /* amp_run never returns */
+    unexpected_exception();
 }
 
 #define EXCEPTIONS 15u  /* exception numbers 1..15 */
