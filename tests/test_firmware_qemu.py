@@ -20,6 +20,7 @@ from types import TracebackType
 
 import pytest
 from cli_run import Run, tpad_rt
+from conftest import require_program
 from firmware_build import build
 
 REPO = Path(__file__).resolve().parents[1]
@@ -70,6 +71,7 @@ class RunQemu:
 
 @pytest.mark.realtime
 def test_play_through_the_microbit_firmware_under_qemu_has_no_bad_frames() -> None:
+    require_program("qemu-system-arm")
     build("microbit")
     with RunQemu() as amp:
         done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}?{SETTINGS}",

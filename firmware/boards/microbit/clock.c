@@ -67,8 +67,8 @@ void hal_wait(uint64_t until_us)
     uint32_t primask = irq_save();
     uart_tx_pump();
     if (!uart_rx_pending() && until_us > now_us) {
+        TIMER0_CC(WAKE_CC) = (uint32_t)until_us;  /* first: an old CC matching now cannot fire after */
         TIMER0_EVENTS_COMPARE(WAKE_CC) = 0u;
-        TIMER0_CC(WAKE_CC) = (uint32_t)until_us;
         TIMER0_INTENSET = TIMER0_INTEN_COMPARE(WAKE_CC);
         /* A compare set at a count already passed fires only after the wrap: check again. */
         if (hal_time_us() < until_us)
