@@ -4,7 +4,8 @@
 One ``realtime`` item plays the grating for 3 s through ``serial://`` to the firmware on QEMU's ``microbit``
 machine, at the settings docs/firmware.md states for it (4 ms frames, a 40 ms buffer), and reads the firmware's
 counters twice: in play's summary (the last STATUS the host read) and in run-qemu's (a STATUS read after the run,
-counters since play's HELLO). The other items are run-qemu's refusals, which judge no time.
+counters since play's HELLO). The other items judge no time: run-qemu ended by SIGINT with no host (no session to
+report), and its refusals (a board QEMU cannot run, no QEMU, no build).
 """
 
 from __future__ import annotations
@@ -50,13 +51,17 @@ class RunQemu:
             raise AssertionError(f"run-qemu did not start: {first!r} {err!r}")
         self.port = first[len(prefix):].strip()
 
-    def finish(self) -> dict[str, int]:
-        """End it with SIGTERM (by PID), check it exited 0, and return the counters its last line gives."""
-        self.process.send_signal(signal.SIGTERM)
+    def stop(self, sig: int = signal.SIGTERM) -> str:
+        """End it with ``sig`` (by PID), check it exited 0, and return its last line."""
+        self.process.send_signal(sig)
         out, err = self.process.communicate(timeout=WAIT_S)
         assert self.process.returncode == 0, (self.process.returncode, err)
-        last = out.strip().splitlines()[-1]
-        assert last.startswith("amplifier stopped by a signal: frames_ok="), out
+        return out.strip().splitlines()[-1]
+
+    def finish(self) -> dict[str, int]:
+        """stop(), and the counters its last line gives."""
+        last = self.stop()
+        assert last.startswith("amplifier stopped by a signal: frames_ok="), last
         return {name: int(value) for name, value in (pair.split("=") for pair in last.split(": ", 1)[1].split())}
 
     def __enter__(self) -> RunQemu:
@@ -89,6 +94,14 @@ def test_play_through_the_microbit_firmware_under_qemu_has_no_bad_frames() -> No
     frames = int(rendered["frames"])
     assert firmware["frames_ok"] + firmware["frames_rejected"] >= frames, (frames, firmware)
     assert firmware["frames_ok"] > frames / 2, (frames, firmware, seen.group(0))
+
+
+def test_run_qemu_without_a_host_ends_on_sigint_saying_there_was_no_session() -> None:
+    require_program("qemu-system-arm")
+    build("microbit")
+    with RunQemu() as amp:
+        last = amp.stop(signal.SIGINT)
+    assert last == "amplifier stopped by a signal: no session (no STATUS: the firmware had no HELLO)"
 
 
 def run_qemu(*args: str, env: dict[str, str] | None = None, script: Path = RUN_QEMU) -> Run:
