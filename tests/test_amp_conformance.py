@@ -37,6 +37,7 @@ from amp_targets import (
 )
 from conftest import require_program
 from tpad_rt.amp import wire
+from tpad_rt.amp.emulator import carrier_phase_cycles
 from tpad_rt.amp.wire import Code, Fault, State, Type
 
 TARGETS = ("emulator", "core", "host", "qemu")
@@ -340,8 +341,10 @@ def test_stop_ramps_linearly_then_idle(target: Target) -> None:
         ramp = played(amp.applied(), stop_us + 0.5)  # a sample due at stop_us plays before the STOP acts
         wanted = [level_uv * (1 - done / samples) for done in range(1, samples + 1)]
         expected = limited_uv(wanted + [0.0] * 10, info, RATE_HZ, level_uv)
-        assert len(ramp.t_us) >= len(expected)
-        np.testing.assert_allclose(ramp.envelope_uv[:len(expected)], expected, atol=step_uv(info))
+        reaches_zero = int(np.flatnonzero(expected == 0)[0]) + 1  # samples (the clock may stop at rest after them)
+        assert len(ramp.t_us) >= reaches_zero and np.all(ramp.envelope_uv[reaches_zero:] == 0)
+        compared = min(len(ramp.t_us), len(expected))
+        np.testing.assert_allclose(ramp.envelope_uv[:compared], expected[:compared], atol=step_uv(info))
         assert (amp.counters()["envelope_uv"], amp.counters()["state"], set(ramp.index)) == (0, State.IDLE, {-1})
         since = host.mark()
         host.send(Type.ENVELOPE, envelope(index, [level] * 8))  # the stream is over: NOT_STARTED
@@ -689,3 +692,113 @@ def wait_for_state(host: Host, state: int) -> wire.Status:
     found = host.wait_for(lambda frame: frame.type == Type.STATUS and wire.Status.unpack(frame.payload).state == state,
                           f"STATUS in state {state}", since, advance_us=100_000)
     return wire.Status.unpack(found.frame.payload)
+
+
+# --- the emulator and the core, side by side ----------------------------------------------------------------------
+
+#: The largest difference (in steps of the envelope's integer encoding, full_scale_mv / 32767) the emulator's and
+#: the core's applied envelopes may show at any sample.
+ENVELOPE_TOLERANCE_STEPS = 1.0
+#: The largest difference (in steps of 1/32767 of full_scale_mv, the core's output LSB) between the core's carrier
+#: samples and the emulator's (Plate.drive's phase accumulator, carrier_phase_cycles, on the same samples): the
+#: core's sine is within 2 LSB of double precision, its envelope within one step.
+CARRIER_TOLERANCE_LSB = 3.0
+#: STATUS fields the two need not share: the measurements (the emulator computes them from its circuit; the core
+#: demodulates ADC samples, none here).
+MEASURED = {"voltage_mv_rms", "current_ua_rms", "phase_cdeg"}
+
+
+def equivalence_stream() -> tuple[list[tuple[int, bytes]], int]:
+    """A session as tpad-rt runs it, as (time in us from power-up, bytes) and its end: HELLO, SET_CARRIER, START,
+    250 ms of envelope in 0.5 ms frames 20 ms ahead (a ramp up, full scale held past the clamp, a ramp into
+    anti-phase, 5 ms never sent, a modulated level), a sequence gap, SET_CARRIER while RUNNING, STOP; then START
+    again with 40 ms of envelope and silence: a watchdog trip."""
+    frames: list[tuple[int, int, bytes]] = []  # (t_us, type, payload)
+
+    def stream(start_us: int, first: int, samples: np.ndarray, lead: int, skip: range = range(0)) -> None:
+        for offset in range(0, len(samples), 8):
+            if offset not in skip:
+                frames.append((start_us + 20 + max(0, offset - lead) * 1_000_000 // RATE_HZ, Type.ENVELOPE,
+                               envelope(first + offset, samples[offset:offset + 8])))
+
+    n = np.arange(4000)
+    first = np.select([n < 1600, n < 2080, n < 2880],
+                      [n / 1600 * 30000, np.full(4000, 32767), 32767 - (n - 2080) / 800 * 52767],
+                      10000 + 8000 * np.sin(2 * np.pi * 200 * n / RATE_HZ)).astype(np.int16)
+    frames += [(1_000, Type.HELLO, wire.Hello("equivalence", 7).pack()),
+               (1_500, Type.SET_CARRIER, wire.SetCarrier(CARRIER_MHZ).pack()),
+               (2_000, Type.START, wire.Start(RATE_HZ, 0, 32).pack())]
+    stream(2_000, 0, first, 320, skip=range(2880, 2960))
+    gap_us = 222_037  # this frame's seq skips one
+    frames += [(gap_us, Type.SET_CARRIER, wire.SetCarrier(31_500_005).pack()),
+               (245_037, Type.STOP, wire.Stop(5).pack()),
+               (400_000, Type.START, wire.Start(RATE_HZ, 1_000_000, 16).pack())]
+    stream(400_000, 1_000_000, np.full(640, 15000, np.int16), 160)
+    frames.sort(key=lambda frame: frame[0])
+    events, seq = [], 0
+    for t_us, type_, payload in frames:
+        seq = 0 if type_ == Type.HELLO else seq + (t_us == gap_us)
+        events.append((t_us, wire.encode(type_, seq, payload)))
+        seq += 1
+    return events, 560_000
+
+
+def run_side_by_side() -> dict[str, float]:
+    """The emulator and the core on equivalence_stream(); what they did, compared (AssertionError where they
+    differ beyond the tolerances); the figures: largest envelope difference (steps), largest carrier difference
+    (LSB), samples and carrier samples compared."""
+    emulator, core = EmulatorTarget(), CoreTarget(core_library())
+    events, end_us = equivalence_stream()
+    for target in (emulator, core):
+        for t_us, data in events:
+            target.advance_to(t_us)
+            target.write(data)
+        target.advance_to(end_us)
+    assert emulator.counters() == core.counters()
+    assert core.counters()["watchdog_trips"] == 1 and core.counters()["underruns"] >= 80
+    assert core.counters()["sequence_gaps"] == 1
+    np.testing.assert_allclose(core.trips_us(), emulator.trips_us(), atol=1e-3)
+    sent = [[item.frame for item in target.take()] for target in (emulator, core)]
+    assert [(frame.type, frame.seq) for frame in sent[0]] == [(frame.type, frame.seq) for frame in sent[1]]
+    info = expected_info()
+    for ours, theirs in zip(*sent):
+        if ours.type == Type.STATUS:
+            mine, other = (vars(wire.Status.unpack(frame.payload)) for frame in (ours, theirs))
+            assert abs(mine.pop("envelope_mv") - other.pop("envelope_mv")) <= info.full_scale_mv / 32767
+            assert {key: mine[key] for key in mine.keys() - MEASURED} == {key: other[key] for key in
+                                                                          other.keys() - MEASURED}
+        elif ours.type == Type.INFO:
+            assert replace(wire.Info.unpack(ours.payload), firmware="", serial="") == replace(
+                wire.Info.unpack(theirs.payload), firmware="", serial="")
+        else:
+            assert ours.payload == theirs.payload
+    # Samples, matched by due time: the emulator's sample clock also runs while its plate rings after the output
+    # came to rest (zeros the core, whose clock stops at rest, does not make).
+    mine, other = emulator.applied(), core.applied()
+    matched = np.isin(np.round(mine.t_us, 3), np.round(other.t_us, 3))
+    assert matched.sum() == len(other.t_us) > 5000
+    extra = ~matched
+    assert np.all(mine.envelope_uv[extra] == 0) and set(mine.state[extra]) <= {State.IDLE}
+    for name in ("carrier_mhz", "index", "state"):
+        np.testing.assert_array_equal(getattr(mine, name)[matched], getattr(other, name), err_msg=name)
+    envelope_steps = np.abs(mine.envelope_uv[matched] - other.envelope_uv) / step_uv(info)
+    assert envelope_steps.max() <= ENVELOPE_TOLERANCE_STEPS
+    # The carrier: Plate.drive's, on the samples both made (its phase runs on only while the core's does too).
+    per_sample = core.output_rate_hz // RATE_HZ
+    phase, _ = carrier_phase_cycles(mine.carrier_mhz[matched] / 1000, per_sample, core.output_rate_hz, 0.0)
+    reference_mv = np.repeat(mine.envelope_uv[matched] / 1000, per_sample) * np.sin(2 * np.pi * phase)
+    made_mv = core.carrier_mv()
+    assert len(made_mv) == len(reference_mv)
+    carrier_lsb = np.abs(made_mv - reference_mv) / (info.full_scale_mv / 32767)
+    assert carrier_lsb.max() <= CARRIER_TOLERANCE_LSB
+    return {"envelope_steps": float(envelope_steps.max()), "carrier_lsb": float(carrier_lsb.max()),
+            "samples": float(len(other.t_us)), "carrier_samples": float(len(made_mv))}
+
+
+def test_emulator_and_core_apply_the_same_envelope_and_carrier() -> None:
+    """Driven in process on the same frames at the same virtual times, the emulator and the firmware core send
+    the same frames (STATUS's measurements aside), count the same, trip at the same time, apply the same envelope
+    within ENVELOPE_TOLERANCE_STEPS of its integer encoding at every sample, and make the same carrier samples
+    within CARRIER_TOLERANCE_LSB."""
+    figures = run_side_by_side()
+    assert figures["samples"] > 5000
