@@ -53,6 +53,8 @@ ORIGIN_US = 1_000_000_000
 STEP_US = 500
 #: Longest wait (s) for an answer from a process on a pty: it only turns a hang into a message.
 ANSWER_TIMEOUT_S = 10.0
+#: What a pty target prints at its end, as ``name=value`` pairs: STATUS's counters since the last HELLO.
+COUNTERS = ("frames_ok", "frames_bad", "frames_rejected", "sequence_gaps", "underruns", "watchdog_trips", "faults")
 #: Longest wait (s) for a process to start (its first line) or to end after SIGTERM.
 START_TIMEOUT_S = 30.0
 
@@ -75,6 +77,11 @@ class Applied:
     carrier_mhz: npt.NDArray[np.int64]
     index: npt.NDArray[np.int64]
     state: npt.NDArray[np.int64]
+
+    def where(self, keep: npt.NDArray[np.bool_]) -> Applied:
+        """The samples ``keep`` selects."""
+        return Applied(self.t_us[keep], self.envelope_uv[keep], self.carrier_mhz[keep], self.index[keep],
+                       self.state[keep])
 
 
 class Target(ABC):
@@ -284,8 +291,9 @@ class LineTarget(Target):
             raise AssertionError(f"{self.name} did not end on SIGTERM") from None
         assert self.process.returncode == 0, (self.name, self.process.returncode, err)
         lines = out.strip().splitlines()
-        self.final_counters = {name: int(value) for name, value in
-                               (pair.split("=", 1) for pair in (lines[-1].split() if lines else []))}
+        self.final_counters = {name: int(value) for name, _, value in
+                               (word.partition("=") for word in (lines[-1].split() if lines else [])) if value}
+        assert set(self.final_counters) == set(COUNTERS), (self.name, out)
 
 
 class Host:
@@ -500,7 +508,7 @@ class CoreTarget(VirtualTarget):
     def counters(self) -> dict[str, int]:
         counters = AmpCounters()
         self._lib.amp_counters(self._amp, ctypes.byref(counters))
-        return {name: int(getattr(counters, name)) for name, _ in AmpCounters._fields_ if name != "tx_dropped"}
+        return {name: int(getattr(counters, name)) for name, *_ in AmpCounters._fields_ if name != "tx_dropped"}
 
     def applied(self) -> Applied:
         columns = list(zip(*self._samples)) or [(), (), (), (), ()]
