@@ -347,6 +347,30 @@ def test_stop_ramps_linearly_then_idle(target: Target) -> None:
         assert host.status().frames_rejected == 1 and host.acks_since(since) == []
 
 
+def test_hello_ramps_the_output_down_on_the_old_carrier(target: Target) -> None:
+    """HELLO during a stream ramps the output linearly to 0 over R (<= 10 ms: A4's ramp) on the carrier it had,
+    then IDLE with no carrier; INFO goes out at once."""
+    amp = virtual(target)
+    host = Host(amp)
+    info = start_stream(host, prefill=64)
+    send_samples(host, 0, [20000] * 640)
+    host.wait_us(20_000)
+    level_uv, hello_us = amp.counters()["envelope_uv"], amp.now_us
+    since = host.mark()
+    host.send(Type.HELLO, wire.Hello("again", 9).pack())
+    assert host.wait_for(lambda frame: frame.type == Type.INFO, "INFO", since).t_us == hello_us
+    host.wait_us(20_000)
+    ramp = played(amp.applied(), hello_us + 0.5)
+    samples = int(np.flatnonzero(ramp.envelope_uv == 0)[0]) + 1
+    assert 1 <= samples <= 10 * RATE_HZ // 1000  # R <= 10 ms
+    wanted = limited_uv([level_uv * (1 - done / samples) for done in range(1, samples + 1)], info, RATE_HZ, level_uv)
+    np.testing.assert_allclose(ramp.envelope_uv[:samples], wanted, atol=step_uv(info))
+    assert set(ramp.carrier_mhz[:samples]) == {CARRIER_MHZ} and set(ramp.index) == {-1}
+    assert set(ramp.state[:samples - 1]) == {State.RAMPING}
+    counters = amp.counters()
+    assert (counters["state"], counters["carrier_mhz"], counters["envelope_uv"]) == (State.IDLE, 0, 0)
+
+
 # --- section 2.3: what a receiver checks -----------------------------------------------------------------------
 
 def test_bad_frames_are_counted_never_acted_on_nor_answered(target: Target) -> None:
