@@ -21,11 +21,9 @@ from __future__ import annotations
 import ctypes
 import functools
 import math
-import subprocess
 import time
 from collections.abc import Iterator
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -35,6 +33,7 @@ from amp_targets import (
     REPO, Applied, CoreTarget, EmulatorTarget, Host, LineTarget, Target, VirtualTarget, expected_info, load_core,
 )
 from conftest import require_program
+from firmware_build import build
 from tpad_rt.amp import wire
 from tpad_rt.amp.emulator import carrier_phase_cycles
 from tpad_rt.amp.wire import Code, Fault, State, Type
@@ -54,35 +53,18 @@ EXACT_TIME = "a rule judged on exact times: it runs on the in-process targets (v
 
 # --- the targets ------------------------------------------------------------------------------------------------
 
-def make_firmware(goal: str, product: str) -> str:
-    """``make -C firmware GOAL`` (once per session): the path of ``product`` (under firmware/build)."""
-    return _make(goal, product)
-
-
-@functools.cache
-def _make(goal: str, product: str) -> str:
-    require_program("make")
-    done = subprocess.run(["make", "-s", "-C", str(REPO / "firmware"), goal], capture_output=True, text=True,
-                          timeout=300)
-    assert done.returncode == 0, done.stderr
-    return str(REPO / "firmware" / "build" / product)
-
-
 @functools.cache
 def core_library() -> ctypes.CDLL:
-    require_program("gcc")
-    return load_core(Path(make_firmware("lib", "host/libtpadamp.so")))
+    return load_core(build("lib"))
 
 
 def start_line(name: str, *flags: str) -> LineTarget:
     """A new process of the pty target ``name`` (built first); ``flags`` for the host build."""
     if name == "host":
-        require_program("gcc")
-        return LineTarget(name, [make_firmware("host", "host/tpad-amp"), "--device",
-                                 str(REPO / "tpad_rt" / "devices" / "default.yaml"), *flags])
-    require_program("arm-none-eabi-gcc")
+        return LineTarget(name, [str(build("host")), "--device", str(REPO / "tpad_rt" / "devices" / "default.yaml"),
+                                 *flags])
     require_program("qemu-system-arm")
-    make_firmware("microbit", "microbit")
+    build("microbit")
     return LineTarget(name, [str(REPO / "firmware" / "run-qemu"), "microbit"])
 
 
