@@ -94,6 +94,8 @@ class Target(ABC):
     def __init__(self) -> None:
         self._splitter = wire.FrameSplitter()
         self._received: list[Received] = []
+        #: Frames from the amplifier that did not decode (a pty target only: see _sent).
+        self.broken = 0
 
     @abstractmethod
     def write(self, data: bytes) -> None:
@@ -115,8 +117,13 @@ class Target(ABC):
     def _sent(self, data: bytes, t_us: int | None) -> None:
         for encoded in self._splitter.feed(data):
             frame = None if encoded is None else wire.decode(encoded)
-            assert frame is not None, f"{self.name} sent a frame that does not decode: {encoded!r}"
-            self._received.append(Received(t_us, frame))
+            if frame is not None:
+                self._received.append(Received(t_us, frame))
+                continue
+            # In process every byte is taken at once: each frame must decode. On a pty a HELLO drops the bytes
+            # still queued for a host that had not read them (stale), which can cut a frame: the host drops it.
+            assert not self.virtual, f"{self.name} sent a frame that does not decode: {encoded!r}"
+            self.broken += 1
 
 
 class VirtualTarget(Target):

@@ -674,6 +674,7 @@ def test_a_stream_end_to_end(target: Target) -> None:
     stalls for the watchdog's time trips it."""
     host = Host(target)
     info = start_stream(host, prefill=160)
+    broken = target.broken
     frame_samples, frame_us = 64, 4000
     index = send_samples(host, 0, [32767] * 320)
     seen: list[wire.Status] = []
@@ -703,6 +704,7 @@ def test_a_stream_end_to_end(target: Target) -> None:
     late = host.send(Type.ENVELOPE, envelope(16, [1000] * 8))
     status = host.status()
     assert (status.frames_rejected, status.watchdog_trips, hung_acks(host, since, {late})) == (2, 1, [])
+    assert target.broken == broken  # every frame whole while the host reads
 
 
 def pause(host: Host, duration_us: int) -> None:
