@@ -45,9 +45,16 @@ static void raise_fault(amp_t *amp, uint8_t bits) {
     if (amp->state != AMP_FAULT) {
         amp_buffer_clear(amp);
         amp_ramp_begin(amp, AMP_FAULT_RAMP_MS, AMP_FAULT, AMP_FAULT);
+        amp_carrier_cut(amp);
     }
     if (new_bits)
         amp_send_status(amp, amp->now_us - amp->origin_us);
+}
+
+int amp_take_output_cut(amp_t *amp) {
+    int cut = amp->output_cut;
+    amp->output_cut = 0;
+    return cut;
 }
 
 void amp_fault(amp_t *amp, uint8_t bits, uint64_t now_us) {
@@ -78,6 +85,15 @@ void amp_counters(const amp_t *amp, amp_counters_t *out) {
 void amp_set_observer(amp_t *amp, amp_observer_t fn, void *ctx) {
     amp->observer = fn;
     amp->observer_ctx = ctx;
+}
+
+void amp_set_hello_hook(amp_t *amp, void (*fn)(void *ctx), void *ctx) {
+    amp->hello_hook = fn;
+    amp->hello_hook_ctx = ctx;
+}
+
+uint64_t amp_last_valid_us(const amp_t *amp) {
+    return amp->has_last_seq ? amp->last_valid_us : UINT64_MAX;
 }
 
 size_t amp_sizeof(void) {
