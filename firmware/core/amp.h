@@ -58,7 +58,8 @@
 
 /* --- the core's own storage (a board may lower these with -D, each a power of two) --- */
 #ifndef AMP_TX_BYTES
-#define AMP_TX_BYTES 1024u     /* bytes queued for the host; a frame that does not fit is dropped */
+#define AMP_TX_BYTES 2048u     /* bytes queued for the host (a STATUS burst after a 100 ms stall
+                                * fits); a frame that does not fit is dropped, counted */
 #endif
 #ifndef AMP_SYNTH_QUEUE
 #define AMP_SYNTH_QUEUE 128u   /* envelope samples played, not yet synthesised */
@@ -103,8 +104,9 @@ typedef void (*amp_observer_t)(void *ctx, const amp_event_t *event);
 
 /* One played envelope sample waiting for synthesis. */
 typedef struct {
-    int32_t amplitude_q15;  /* envelope / full scale * 32767 (signed) */
+    int32_t amplitude_q15;  /* envelope / full scale * 32768 (signed) */
     uint32_t carrier_mhz;
+    uint32_t outputs;       /* output samples it makes: output_rate_hz / envelope_hz */
 } amp_played_t;
 
 /* The full state. Boards allocate it statically and touch it only through the functions below. */
@@ -152,7 +154,7 @@ typedef struct amp {
     uint32_t tx_head, tx_tail;   /* bytes written / taken, free-running */
     uint8_t tx_mid_frame;        /* the last byte taken was not a delimiter */
     /* carrier synthesis */
-    uint32_t output_per_envelope; /* output samples per envelope sample */
+    uint64_t q15_per_uv_q32;      /* 32768 / full_scale_uv, times 2**32 */
     uint32_t phase;               /* the carrier's phase, cycles * 2**32 */
     uint32_t phase_rem;           /* sub-step remainder, over phase_den */
     uint32_t phase_den;           /* output_rate_hz * 1000 */
@@ -162,8 +164,10 @@ typedef struct amp {
     /* measurement */
     uint32_t measure_phase[AMP_MEASURE_RING];
     uint32_t written, measured;   /* output samples synthesised / measured, free-running */
-    int64_t v_i, v_q, c_i, c_q;   /* sums of sample * sin and * cos (Q15) over the window */
-    uint32_t window_samples, window_min_samples, last_measure_phase;
+    /* sums over the window: voltage and current times sin and cos (Q15), and the sines' products */
+    int64_t sum_vs, sum_vc, sum_is, sum_ic, sum_ss, sum_sc, sum_cc;
+    uint32_t window_samples, window_min_samples, window_max_samples, last_measure_phase;
+    uint8_t window_open;
     uint32_t voltage_mv_rms, current_ua_rms;
     int16_t phase_cdeg;
     /* the observer */
@@ -172,8 +176,9 @@ typedef struct amp {
 } amp_t;
 
 /* Power-up (A7): output 0, IDLE, no carrier, no STATUS before the first HELLO. `board` must
- * outlive amp (hal_init's); `serial` is INFO's serial (up to 15 characters and a NUL). */
-void amp_init(amp_t *amp, const hal_board_t *board, const char serial[16], uint64_t now_us);
+ * outlive amp (hal_init's); `serial` is INFO's serial: up to 15 characters read, up to a NUL
+ * (a char[16] from hal_serial_number, or a shorter string). */
+void amp_init(amp_t *amp, const hal_board_t *board, const char *serial, uint64_t now_us);
 
 /* `n` bytes from the line arrived at `now_us`: samples and STATUS due up to now_us first, then
  * every frame they complete, in order. Any bytes are safe: at most AMP_MAX_ENCODED are held. */
@@ -194,7 +199,7 @@ size_t amp_transmit(amp_t *amp, uint8_t *out, size_t cap);
 
 /* Take up to `cap` carrier samples (at output_rate_hz) for the envelope samples played so far:
  * output = applied envelope / full scale * sin(2 pi phase) * 32767, phase continuous (A2).
- * Against that double-precision reference the samples are within 2 (of 32767). A board that
+ * Against that double-precision reference the samples are within 1.5 (of 32767; tests/core_carrier.c). A board that
  * takes fewer than are made loses the oldest beyond AMP_SYNTH_QUEUE envelope samples (the phase
  * runs on). 0 when output_rate_hz is 0. */
 size_t amp_synthesize(amp_t *amp, int16_t *out, size_t cap);

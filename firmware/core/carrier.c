@@ -1,0 +1,98 @@
+/* carrier.c - the carrier: a phase accumulator, the sine, the output samples (A2: phase continuous).
+ *
+ * The phase is cycles * 2**32 (uint32, wrapping once a cycle). Per output sample it advances by
+ * carrier_mhz / (output_rate_hz * 1000) cycles, which is kept exactly: with m = carrier_mhz / step and
+ * den = output_rate_hz * 1000 / step, the increment is (m * 2**32) / den = inc_q + inc_r / den, and
+ * the remainder accumulates in phase_rem (over den): the phase never drifts from the ideal one, so
+ * every carrier that is a multiple of the step is made exactly. The step (INFO's carrier_step_mhz)
+ * is 10 mHz unless den would not fit 32 bits (an output rate above 42.9 MHz): then the smallest
+ * multiple of 10 mHz that divides output_rate_hz * 1000 into a den that fits (amp_init).
+ * The phase starts at 0 at power-up and advances only while samples are made (the emulator's Plate). */
+#include "amp_core.h"
+
+/* 32767 * sin(2 pi phase / 2**32): the table's two neighbours, interpolated linearly on the next 16
+ * bits (within 1.05: the table's rounding, the interpolation's; >> of a negative number is gcc's
+ * arithmetic shift). */
+int32_t amp_sine_q15(uint32_t phase) {
+    uint32_t i = phase >> (32 - AMP_SINE_BITS);
+    int32_t frac = (int32_t)((phase >> (16 - AMP_SINE_BITS)) & 0xFFFFu);
+    int32_t low = amp_sine_table[i], high = amp_sine_table[i + 1u];
+    return low + (((high - low) * frac + 32768) >> 16);
+}
+
+static void set_increment(amp_t *amp, uint32_t carrier_mhz) {
+    uint64_t m = (uint64_t)(carrier_mhz / amp->carrier_step_mhz) << 32;
+    amp->inc_carrier_mhz = carrier_mhz;
+    amp->inc_q = (uint32_t)(m / amp->phase_den);
+    amp->inc_r = (uint32_t)(m % amp->phase_den);
+}
+
+/* The phase of the next output sample, then one step on. */
+static uint32_t next_phase(amp_t *amp) {
+    uint32_t phase = amp->phase;
+    amp->phase += amp->inc_q;
+    if (amp->phase_rem >= amp->phase_den - amp->inc_r) {
+        amp->phase_rem -= amp->phase_den - amp->inc_r;
+        amp->phase++;
+    } else {
+        amp->phase_rem += amp->inc_r;
+    }
+    return phase;
+}
+
+void amp_carrier_init(amp_t *amp) {
+    const hal_board_t *board = amp->board;
+    if (board->output_rate_hz == 0)
+        return;
+    amp->phase_den = (uint32_t)((uint64_t)board->output_rate_hz * 1000u / amp->carrier_step_mhz);
+    amp->q15_per_uv_q32 = ((uint64_t)32768u << 32) / amp->full_scale_uv;
+    set_increment(amp, 0);
+}
+
+/* Drop the oldest played sample: its phase runs on (the board took too few samples). */
+static void drop_oldest(amp_t *amp) {
+    amp_played_t *played = &amp->played[amp->played_tail & (AMP_SYNTH_QUEUE - 1u)];
+    if (played->carrier_mhz != amp->inc_carrier_mhz)
+        set_increment(amp, played->carrier_mhz);
+    for (; amp->played_done < played->outputs; amp->played_done++)
+        next_phase(amp);
+    amp->played_done = 0;
+    amp->played_tail++;
+}
+
+/* A sample was played (play.c): queue it for synthesis. */
+void amp_carrier_played(amp_t *amp, int32_t envelope_uv, uint32_t carrier_mhz) {
+    if (amp->board->output_rate_hz == 0)
+        return;
+    if (amp->played_head - amp->played_tail == AMP_SYNTH_QUEUE)
+        drop_oldest(amp);
+    amp_played_t *played = &amp->played[amp->played_head & (AMP_SYNTH_QUEUE - 1u)];
+    uint32_t magnitude_uv = (uint32_t)(envelope_uv < 0 ? -envelope_uv : envelope_uv);
+    int32_t q15 = (int32_t)((magnitude_uv * amp->q15_per_uv_q32 + 0x80000000u) >> 32);
+    played->amplitude_q15 = envelope_uv < 0 ? -q15 : q15;
+    played->carrier_mhz = carrier_mhz;
+    played->outputs = amp->board->output_rate_hz / amp->rate_hz;
+    amp->played_head++;
+}
+
+size_t amp_synthesize(amp_t *amp, int16_t *out, size_t cap) {
+    size_t n = 0;
+    while (n < cap && amp->played_tail != amp->played_head) {
+        const amp_played_t *played = &amp->played[amp->played_tail & (AMP_SYNTH_QUEUE - 1u)];
+        if (played->carrier_mhz != amp->inc_carrier_mhz)
+            set_increment(amp, played->carrier_mhz);
+        for (; amp->played_done < played->outputs && n < cap; amp->played_done++) {
+            uint32_t phase = next_phase(amp);
+            if (amp->board->measures) {
+                amp->measure_phase[amp->written & (AMP_MEASURE_RING - 1u)] = phase;
+                amp->written++;
+            }
+            out[n++] = (int16_t)((played->amplitude_q15 * amp_sine_q15(phase) + 16384) >> 15);
+        }
+        if (amp->played_done == played->outputs) {
+            amp->played_done = 0;
+            amp->played_tail++;
+        }
+    }
+    return n;
+}
