@@ -80,6 +80,15 @@ void amp_set_observer(amp_t *amp, amp_observer_t fn, void *ctx) {
     amp->observer_ctx = ctx;
 }
 
+void amp_set_hello_hook(amp_t *amp, void (*fn)(void *ctx), void *ctx) {
+    amp->hello_hook = fn;
+    amp->hello_hook_ctx = ctx;
+}
+
+uint64_t amp_last_valid_us(const amp_t *amp) {
+    return amp->has_last_seq ? amp->last_valid_us : UINT64_MAX;
+}
+
 size_t amp_sizeof(void) {
     return sizeof(amp_t);
 }

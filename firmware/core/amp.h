@@ -173,6 +173,9 @@ typedef struct amp {
     /* the observer */
     amp_observer_t observer;
     void *observer_ctx;
+    /* the HELLO hook (amp_set_hello_hook) */
+    void (*hello_hook)(void *ctx);
+    void *hello_hook_ctx;
 } amp_t;
 
 /* Power-up (A7): output 0, IDLE, no carrier, no STATUS before the first HELLO. `board` must
@@ -219,6 +222,15 @@ void amp_counters(const amp_t *amp, amp_counters_t *out);
 
 /* Called for every applied envelope sample and every watchdog trip (NULL: none). */
 void amp_set_observer(amp_t *amp, amp_observer_t fn, void *ctx);
+
+/* Called when a HELLO is acted on, after the core dropped what it held for the host and before INFO
+ * is queued (NULL: none): a board drops the bytes its line still holds for the host, stale in the
+ * new session (the emulator's Port.discard_output). */
+void amp_set_hello_hook(amp_t *amp, void (*fn)(void *ctx), void *ctx);
+
+/* When the last valid frame arrived (board us, the now_us it was received at; the watchdog's A4
+ * reference); UINT64_MAX before the first. */
+uint64_t amp_last_valid_us(const amp_t *amp);
 
 /* sizeof(amp_t), for callers that allocate it without this header (ctypes). */
 size_t amp_sizeof(void);

@@ -24,6 +24,8 @@ static void on_hello(amp_t *amp, const amp_frame_t *frame) {
     amp->counters = zero;
     amp->tx_seq = 0;
     amp_tx_discard(amp); /* stale: the new session starts with INFO */
+    if (amp->hello_hook != NULL)
+        amp->hello_hook(amp->hello_hook_ctx); /* and what the board's line still holds */
     amp_send_info(amp, get_u32(frame->payload + 12)); /* the nonce: the answer to this HELLO */
     accept(amp);
     amp->has_hello = 1;

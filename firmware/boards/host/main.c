@@ -48,6 +48,16 @@ static void realtime_priority(void)
 static amp_t amp;
 static amp_pending_t pending;
 
+/* A HELLO (amp_set_hello_hook): what the pty and the loop's pending bytes hold for the host is stale; a
+ * 0x00 then ends any frame the host had begun to read, so that INFO arrives whole. */
+static void on_hello(void *ctx)
+{
+    (void)ctx;
+    host_discard_output();
+    pending.bytes[0] = 0x00;
+    pending.count = 1;
+}
+
 /* Serve until asked to stop; why it ended. */
 static const char *serve(const options_t *options)
 {
@@ -100,6 +110,7 @@ int main(int argc, char **argv)
     hal_serial_number(serial);
     amp_init(&amp, board, serial, hal_time_us());
     amp_set_observer(&amp, host_observe, &amp);
+    amp_set_hello_hook(&amp, on_hello, NULL);
     printf("amplifier on %s\n", host_port_name());
     fflush(stdout);
     const char *ending = serve(&options);
