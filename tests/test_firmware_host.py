@@ -10,11 +10,17 @@ on a virtual clock by the core's unit tests and the conformance suite.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
+import select
 import signal
+import struct
 import subprocess
 import sys
+import termios
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -22,10 +28,10 @@ import pytest
 
 from cli_run import tpad_rt
 from firmware_amp import DEFAULT_DEVICE, HostAmp, tpad_amp
-from pty_host import PtyHost
+from pty_host import WAIT_S, PtyHost
 from tpad_rt.amp import wire
 from tpad_rt.amp.emulator import Circuit, amplifier_info
-from tpad_rt.amp.wire import State, Type
+from tpad_rt.amp.wire import Code, State, Type
 from tpad_rt.device import Device
 from tpad_rt.physics import electromech
 
@@ -163,6 +169,50 @@ def test_info_matches_the_emulators_and_a_bad_frame_is_counted(tmp_path: Path) -
         host.close()
     assert amp.summary.startswith("tpad-amp stopped by a signal: frames_ok=1 frames_bad=0 ")
     assert amp.counters["faults"] == 0 and recording.shape == (0,)
+
+
+def _unread_bytes(fd: int) -> int:
+    """Bytes the amplifier wrote that the host's end ``fd`` has not read (FIONREAD)."""
+    return struct.unpack("i", fcntl.ioctl(fd, termios.FIONREAD, b"\0\0\0\0"))[0]
+
+
+def _wait_until(condition: Callable[[], bool], what: str) -> None:
+    """Poll ``condition`` every millisecond until true; AssertionError after WAIT_S (a safety net)."""
+    deadline_s = time.monotonic() + WAIT_S
+    while not condition():
+        assert time.monotonic() < deadline_s, f"no {what} within {WAIT_S:g} s"
+        select.select([], [], [], 0.001)
+
+
+def test_hello_drops_the_bytes_the_host_has_not_read(tmp_path: Path) -> None:
+    """A host that read nothing for a while finds STATUS frames of the old session queued; its HELLO drops them (the
+    emulator's discard_output), so that the first frame it reads after is the INFO answering it, seq 0."""
+    with HostAmp(tmp_path) as amp:
+        host = PtyHost(amp.port)
+        host.hello(1)
+        _wait_until(lambda: _unread_bytes(host.fd) > 1000, "STATUS frames piling up")
+        host.seq = 0
+        host.send(Type.HELLO, wire.Hello("test", 2).pack())
+        _wait_until(lambda: _unread_bytes(host.fd) < 1000, "the stale bytes dropped")
+        first = host.wait(lambda frame: True, "a frame")
+        amp.finish()
+        host.close()
+    assert first.type == Type.INFO and first.seq == 0 and wire.Info.unpack(first.payload).hello_nonce == 2
+
+
+def test_an_overcurrent_fault_is_reported_and_refuses_start(tmp_path: Path) -> None:
+    """--fault overcurrent:AT_S: STATUS reports the fault (A6) and FAULT; START is refused until HELLO."""
+    with HostAmp(tmp_path, "--fault", "overcurrent:0.2") as amp:
+        host = PtyHost(amp.port)
+        host.hello(3)
+        host.status(lambda status: status.faults == 1 and status.state == State.FAULT, "the overcurrent fault")
+        carrier = host.send(Type.SET_CARRIER, wire.SetCarrier(31_360_000).pack())
+        assert host.ack(carrier).code == Code.OK
+        start = host.send(Type.START, wire.Start(16000, 0, 16).pack())
+        assert host.ack(start).code == Code.FAULT
+        amp.finish()
+        host.close()
+    assert amp.counters["faults"] == 1 and amp.counters["frames_rejected"] == 1
 
 
 def test_duration_and_disconnect_end_by_themselves_with_status_0(tmp_path: Path) -> None:
