@@ -45,9 +45,16 @@ static void raise_fault(amp_t *amp, uint8_t bits) {
     if (amp->state != AMP_FAULT) {
         amp_buffer_clear(amp);
         amp_ramp_begin(amp, AMP_FAULT_RAMP_MS, AMP_FAULT, AMP_FAULT);
+        amp_carrier_cut(amp);
     }
     if (new_bits)
         amp_send_status(amp, amp->now_us - amp->origin_us);
+}
+
+int amp_take_output_cut(amp_t *amp) {
+    int cut = amp->output_cut;
+    amp->output_cut = 0;
+    return cut;
 }
 
 void amp_fault(amp_t *amp, uint8_t bits, uint64_t now_us) {

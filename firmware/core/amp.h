@@ -56,7 +56,9 @@
 #define AMP_MIN_BODY 6u                                         /* header and CRC */
 #define AMP_MAX_ENCODED (AMP_MAX_BODY + AMP_MAX_BODY / 254u + 2u) /* longest run without 0x00 */
 
-/* --- the core's own storage (a board may lower these with -D, each a power of two) --- */
+/* --- the core's own storage (a board may lower these with -D, each a power of two; a board with
+ * no carrier and no ADC, as the microbit, needs only -DAMP_SYNTH_QUEUE=1 -DAMP_MEASURE_RING=1:
+ * amp_t is then about 5 KB) --- */
 #ifndef AMP_TX_BYTES
 #define AMP_TX_BYTES 2048u     /* bytes queued for the host (a STATUS burst after a 100 ms stall
                                 * fits); a frame that does not fit is dropped, counted */
@@ -161,6 +163,7 @@ typedef struct amp {
     uint32_t inc_carrier_mhz, inc_q, inc_r; /* increment for that carrier: inc_q + inc_r / phase_den */
     amp_played_t played[AMP_SYNTH_QUEUE];
     uint32_t played_head, played_tail, played_done; /* done: output samples made of the tail one */
+    uint8_t output_cut;           /* a fault began: the board is to drop its queued output */
     /* measurement */
     uint32_t measure_phase[AMP_MEASURE_RING];
     uint32_t written, measured;   /* output samples synthesised / measured, free-running */
@@ -178,49 +181,77 @@ typedef struct amp {
     void *hello_hook_ctx;
 } amp_t;
 
-/* Power-up (A7): output 0, IDLE, no carrier, no STATUS before the first HELLO. `board` must
- * outlive amp (hal_init's); `serial` is INFO's serial: up to 15 characters read, up to a NUL
+/*
+ * The functions. All run to completion in the caller's context (no interrupts, no locks: call them
+ * from one thread or the main loop only; an interrupt handler only fills the board's buffers).
+ * "What is due" is every envelope sample and periodic STATUS whose time is at or before now_us,
+ * made in time order; every call taking now_us makes it first. A typical board: amp_run().
+ */
+
+/* Power-up (A7): output 0, IDLE, no carrier, no STATUS before the first HELLO; STATUS time_us
+ * counts from `now_us`. Call once, before any other function. `board` (hal_init's) must outlive
+ * amp; its limits are taken as they are, except full scale (capped at 1000 V) and the clamp
+ * (max_mv, at most full scale). `serial` is INFO's serial: up to 15 characters, up to a NUL
  * (a char[16] from hal_serial_number, or a shorter string). */
 void amp_init(amp_t *amp, const hal_board_t *board, const char *serial, uint64_t now_us);
 
-/* `n` bytes from the line arrived at `now_us`: samples and STATUS due up to now_us first, then
- * every frame they complete, in order. Any bytes are safe: at most AMP_MAX_ENCODED are held. */
+/* `n` bytes from the line (any bytes: every one is validated) arrived at `now_us`. Each frame they
+ * complete acts at now_us after what is due up to then, in order; answers are queued for
+ * amp_transmit. At most AMP_MAX_ENCODED bytes of an unfinished frame are held. */
 void amp_receive(amp_t *amp, const uint8_t *data, size_t n, uint64_t now_us);
 
-/* Play every envelope sample and send every STATUS due up to `now_us`. */
+/* Make what is due up to `now_us`: envelope samples (A1-A4 applied, queued for amp_synthesize,
+ * told to the observer) and periodic STATUS (A8). Call it at least at amp_next_due_us(). */
 void amp_advance(amp_t *amp, uint64_t now_us);
 
-/* Hardware fault `bits` (AMP_FAULT_*) at `now_us` (A6): after what is due, the output ramps to 0
- * within 1 ms, the bits latch until HELLO, STATUS goes out at once for a new bit, FAULT. */
+/* Hardware fault `bits` (AMP_FAULT_*; others ignored) at `now_us`, after what is due (A6): the
+ * applied envelope ramps to 0 within 1 ms, the bits latch until HELLO, a STATUS goes out at once
+ * for a new bit, the state is FAULT (START refused) until HELLO; see amp_take_output_cut. */
 void amp_fault(amp_t *amp, uint8_t bits, uint64_t now_us);
 
-/* The board is going away (e.g. SIGTERM): ramp to 0 over R as the watchdog would, no trip. */
+/* The board is going away (e.g. the host build's SIGTERM): while PRIMING or RUNNING, ramp to 0 over
+ * R (10 ms) and go IDLE as the watchdog would, without counting a trip. Keep calling amp_advance
+ * until amp_counters' state is IDLE and envelope_uv 0 (amp_next_due_us then only names STATUS). */
 void amp_stop_output(amp_t *amp, uint64_t now_us);
 
-/* Take up to `cap` bytes queued for the host (whole frames are queued, taken in any pieces). */
+/* Take up to `cap` of the bytes queued for the host, in order (whole frames, each ending in 0x00,
+ * are queued; they may be taken in any pieces). The queue holds AMP_TX_BYTES: a frame that does
+ * not fit is dropped whole and counted (tx_dropped); HELLO drops what was not taken. */
 size_t amp_transmit(amp_t *amp, uint8_t *out, size_t cap);
 
-/* Take up to `cap` carrier samples (at output_rate_hz) for the envelope samples played so far:
- * output = applied envelope / full scale * sin(2 pi phase) * 32767, phase continuous (A2).
- * Against that double-precision reference the samples are within 1.5 (of 32767; tests/core_carrier.c). A board that
- * takes fewer than are made loses the oldest beyond AMP_SYNTH_QUEUE envelope samples (the phase
- * runs on). 0 when output_rate_hz is 0. */
+/* Take up to `cap` carrier samples (at output_rate_hz, output_rate_hz / envelope_hz per envelope
+ * sample played, the envelope held over them): applied envelope / full scale * sin(2 pi phase) *
+ * 32767, rounded. The phase starts at 0 at power-up, advances only while samples are made, and is
+ * continuous across samples and carrier changes (A2); it is exact (carrier.c: no drift). Against
+ * that double-precision reference the samples are within 1.5 (of 32767; tests/core_carrier.c).
+ * A board that takes fewer than are made loses the oldest beyond AMP_SYNTH_QUEUE envelope samples
+ * (the phase runs on). Returns 0 when output_rate_hz is 0. */
 size_t amp_synthesize(amp_t *amp, int16_t *out, size_t cap);
+
+/* 1 once after a fault began (A6): the board drops the output it has queued (hal_output_off);
+ * amp_run does so. From the fault on, amp_synthesize makes the carrier at 0 (the applied envelope,
+ * what STATUS and the observer report, still ramps as A6 says). */
+int amp_take_output_cut(amp_t *amp);
 
 /* `n` ADC pairs (hal_adc_read's), the k-th taken while the k-th sample amp_synthesize gave
  * played. Synchronous demodulation against each sample's own phase, over windows of whole
- * carrier periods (at least 1 ms): STATUS's voltage_mv_rms, current_ua_rms, phase_cdeg, and the
- * overcurrent trip (A6, at the last now_us seen). Pairs older than AMP_MEASURE_RING output
- * samples are skipped. Does nothing unless the board measures. */
+ * carrier periods (at least 1 ms): STATUS's voltage_mv_rms, current_ua_rms (through the board's
+ * uv/na per lsb), phase_cdeg (current against voltage, +-18000), and the overcurrent trip (A6,
+ * rms current above max_current_ma, at the last now_us seen). Pairs whose sample's phase is older
+ * than AMP_MEASURE_RING output samples start a new window; pairs for samples never made are
+ * ignored. Does nothing when the board's measures is 0. */
 void amp_measure(amp_t *amp, const int16_t *voltage, const int16_t *current, size_t n);
 
-/* When the next sample or STATUS is due (board us, rounded up); UINT64_MAX when none. */
+/* When the next envelope sample or STATUS is due (board us, rounded up); UINT64_MAX when neither
+ * (at rest before the first HELLO). A board sleeps until then or until bytes arrive. */
 uint64_t amp_next_due_us(const amp_t *amp);
 
-/* Counters and the present output. */
+/* STATUS's counters since the last HELLO, the fault bits, the state, the applied envelope (uV),
+ * the carrier made (mHz, 0: none) and play_index; tx_dropped counts from power-up. */
 void amp_counters(const amp_t *amp, amp_counters_t *out);
 
-/* Called for every applied envelope sample and every watchdog trip (NULL: none). */
+/* `fn(ctx, event)` is called for every applied envelope sample and every watchdog trip, from inside
+ * the call that made it (it must not call the core); NULL: none. The host build records with it. */
 void amp_set_observer(amp_t *amp, amp_observer_t fn, void *ctx);
 
 /* Called when a HELLO is acted on, after the core dropped what it held for the host and before INFO
@@ -235,12 +266,16 @@ uint64_t amp_last_valid_us(const amp_t *amp);
 /* sizeof(amp_t), for callers that allocate it without this header (ctypes). */
 size_t amp_sizeof(void);
 
-/* The main loop on hal.h: hal_init, hal_serial_number, amp_init, then forever amp_run_once. */
+/* The main loop on hal.h: hal_init, hal_serial_number, amp_init(hal_time_us()), then forever
+ * amp_run_once on a static amp_t. Never returns. */
 void amp_run(void);
 
-/* One pass of amp_run's loop on `amp` (the bytes hal_uart_write did not take are kept in
- * `pending`, at most AMP_PENDING_BYTES): read, receive, faults, advance, synthesise, output,
- * measure, transmit, watchdog kick, then hal_wait until the next thing is due. */
+/* One pass of amp_run's loop on `amp`: hal_uart_read -> amp_receive (at most 16 reads of 64 bytes,
+ * each stamped hal_time_us()), hal_faults -> amp_fault, amp_advance, hal_adc_read -> amp_measure,
+ * amp_take_output_cut -> hal_output_off, amp_synthesize -> hal_output_write (up to
+ * hal_output_room), amp_transmit -> hal_uart_write (what it does not take stays in `pending`, at
+ * most AMP_PENDING_BYTES; the loop never waits for the host), hal_watchdog_kick, then
+ * hal_wait(amp_next_due_us). For a board that runs its own loop on the same functions. */
 #define AMP_PENDING_BYTES 256u
 typedef struct {
     uint8_t bytes[AMP_PENDING_BYTES];

@@ -95,6 +95,7 @@ void amp_on_frame(amp_t *amp, const amp_frame_t *frame);
 /* carrier.c: the phase accumulator and the sine. */
 void amp_carrier_init(amp_t *amp);
 void amp_carrier_played(amp_t *amp, int32_t envelope_uv, uint32_t carrier_mhz);
+void amp_carrier_cut(amp_t *amp); /* a fault: the samples not yet made are made at 0 */
 int32_t amp_sine_q15(uint32_t phase);
 
 /* measure.c: the demodulator. */

@@ -60,10 +60,19 @@ static void drop_oldest(amp_t *amp) {
     amp->played_tail++;
 }
 
-/* A sample was played (play.c): queue it for synthesis. */
+/* A fault (A6): what is queued, and what plays in FAULT, is made at 0; the board cuts its own queue. */
+void amp_carrier_cut(amp_t *amp) {
+    for (uint32_t k = amp->played_tail; k != amp->played_head; k++)
+        amp->played[k & (AMP_SYNTH_QUEUE - 1u)].amplitude_q15 = 0;
+    amp->output_cut = 1;
+}
+
+/* A sample was played (play.c): queue it for synthesis (at 0 in FAULT). */
 void amp_carrier_played(amp_t *amp, int32_t envelope_uv, uint32_t carrier_mhz) {
     if (amp->board->output_rate_hz == 0)
         return;
+    if (amp->state == AMP_FAULT)
+        envelope_uv = 0;
     if (amp->played_head - amp->played_tail == AMP_SYNTH_QUEUE)
         drop_oldest(amp);
     amp_played_t *played = &amp->played[amp->played_head & (AMP_SYNTH_QUEUE - 1u)];

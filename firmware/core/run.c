@@ -62,10 +62,12 @@ void amp_run_once(amp_t *amp, amp_pending_t *pending) {
     if (faults)
         amp_fault(amp, faults, hal_time_us());
     amp_advance(amp, hal_time_us());
+    if (amp->board->measures)
+        move_adc(amp); /* an overcurrent it finds cuts the output below */
+    if (amp_take_output_cut(amp))
+        hal_output_off();
     if (amp->board->output_rate_hz != 0)
         move_output(amp);
-    if (amp->board->measures)
-        move_adc(amp);
     move_tx(amp, pending);
     hal_watchdog_kick();
     hal_wait(amp_next_due_us(amp));

@@ -157,21 +157,31 @@ static void test_demodulation(void) {
 static void test_overcurrent(void) {
     static const hal_board_t weak = { "weak", 192000u, 125000u, 100000u, 10000000u, 80000000u, 10u, 7u, 5000u, 1000u };
     session_init(&s, &weak, 0);
-    session_running(&s, 0, 0, 0);
-    int16_t zeros[256] = { 0 };
-    host_envelope(&s, 16, zeros, 256, 0);
+    session_running(&s, 0, 0, 1000);
+    int16_t level[256];
+    for (int i = 0; i < 256; i++)
+        level[i] = 1000;
+    host_envelope(&s, 16, level, 256, 0);
     for (uint64_t t = 1000; t <= 3000; t += 1000) {
         amp_advance(&s.amp, t);
         measure_known(1000.0, 0.0, 14000.0, 0.0, amp_synthesize(&s.amp, out, sizeof out / sizeof *out));
     }
     CHECK(s.amp.current_ua_rms > 9800);
     CHECK_EQ(s.amp.state, AMP_RUNNING); /* 9.9 mA: under the 10 mA trip */
-    for (uint64_t t = 4000; t <= 6000; t += 1000) {
+    for (uint64_t t = 4000; t <= 6000 && s.amp.state != AMP_FAULT; t += 1000) {
         amp_advance(&s.amp, t);
         measure_known(1000.0, 0.0, 14500.0, 0.0, amp_synthesize(&s.amp, out, sizeof out / sizeof *out));
     }
     CHECK_EQ(s.amp.state, AMP_FAULT); /* A6 from the measured current */
     CHECK_EQ(s.amp.faults, AMP_FAULT_OVERCURRENT);
+    CHECK_EQ(amp_take_output_cut(&s.amp), 1); /* once */
+    CHECK_EQ(amp_take_output_cut(&s.amp), 0);
+    CHECK(s.amp.output_uv != 0); /* the applied envelope still ramps (A6), ... */
+    amp_advance(&s.amp, s.amp.now_us + 2000);
+    size_t made = amp_synthesize(&s.amp, out, sizeof out / sizeof *out);
+    CHECK(made > 100);
+    for (size_t k = 0; k < made; k++) /* ... the carrier is cut at once */
+        CHECK_EQ(out[k], 0);
     take_sent(&s);
     size_t fault_status = 0;
     for (size_t i = 0; i < s.sent_count; i++)

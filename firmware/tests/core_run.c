@@ -23,7 +23,8 @@ void test_run(void) {
     hal_script.tx_per_call = 16;
     hal_script.output_room = 100;
     hal_script.jump = &jump;
-    hal_script.fault_bits = 0;
+    hal_script.fault_bits = AMP_FAULT_OVERTEMPERATURE;
+    hal_script.fault_at_us = 70000;
     uint8_t p[4 + 2 * 256] = { 't' };
     put_u32(p + 12, 42);
     script_frame(1000, MSG_HELLO, 0, p, 16);
@@ -67,7 +68,9 @@ void test_run(void) {
     CHECK(statuses >= 14);
     CHECK_EQ(get_u32(last_status + 12), 7);  /* frames_ok */
     CHECK_EQ(get_u32(last_status + 32), 1);  /* the watchdog tripped (38 ms after the last frame) */
-    CHECK_EQ(last_status[10], AMP_IDLE);
+    CHECK_EQ(last_status[10], AMP_FAULT);   /* the hardware fault at 70 ms */
+    CHECK_EQ(last_status[11], AMP_FAULT_OVERTEMPERATURE);
+    CHECK_EQ(hal_script.output_offs, 1);    /* the fault cut the board's queued output */
     CHECK(get_u32(last_status + 44) > 0);    /* voltage measured by then, from the ADC */
     CHECK(hal_script.output_count > 7000);   /* about 40 ms of 192 kHz carrier */
     CHECK(hal_script.adc_count == hal_script.output_count);
