@@ -10,14 +10,16 @@ Every test function is parametrised over the targets of tests/amp_targets.py:
 The rules that need exact time (A1-A4, A6's 1 ms, STOP's and HELLO's ramps, STATUS's schedule
 to the microsecond) run on the in-process targets; a pty target skips them with the reason,
 and runs every rule judged on answers, counters and refusals, with waits for answers only.
-What needs a stream kept alive within the watchdog on a pty runs in one test,
-:func:`test_a_stream_end_to_end`, marked realtime for the pty targets only. The
-emulator and the core also run side by side on the same frames at the same times
-(:func:`test_emulator_and_core_apply_the_same_envelope_and_carrier`).
+A stream on a pty runs in one test, :func:`test_a_stream_plays_on_the_amplifiers_clock`,
+marked realtime for the pty targets only. The emulator and the core also run side by side on
+the same frames at the same times
+(:func:`test_emulator_and_core_apply_the_same_envelope_and_carrier`). docs/testing.md "The
+amplifier conformance suite" says what runs where.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import functools
 import math
@@ -81,8 +83,9 @@ def lines() -> Iterator[dict[str, LineTarget]]:
     its own session with HELLO); each must end with status 0 on SIGTERM."""
     started: dict[str, LineTarget] = {}
     yield started
-    for line in started.values():
-        line.close()
+    with contextlib.ExitStack() as closing:  # every one is closed, whichever fails
+        for line in started.values():
+            closing.callback(line.close)
 
 
 @pytest.fixture(params=TARGETS)
