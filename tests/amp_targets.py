@@ -4,7 +4,7 @@ A target takes frames (bytes) and gives back the frames the amplifier sent. Two 
 
 - :class:`VirtualTarget`, in process on exact virtual times (integer us from the amplifier's
   power-up): bytes arrive at ``now_us``, :meth:`VirtualTarget.advance_to` moves time on, and
-  every applied envelope sample, watchdog trip and carrier sample can be read back.
+  every applied envelope sample and watchdog trip (and the core's carrier samples) can be read back.
   :class:`EmulatorTarget` drives :class:`tpad_rt.amp.emulator.Amplifier` directly;
   :class:`CoreTarget` drives the firmware's portable core (firmware/core/amp.h) through ctypes
   on ``firmware/build/host/libtpadamp.so``, with a board of the emulator's INFO for the same
@@ -21,7 +21,6 @@ answers (on a virtual target they are there at once; on a line up to ANSWER_TIME
 from __future__ import annotations
 
 import ctypes
-import math
 import os
 import select
 import signal
@@ -38,7 +37,7 @@ import numpy.typing as npt
 
 from tpad_rt.amp import wire
 from tpad_rt.amp.emulator import (
-    Amplifier, Circuit, Plate, Recorder, amplifier_info, carrier_phase_cycles, sim_rate_hz,
+    Amplifier, Circuit, Plate, Recorder, amplifier_info, sim_rate_hz,
 )
 from tpad_rt.amp.wire import Type
 from tpad_rt.device import Device
@@ -171,10 +170,7 @@ class VirtualTarget(Target):
     def trips_us(self) -> list[float]:
         """When (us from power-up) each watchdog trip came."""
 
-    @abstractmethod
-    def carrier_mv(self) -> npt.NDArray[np.float64]:
-        """Every carrier sample made so far (mV at the output), at ``output_rate_hz``."""
-
+    #: Carrier samples per second (the emulator's plate simulation; the core's output).
     output_rate_hz: int
 
 
@@ -234,13 +230,6 @@ class EmulatorTarget(VirtualTarget):
 
     def trips_us(self) -> list[float]:
         return [t_s * 1e6 - ORIGIN_US for t_s in self.amplifier.watchdog_trip_t_s]
-
-    def carrier_mv(self) -> npt.NDArray[np.float64]:
-        """The carrier Plate.drive made (its phase accumulator, carrier_phase_cycles), from the recorded samples."""
-        envelope_v, carrier_hz = self._recorder.column("envelope_v"), self._recorder.column("carrier_hz")
-        per_sample = self.output_rate_hz // self.amplifier.envelope_hz if len(envelope_v) else 1
-        phase, _ = carrier_phase_cycles(carrier_hz, per_sample, self.output_rate_hz, 0.0)
-        return np.repeat(envelope_v * 1000, per_sample) * np.sin(2 * math.pi * phase)
 
 
 class LineTarget(Target):
@@ -527,5 +516,6 @@ class CoreTarget(VirtualTarget):
         return list(self._trips_us)
 
     def carrier_mv(self) -> npt.NDArray[np.float64]:
+        """Every carrier sample amp_synthesize gave so far (mV at the output), at ``output_rate_hz``."""
         samples = np.concatenate(self._carrier) if self._carrier else np.zeros(0, np.int16)
         return samples.astype(np.float64) * self.full_scale_mv / 32767
