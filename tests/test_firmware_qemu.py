@@ -5,7 +5,7 @@ One ``realtime`` item plays the grating for 3 s through ``serial://`` to the fir
 machine, at the settings docs/firmware.md states for it (4 ms frames, a 40 ms buffer), and reads the firmware's
 counters twice: in play's summary (the last STATUS the host read) and in run-qemu's (a STATUS read after the run,
 counters since play's HELLO). The other items judge no time: run-qemu ended by SIGINT with no host (no session to
-report), and its refusals (a board QEMU cannot run, no QEMU, no build).
+report), and its refusals (a bad flag, a board QEMU cannot run, no QEMU, no build).
 """
 
 from __future__ import annotations
@@ -114,6 +114,10 @@ def test_run_qemu_refuses_a_board_qemu_cannot_run() -> None:
     done = run_qemu("nucleo-g474re")
     done.assert_one_line_error("run-qemu: no QEMU machine for board 'nucleo-g474re' (QEMU runs: microbit)")
     assert done.stdout == ""
+
+
+def test_run_qemu_refuses_a_bad_flag_in_one_line() -> None:
+    run_qemu("microbit", "--bogus").assert_one_line_error("run-qemu: error: unrecognized arguments: --bogus")
 
 
 def test_run_qemu_without_qemu_says_which_binary_is_missing() -> None:
