@@ -29,7 +29,8 @@ Choices the document leaves open (each said again where it is made):
   restarted by each HELLO; before any HELLO the emulator sends only ACKs;
 - every ramp (STOP's, A4's, A6's, HELLO's) passes A1 and A2 like any sample; the slew
   limit is at least ``max_mv`` per ms, so A6's 1 ms ramp from ``max_mv`` fits it;
-- the output is held during PRIMING (0 after IDLE; the present value after a restart);
+- the output is held during PRIMING (0 after IDLE; the present value after a restart), and goes to 0
+  through A2 at rest (IDLE, FAULT: after a STOP ramp shorter than the slew allows, too);
   during a ramp after HELLO the old carrier is still made and reported;
 - the carriers made are multiples of CARRIER_STEP_MHZ, and so are the limits (ties
   round up); a carrier refused OUT_OF_RANGE is answered with value 0;
@@ -40,6 +41,7 @@ API map
 -------
 amplifier_info(device, circuit) -> Info         what this amplifier says in INFO
 Circuit(device, force_n), Plate(device, force_n, sim_rate_hz)   the load
+carrier_phase_cycles(carrier_hz, per_sample, sim_rate_hz, phase_cycles) -> (phase, phase_after)   Plate's carrier
 Amplifier(info, circuit, plate, origin_s, recorder=None, on_hello=None)   the protocol machine
 Recorder(limit), write_recording(path, recorder, scalars), check_record_path(path)
 counters(amplifier), recording_scalars(amplifier, recorder)   the summary's and the recording's numbers
@@ -189,14 +191,26 @@ class Plate:
               rate_hz: int) -> npt.NDArray[np.float64]:
         """Mean plate amplitude (um) over each envelope sample's period (``1 / rate_hz``, held envelope)."""
         per_sample = self.sim_rate_hz // rate_hz
-        step = np.repeat(carrier_hz / self.sim_rate_hz, per_sample)
-        phase = self._phase_cycles + np.cumsum(step) - step
-        self._phase_cycles = float((self._phase_cycles + step.sum()) % 1.0)
+        phase, self._phase_cycles = carrier_phase_cycles(carrier_hz, per_sample, self.sim_rate_hz, self._phase_cycles)
         drive = (np.repeat(envelope_v / self._volts_per_full_scale, per_sample)
                  * np.sin(2 * math.pi * phase)).astype(np.float32)
         amplitude_m = np.empty(len(drive))
         resonate(drive, self._volts_per_full_scale, self._coef, self._state, amplitude_m)
         return amplitude_m.reshape(-1, per_sample).mean(axis=1) * 1e6
+
+
+def carrier_phase_cycles(carrier_hz: npt.NDArray[np.float64], per_sample: int, sim_rate_hz: int,
+                         phase_cycles: float) -> tuple[npt.NDArray[np.float64], float]:
+    """The carrier's phase (cycles) at each of its samples, and the phase after the last one (mod 1).
+
+    ``carrier_hz`` is the carrier (Hz) for each envelope sample, made for ``per_sample`` samples at
+    ``sim_rate_hz``; the phase starts at ``phase_cycles`` and accumulates ``carrier_hz / sim_rate_hz`` per
+    sample (a phase accumulator: the carrier never jumps in phase, A2). The carrier sample is the envelope
+    times ``sin(2 pi phase)``: :meth:`Plate.drive`, and the conformance suite's equivalence test.
+    """
+    step = np.repeat(carrier_hz / sim_rate_hz, per_sample)
+    phase = phase_cycles + np.cumsum(step) - step
+    return phase, float((phase_cycles + step.sum()) % 1.0)
 
 
 def sim_rate_hz(carrier_max_mhz: int) -> int:
@@ -407,7 +421,7 @@ class Amplifier:
         elif self._ramp is not None:
             target_mv = self._ramp.next_mv()
         else:
-            target_mv = self.output_mv  # held: PRIMING, and 0 at rest
+            target_mv = self.output_mv if self.state == State.PRIMING else 0.0  # held while PRIMING; to 0 at rest
         carrier_mhz = self.carrier_made_mhz
         if self._ramp is not None and self._ramp.done >= self._ramp.samples:
             self.state, self._ramp = self._ramp.then, None

@@ -1,0 +1,132 @@
+/*
+ * main.c - tpad-amp on Linux (tpad-amp --help): the portable core on a pty, its hardware
+ * simulated (hal_host.c), until SIGTERM, SIGINT, --duration or a disconnect fault; then the
+ * output ramps to 0 and the counters are printed on one line, as amp emulate prints them.
+ */
+#include <sched.h>
+#include <signal.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "amp.h"
+#include "host.h"
+#include "options.h"
+
+/* The SCHED_FIFO priority asked for, as amp emulate: a microcontroller that nothing else delays. */
+#define REALTIME_PRIORITY 10
+/* After the output is told to stop: the ramp (R) and this much more (ms) at most. */
+#define STOP_GRACE_MS 50u
+
+static volatile sig_atomic_t stop_requested;
+
+static void on_signal(int signum)
+{
+    (void)signum;
+    stop_requested = 1;
+}
+
+static void stop_signals(void)
+{
+    struct sigaction action;
+    memset(&action, 0, sizeof action);
+    action.sa_handler = on_signal; /* no SA_RESTART: poll returns at once */
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGTERM, &action, NULL);
+    sigaction(SIGINT, &action, NULL);
+}
+
+static void realtime_priority(void)
+{
+    struct sched_param param;
+    memset(&param, 0, sizeof param);
+    param.sched_priority = REALTIME_PRIORITY;
+    if (sched_setscheduler(0, SCHED_FIFO, &param) != 0)
+        fprintf(stderr, "tpad-amp: no real-time priority here (SCHED_FIFO refused): a busy machine can delay the "
+                        "firmware, and frames it reads late count as underruns\n");
+}
+
+static amp_t amp;
+static amp_pending_t pending;
+
+/* A HELLO (amp_set_hello_hook): what the pty and the loop's pending bytes hold for the host is stale; a
+ * 0x00 then ends any frame the host had begun to read, so that INFO arrives whole. */
+static void on_hello(void *ctx)
+{
+    (void)ctx;
+    host_discard_output();
+    pending.bytes[0] = 0x00;
+    pending.count = 1;
+}
+
+/* Serve until asked to stop; why it ended. */
+static const char *serve(const options_t *options)
+{
+    uint64_t end_us = options->duration_s > 0.0 ? (uint64_t)(options->duration_s * 1e6 + 0.5) : UINT64_MAX;
+    for (;;) {
+        uint64_t now = hal_time_us();
+        if (stop_requested)
+            return "stopped by a signal";
+        if (now >= end_us)
+            return "ran for --duration";
+        if (host_disconnected(now))
+            return "disconnected";
+        amp_run_once(&amp, &pending);
+    }
+}
+
+/* Ramp to 0 (A4's ramp, no trip counted) and play it out, at most R + STOP_GRACE_MS. */
+static void ramp_down(void)
+{
+    uint64_t now = hal_time_us(), deadline = now + (AMP_RAMP_MS + STOP_GRACE_MS) * 1000u;
+    amp_counters_t counters;
+    host_set_serving(0);
+    amp_stop_output(&amp, now);
+    do {
+        amp_run_once(&amp, &pending);
+        amp_counters(&amp, &counters);
+    } while (!((counters.state == AMP_IDLE || counters.state == AMP_FAULT) && counters.envelope_uv == 0) &&
+             hal_time_us() < deadline);
+}
+
+int main(int argc, char **argv)
+{
+    static options_t options;
+    char error[512], serial[16];
+    if (options_parse(argc, argv, &options, error, sizeof error) != 0) {
+        fprintf(stderr, "tpad-amp: %s\n", error);
+        return 1;
+    }
+    if (options.help) {
+        fputs(options_help, stdout);
+        return 0;
+    }
+    stop_signals();
+    if (host_setup(&options, &stop_requested, error, sizeof error) != 0) {
+        fprintf(stderr, "tpad-amp: %s\n", error);
+        return 1;
+    }
+    realtime_priority();
+    const hal_board_t *board = hal_init();
+    hal_serial_number(serial);
+    amp_init(&amp, board, serial, hal_time_us());
+    amp_set_observer(&amp, host_observe, &amp);
+    amp_set_hello_hook(&amp, on_hello, NULL);
+    printf("amplifier on %s\n", host_port_name());
+    fflush(stdout);
+    const char *ending = serve(&options);
+    ramp_down();
+    amp_counters_t counters;
+    amp_counters(&amp, &counters);
+    int status = host_finish(error, sizeof error);
+    printf("tpad-amp %s: frames_ok=%lu frames_bad=%lu frames_rejected=%lu sequence_gaps=%lu underruns=%lu "
+           "watchdog_trips=%lu faults=%u\n",
+           ending, (unsigned long)counters.frames_ok, (unsigned long)counters.frames_bad,
+           (unsigned long)counters.frames_rejected, (unsigned long)counters.sequence_gaps,
+           (unsigned long)counters.underruns, (unsigned long)counters.watchdog_trips, (unsigned)counters.faults);
+    fflush(stdout);
+    if (status != 0) {
+        fprintf(stderr, "tpad-amp: %s\n", error);
+        return 1;
+    }
+    return 0;
+}
