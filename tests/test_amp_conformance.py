@@ -41,6 +41,8 @@ from tpad_rt.amp.wire import Code, Fault, State, Type
 
 TARGETS = ("emulator", "core", "host", "qemu")
 LINES = ("host", "qemu")
+#: The targets on exact (virtual) times.
+EXACT = ("emulator", "core")
 RATE_HZ = 16_000
 CARRIER_MHZ = 31_360_000
 #: The document's worked bytes (section 7): what goes on the line.
@@ -49,7 +51,6 @@ WORKED_HELLO = bytes.fromhex("03 02 01 01 08 74 70 61 64 2d 72 74 01 01 01 01 07
 WORKED_HELLO_NONCE = 0x9E3779B9
 WORKED_ENVELOPE = bytes.fromhex("04 02 04 03 01 01 01 01 01 01 01 02 40 06 c0 ff 7f 6a 87 00")
 WORKED_SAMPLES = (0, 16384, -16384, 32767)
-EXACT_TIME = "a rule judged on exact times: it runs on the in-process targets (virtual clock)"
 
 
 # --- the targets ------------------------------------------------------------------------------------------------
@@ -106,11 +107,13 @@ def fresh_target(request: pytest.FixtureRequest) -> Iterator[Target]:
     started.close()
 
 
-def virtual(target: Target) -> VirtualTarget:
-    """``target`` when it runs on exact times; else the test is skipped for it."""
-    if not isinstance(target, VirtualTarget):
-        pytest.skip(EXACT_TIME)
-    return target
+@pytest.fixture(params=EXACT)
+def exact_target(request: pytest.FixtureRequest) -> VirtualTarget:
+    """An in-process target on exact virtual times: the rules judged on exact times run on these only (a pty
+    target's times are its host's scheduling)."""
+    made = new_target(request.param)
+    assert isinstance(made, VirtualTarget)
+    return made
 
 
 # --- helpers ----------------------------------------------------------------------------------------------------
@@ -209,10 +212,10 @@ def test_worked_hello_is_answered_by_info_echoing_its_nonce(target: Target) -> N
     assert (status.state, status.envelope_mv, status.last_seq) == (State.IDLE, 0, 6)
 
 
-def test_worked_envelope_plays_its_four_samples(target: Target) -> None:
+def test_worked_envelope_plays_its_four_samples(exact_target: VirtualTarget) -> None:
     """Section 6's session with section 7's bytes: HELLO, SET_CARRIER seq 1, START seq 2 (prefill 4), the worked
     ENVELOPE seq 3: indices 0-3 play 0, +half, -half (anti-phase) and full scale, through A1 and A2."""
-    amp = virtual(target)
+    amp = exact_target
     host = Host(amp)
     host.write(WORKED_HELLO)
     info = wire.Info.unpack(host.wait_for(lambda frame: frame.type == Type.INFO, "INFO").frame.payload)
@@ -301,10 +304,10 @@ def test_start_checks_in_order(target: Target) -> None:
         assert host.command(Type.START, wire.Start(12345, 0, 0).pack()).code == Code.FAULT
 
 
-def test_stop_ramps_linearly_then_idle(target: Target) -> None:
+def test_stop_ramps_linearly_then_idle(exact_target: VirtualTarget) -> None:
     """STOP ramps from the present value to 0 over min(ramp_ms, 50) ms (at least one sample), ACK at once, then
     IDLE with the buffer emptied; every ramp passes A2, and the output ends at 0 however short the ramp."""
-    amp = virtual(target)
+    amp = exact_target
     host = Host(amp)
     level = 20000
     for ramp_ms, samples in ((5, 80), (1000, 800), (0, 1)):
@@ -331,10 +334,10 @@ def test_stop_ramps_linearly_then_idle(target: Target) -> None:
         assert host.status().frames_rejected == 1 and host.acks_since(since) == []
 
 
-def test_hello_ramps_the_output_down_on_the_old_carrier(target: Target) -> None:
+def test_hello_ramps_the_output_down_on_the_old_carrier(exact_target: VirtualTarget) -> None:
     """HELLO during a stream ramps the output linearly to 0 over R (<= 10 ms: A4's ramp) on the carrier it had,
     then IDLE with no carrier; INFO goes out at once."""
-    amp = virtual(target)
+    amp = exact_target
     host = Host(amp)
     info = start_stream(host, prefill=64)
     send_samples(host, 0, [20000] * 640)
@@ -420,7 +423,9 @@ def test_envelope_outside_a_stream_or_its_window_is_counted_not_answered(target:
     seqs = {host.send(Type.ENVELOPE, envelope(0, [100] * 8))}
     status = host.status()
     assert (status.frames_rejected, hung_acks(host, since, seqs)) == (1, [])
-    amp = virtual(target)  # a stream: its watchdog needs the host's frames in time
+    if not isinstance(target, VirtualTarget):
+        return  # the window needs a stream whose watchdog the host's frames keep in time: exact targets only
+    amp = target
     start = 2**32 - 16
     start_stream(host, start_index=start, prefill=info.buffer_samples)
     since = host.mark()
@@ -455,10 +460,10 @@ def test_sequence_gaps_are_counted_across_valid_frames(target: Target) -> None:
 
 # --- section 4: the amplifier's rules -----------------------------------------------------------------------------
 
-def test_a1_clamp_applies_samples_above_max_mv_at_max_mv(target: Target) -> None:
+def test_a1_clamp_applies_samples_above_max_mv_at_max_mv(exact_target: VirtualTarget) -> None:
     """A1: no applied sample exceeds max_mv in magnitude; samples above it (full scale is above max_mv) apply at
     max_mv, anti-phase ones at -max_mv."""
-    amp = virtual(target)
+    amp = exact_target
     host = Host(amp)
     info = start_stream(host, prefill=64)
     samples = [32767] * 64 + [-32768] * 64 + [30000] * 64 + [10000] * 64 + [-32767] * 64
@@ -474,10 +479,10 @@ def test_a1_clamp_applies_samples_above_max_mv_at_max_mv(target: Target) -> None
     np.testing.assert_allclose(stream.envelope_uv, expected, atol=step_uv(info))
 
 
-def test_a2_slew_limits_every_step(target: Target) -> None:
+def test_a2_slew_limits_every_step(exact_target: VirtualTarget) -> None:
     """A2: the applied envelope moves by at most slew_mv_per_ms / envelope_hz * 1000 mV per sample (at 8 kHz:
     two 16 kHz steps), on steps, swings and underruns alike, and reaches the asked level at that pace."""
-    amp = virtual(target)
+    amp = exact_target
     host = Host(amp)
     info = start_stream(host, prefill=64, rate_hz=8000)
     samples = [0] * 8 + [32767] * 40 + [-32767] * 40 + [5000] * 40 + [-5000] * 2 + [0] * 30
@@ -492,10 +497,10 @@ def test_a2_slew_limits_every_step(target: Target) -> None:
     assert amp.counters()["underruns"] >= 40
 
 
-def test_a3_samples_play_at_their_index_once(target: Target) -> None:
+def test_a3_samples_play_at_their_index_once(exact_target: VirtualTarget) -> None:
     """A3: samples play at their index whatever the frames' order; a repeated index is replaced; a missing index
     plays 0 (through A2) and counts one underrun per sample; a bad frame's samples are never applied."""
-    amp = virtual(target)
+    amp = exact_target
     host = Host(amp)
     info = start_stream(host, start_index=1000, prefill=16)
     levels = {"a": 1000, "b": 2000, "c": 3000, "d": 4000, "e": 1500, "bad": 9000}
@@ -516,11 +521,11 @@ def test_a3_samples_play_at_their_index_once(target: Target) -> None:
     assert amp.counters()["frames_bad"] == 1
 
 
-def test_a4_watchdog_zeroes_the_output_within_watchdog_ms(target: Target) -> None:
+def test_a4_watchdog_zeroes_the_output_within_watchdog_ms(exact_target: VirtualTarget) -> None:
     """A4: with no valid frame for watchdog_ms - R (R <= 10 ms) the amplifier counts a trip, ramps to 0 and goes
     IDLE: output 0 within watchdog_ms of the last valid frame; bad frames do not hold it off, rejected valid ones
     do; frames every 30 ms never trip it; START is needed again."""
-    amp = virtual(target)
+    amp = exact_target
     host = Host(amp)
     info = start_stream(host, prefill=16)
     index = send_samples(host, 0, [20000] * 640)  # 40 ms ahead: still playing when the watchdog trips
@@ -555,13 +560,13 @@ def test_a4_watchdog_zeroes_the_output_within_watchdog_ms(target: Target) -> Non
     assert amp.counters()["watchdog_trips"] == 2 and amp.counters()["state"] == State.IDLE
 
 
+@pytest.mark.parametrize("target", [name for name in TARGETS if name != "qemu"], indirect=True)
 def test_a6_fault_ramps_within_1_ms_and_holds_until_hello(target: Target) -> None:
     """A6: a fault ramps the output to 0 within 1 ms, sets its bit, sends STATUS at once (for a new bit), goes to
     FAULT and refuses START with FAULT (first of START's checks) until HELLO; envelope frames are refused.
-    The host build checks the refusals with an overcurrent at its start (``--fault overcurrent:0``)."""
+    The host build checks the refusals with an overcurrent at its start (``--fault overcurrent:0``); the
+    microbit build injects no faults."""
     if isinstance(target, LineTarget):
-        if target.name != "host":
-            pytest.skip("the microbit build injects no faults: A6 runs in process and on the host build")
         faulty = start_line("host", "--fault", "overcurrent:0")
         try:
             refuses_start_until_hello(faulty)
@@ -569,7 +574,8 @@ def test_a6_fault_ramps_within_1_ms_and_holds_until_hello(target: Target) -> Non
             faulty.close()
         assert faulty.final_counters["faults"] == 0  # cleared by HELLO
         return
-    amp = virtual(target)
+    assert isinstance(target, VirtualTarget)
+    amp = target
     host = Host(amp)
     start_stream(host, prefill=64)
     index = send_samples(host, 0, [32767] * 320)
