@@ -19,6 +19,9 @@ on_written(link, count) -> int
 settle(link, now_ns) -> int
     after the writes: the stall check, the prefill's end; when to wake (ns), or RUN_OVER
     (``link[LINK_EXIT]`` says why)
+play_position(link, now_ns) -> float
+    the stream index the host estimates the amplifier plays at ``now_ns`` (the DAC time its
+    blocks are stamped with: each frame's delay is the written index less this)
 stream(table, link, buffers, envelope, times) -> int
     the production loop: the steps above on CLOCK_MONOTONIC and the non-blocking
     descriptor ``link[LINK_FD]`` (reads until EAGAIN, writes until EAGAIN, EINTR retried,
@@ -788,7 +791,7 @@ def _react(cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, link: np.ndarray
 
 
 @njit(**_KERNEL)
-def _play_position(link: np.ndarray, now_ns: int) -> float:
+def play_position(link: np.ndarray, now_ns: int) -> float:
     """The stream index the amplifier plays at ``now_ns``: from the reference, at the envelope rate once primed."""
     if link[LINK_PRIMED] == 0:
         return float(link[LINK_REF_INDEX])
@@ -800,23 +803,26 @@ def _pace(table: np.ndarray, state: np.ndarray, link: np.ndarray, buffers: np.nd
           times: np.ndarray, now_ns: int) -> None:
     """Queue the frames due at ``now_ns``: skip ahead of a play position that passed what was sent, then render
     frames while fewer than the target fill (and a frame, once primed) are ahead of it, never more than the
-    amplifier's buffer, with room left in BUF_TX for a START or a STOP; each followed by a SET_CARRIER if
+    amplifier's buffer ahead of it (of the START's index until a RUNNING STATUS came), with room left in BUF_TX for a START or a STOP; each followed by a SET_CARRIER if
     tracking moved the carrier."""
     rate_hz = link[LINK_ENVELOPE_HZ]
     frame_samples = link[LINK_FRAME_SAMPLES]
     body_bytes = PAYLOAD + ENVELOPE_SAMPLES + 2 * frame_samples + codec.CRC_BYTES
     frame_bytes = body_bytes + body_bytes // 254 + 2  # its most COBS bytes, delimiter included
     room = buffers[BUF_TX].shape[0] - frame_bytes - MAX_ENCODED
-    play = _play_position(link, now_ns)
+    play = play_position(link, now_ns)
     if link[LINK_WRITTEN] < play - frame_samples:
         # The amplifier played past what it was sent (an underrun: it plays 0 and moves on), so samples for those
         # indices would be refused as already played: skip the stream ahead of it.
         link[LINK_LATE] += 1
         _skip_to(table, state, link, np.int64(play) + frame_samples)
         link[LINK_SKIPPED] = 1
+    # The amplifier takes indices up to its own play index + its buffer: until a RUNNING STATUS since the last START
+    # says it plays (the prefill may still be on the line, the estimate then runs ahead of it), the START's index.
+    window = play if link[LINK_CHECK_TIME_US] >= 0 else float(link[LINK_START_INDEX])
     end = link[LINK_TX_END]
     while (link[LINK_WRITTEN] < play + link[LINK_TARGET_FILL] + frame_samples * link[LINK_PRIMED]
-           and link[LINK_WRITTEN] + frame_samples <= play + link[LINK_BUFFER_SAMPLES] and end <= room):
+           and link[LINK_WRITTEN] + frame_samples <= window + link[LINK_BUFFER_SAMPLES] and end <= room):
         delay_ns = int((link[LINK_WRITTEN] - play) * 1e9 / rate_hz)
         end = _queue_envelope(table, state, link, buffers, envelope, times, delay_ns, link[LINK_SKIPPED] != 0,
                               link[LINK_PRIMED] == 0, end)
