@@ -122,6 +122,9 @@ def test_the_rate_estimate_from_status_reports() -> None:
     assert link_rate([(0, 0), (5000, 50), (15000, 150), (20000, 175)], 175) == LinkRate(80000.0, False, 175, 0.01)
     # All of it between two reports 5 ms apart: at least the burst over that time.
     assert link_rate([(0, 0), (5000, 0), (10000, 175)], 175) == LinkRate(280000.0, True, 175, 0.005)
+    # An amplifier that reads a fast line in bursts of its own (the emulator on a pty): the whole burst's bound.
+    assert link_rate([(0, 0), (5000, 0), (10000, 1472), (15000, 1472), (20000, 1472), (25000, 2000)], 2000) == \
+        LinkRate(800000.0, True, 2000, 0.02)
     # Nothing came.
     assert link_rate([(0, 0), (5000, 0), (10000, 0)], 175).bytes_per_s == 0.0
 

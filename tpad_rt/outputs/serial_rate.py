@@ -20,9 +20,10 @@ Method (H11): after INFO and SET_CARRIER the host sends a burst of KEEPALIVE fra
 each on the line; each resets the watchdog and counts in STATUS's ``frames_ok``) as fast as
 the line takes them, and reads the STATUS frames the amplifier sends every
 ``status_period_ms`` meanwhile: ``frames_ok + frames_bad`` against ``time_us``, the
-amplifier's own clock. Two or more STATUS frames taken while the burst was arriving give the
-rate from their difference; a burst that arrived within two STATUS periods gives a lower
-bound (all its bytes over the time between the STATUS before it and the one after), and the
+amplifier's own clock. The rate is the higher of two the link showed: between the first and
+the last STATUS taken while the burst arrived (exact on a line the burst keeps busy), and
+the whole burst over the time from the STATUS before it to the one after it (a lower bound,
+the one left when the burst came within two STATUS periods or in bursts of its own); the
 burst is long enough (BURST_STATUS_PERIODS periods at the rate needed) for that bound to
 pass a link that can carry the envelope. The protocol's bytes do not change.
 """
@@ -76,18 +77,24 @@ class LinkRate:
 
 def link_rate(reports: list[tuple[int, int]], frames: int) -> LinkRate:
     """The rate from ``reports``: (``time_us``, frames the amplifier took since the burst began) of each STATUS read,
-    the first one sent before the burst (0 frames taken), times unwrapped; ``frames`` the burst's."""
+    the first one sent before the burst (0 frames taken), times unwrapped; ``frames`` the burst's.
+
+    Two rates the link showed, the higher one: between the first and the last STATUS taken while the burst arrived
+    (exact on a line the burst keeps busy), and over the whole burst, from the last STATUS before any of it to the
+    first after all of it (a lower bound: it counts up to two STATUS periods more than the burst took; the only one
+    when it arrived between two STATUS frames, or in bursts of its own, as an amplifier reading a fast line may)."""
+    before_us = max(t_us for t_us, taken in reports if taken == 0)
+    t_us, taken = next(((t_us, taken) for t_us, taken in reports if taken >= frames), reports[-1])
+    whole = LinkRate(taken * KEEPALIVE_LINE_BYTES / ((t_us - before_us) * 1e-6) if t_us > before_us else 0.0,
+                     taken >= frames, frames, max(t_us - before_us, 0) * 1e-6)
     during = [(t_us, taken) for t_us, taken in reports if 0 < taken < frames]
     if len(during) >= 2 and during[-1][0] > during[0][0]:
         (t0_us, taken0), (t1_us, taken1) = during[0], during[-1]
-        return LinkRate((taken1 - taken0) * KEEPALIVE_LINE_BYTES / ((t1_us - t0_us) * 1e-6), False, frames,
-                        (t1_us - t0_us) * 1e-6)
-    before_us = max(t_us for t_us, taken in reports if taken == 0)
-    after = next(((t_us, taken) for t_us, taken in reports if taken >= frames), reports[-1])
-    elapsed_s = (after[0] - before_us) * 1e-6
-    if after[1] <= 0 or elapsed_s <= 0:
-        return LinkRate(0.0, False, frames, max(elapsed_s, 0.0))
-    return LinkRate(after[1] * KEEPALIVE_LINE_BYTES / elapsed_s, after[1] >= frames, frames, elapsed_s)
+        elapsed_s = (t1_us - t0_us) * 1e-6
+        busy = LinkRate((taken1 - taken0) * KEEPALIVE_LINE_BYTES / elapsed_s, False, frames, elapsed_s)
+        if busy.bytes_per_s >= whole.bytes_per_s:
+            return busy
+    return whole
 
 
 def frames_for(rate: LinkRate, envelope_hz: int, frame_samples: int, fill_samples: int, max_frame_samples: int,
