@@ -64,20 +64,18 @@ class SerialStreamDriver(Driver):
         """Open the port, make the handshake, set the carrier to the device's resonance, measure the link; the
         envelope's scale the link decided (the amplifier's full scale; the lower of its clamp and the device's
         max_voltage_v) and the achieved carrier go into the pipeline. A link too slow for the URL's frames gets
-        larger ones: one line on stderr says so (and the summary, and the drive's source in the recording's
-        metadata). BackendError as AmpLink.open says."""
+        larger ones: one line on stderr says so (and the summary; a recording's metadata has the frames in
+        ``block_frames``). BackendError as AmpLink.open says."""
         line = self._open_line(self.target) if self._open_line is not None else None
         link = self.link = self._last_link = serial_amp.AmpLink.open(self.target, carrier_hz=self.device.carrier_hz,
                                                                     max_voltage_v=self.device.max_voltage_v, line=line)
         scale = link.scale  # decided once, from the INFO the handshake took (H1, H3); the streamer clamps to it
         assert scale is not None
-        source = f"amplifier {link.info.firmware!r} on {self.target.port}" if link.info else self.target.port
         if link.link_note:  # the link is slower than the URL's frames need: larger frames (H11), said once here
             print(link.link_note, file=sys.stderr, flush=True)
-            source += f" (frames of {link.frame_samples} samples: the link carries {link.link_rate.text()})"  # type: ignore[union-attr]
         pipeline.set_drive(pipeline.device_drive.from_hardware(
             volts_per_full_scale=scale.full_scale_v, max_voltage_v=scale.max_v, carrier_hz=link.carrier_hz,
-            source=source))
+            source=f"amplifier {link.info.firmware!r} on {self.target.port}" if link.info else self.target.port))
         self.block_frames = link.frame_samples
 
     def start(self, table: CallbackTable) -> None:
