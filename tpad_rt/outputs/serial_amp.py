@@ -11,9 +11,12 @@ AmpLink.open(target, *, carrier_hz, max_voltage_v=inf, timeout_s=None, line=None
     ``line``, any :class:`~tpad_rt.outputs.serial_line.Line`, e.g. the virtual link of
     :mod:`tpad_rt.amp.virtual_link`), say HELLO with a new nonce, take the INFO that echoes it
     (rule H1), decide the envelope's scale from it (H3: ``.scale``), set the carrier and
-    check the achieved one (H2); BackendError naming the port for one that cannot open,
-    no or a bad answer, an amplifier that contradicts itself, another protocol version,
-    a carrier or envelope rate the amplifier cannot make
+    check the achieved one (H2), measure the link (H11: ``.link_rate``; larger frames than
+    the URL's where it needs them, said in ``.link_note``; :mod:`tpad_rt.outputs.serial_rate`),
+    choose the frame and target fill (``.frame_samples``, ``.target_fill``); BackendError naming
+    the port for one that cannot open, no or a bad answer, an amplifier that contradicts itself,
+    another protocol version, a carrier or envelope rate the amplifier cannot make, a link too
+    slow for the envelope; ConfigError for a ``buffer_ms`` its buffer cannot hold
 AmpLink.start(table, track=False, ramp_ms=STOP_RAMP_MS) / .failure() / .stop(ramp_ms) / .stats() / .info / .scale / .carrier_hz
     stream with the streamer's steps (:mod:`tpad_rt.kernel.amp_stream`) as the line runs
     them (a real port: the GIL-free compiled loop in a thread);
@@ -271,6 +274,7 @@ class AmpLink:
         try:
             link._hello(HELLO_TIMEOUT_S if timeout_s is None else timeout_s, max_voltage_v)
             link._set_carrier(carrier_hz)
+            link._check_rate()
             link.link_rate = link._measure_link()
             link._plan()
         except BaseException:
@@ -508,7 +512,6 @@ class AmpLink:
         serial_rate.MEASURE_LIMIT_S. BackendError if the amplifier stops reporting meanwhile, or as the reads say."""
         info = self.info
         assert info is not None
-        self._check_rate()
         frames = serial_rate.burst_frames(self.target.envelope_hz, self._url_frame_samples(self.target.envelope_hz),
                                           info.status_period_ms)
         limit_ns = self._deadline_ns(serial_rate.MEASURE_LIMIT_S)
