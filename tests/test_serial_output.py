@@ -24,6 +24,7 @@ import pytest
 import yaml
 from amp_emulator import REPO, START_TIMEOUT_S, Emulator
 from cli_run import tpad_rt
+from slow_line import SlowLine
 
 from tpad_rt.amp.emulator import RECORDED_COLUMNS
 from tpad_rt.cli.play import AUTO_SWIPE
@@ -276,3 +277,28 @@ def test_gil_load_does_not_starve_the_streamer_while_a_python_writer_degrades(tm
     # its idle run, on a busy host, missed more than the loaded one).
     assert (control_loaded[2] > control_idle[2] + 5 * MISSED_MARGIN
             or control_loaded[0] < 0.9 * control_loaded[1]), "the control must visibly degrade"
+
+
+@pytest.mark.realtime
+@pytest.mark.parametrize("bytes_per_s", [50_000, 30_000])
+def test_a_slow_line_to_the_emulator_is_adapted_or_refused_in_one_line(tmp_path: Path, bytes_per_s: int) -> None:
+    """The real emulator behind a line relayed at ``bytes_per_s`` (tests/slow_line.py): 50 kB/s carries 16 kHz in
+    larger frames than the default's (56 kB/s, 70 with the margin), said on stderr and in the summary, and plays;
+    30 kB/s carries no frame the amplifier takes at 16 kHz (41 kB/s at 256 samples): refused in one line naming the
+    rates and the envelope rate that fits. Before H11 both played with frames refused and underruns throughout."""
+    with Emulator(tmp_path) as amp, SlowLine(amp.port, bytes_per_s) as line:
+        done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{line.port}", "--duration", "2")
+        recording = amp.finish()
+    if bytes_per_s >= 41_100:
+        assert done.returncode == 0, done.stderr
+        note = f"serial: the link to the amplifier on {line.port} carries "
+        assert done.stderr.count(note) == 1 and "sending frames of" in done.stderr, done.stderr
+        assert note in done.stdout  # the summary says it again
+        assert int(recording["frames_bad"]) == 0
+        # Fed, not starved: what scheduling misses on a loaded machine is counted, a few frames at most.
+        played = int(np.count_nonzero(recording["index"] >= 0))
+        missed = (int(recording["underruns"]), int(recording["frames_rejected"]))
+        assert missed[0] < 0.02 * played and missed[1] < 0.01 * played / 24, (missed, played)
+    else:
+        done.assert_one_line_error(f"serial: the link to the amplifier on {line.port} carries ")
+        assert "too slow for the envelope at 16000 Hz" in done.stderr and "envelope_hz=8000 fits" in done.stderr

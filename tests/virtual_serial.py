@@ -4,8 +4,10 @@
 rendering the envelope, its CallbackTable, a SerialStreamDriver whose line is the
 :class:`tpad_rt.amp.virtual_link.VirtualLink`), and :meth:`VirtualRun.start`,
 :meth:`VirtualRun.swipe`, :meth:`VirtualRun.stop` do what the Renderer does, on the
-link's virtual clock: the finger's samples are events on it, stamped with the stream's
-time, and stop waits out the drive's ramp on it (the driver's own wait) before the driver closes.
+link's virtual clock: the finger's samples are events on it, stamped as the Renderer stamps
+them (its ``now_s``: the stream time of the sample the output plays now, by the streamer's
+estimate of the amplifier's play position, while the streamer renders ``buffer_ms`` ahead of it), and stop waits out
+the drive's ramp on it (the driver's own wait) before the driver closes.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from pathlib import Path
 from tpad_rt.amp.virtual_link import VirtualLink
 from tpad_rt.device import Device
 from tpad_rt.drivers.serial_stream import SerialStreamDriver
+from tpad_rt.kernel import amp_stream
 from tpad_rt.outputs import output_kind
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.realtime import CallbackTable
@@ -74,8 +77,17 @@ class VirtualRun:
         self.run_until(end_ns)
 
     def _push(self, x_mm: float, force_n: float) -> None:
-        t_s = max(self.pipeline.stream_time_s, self.pipeline.last_time_s)
+        t_s = max(self.playing_time_s(), self.pipeline.last_time_s)
         self.pipeline.push_finger(t_s, x_mm, 20.0, force_n)
+
+    def playing_time_s(self) -> float:
+        """The stream time (s) of the sample at the output now, as Renderer.now_s has it on a real port (the block
+        records' DAC time: the streamer's estimate of the amplifier's play position), on the link's clock; the
+        stream's next sample before the stream runs."""
+        amp_link = self.driver.link
+        if amp_link is None or not amp_link.streaming:
+            return self.pipeline.stream_time_s
+        return float(amp_stream.play_position(amp_link.link, self.clock.now_ns())) / self.pipeline.fs_hz
 
     def run_until(self, t_ns: int) -> None:
         """Advance the clock to ``t_ns`` (ns), the stream and the amplifier running on the way."""

@@ -24,8 +24,9 @@ link.unplug()                    the port is lost: the host's reads and writes f
 link.set_drift(fraction)         the amplifier's clock runs ``1 + fraction`` times the host's from now
 link.recording() -> dict         the samples the amplifier applied (the emulator's recording columns)
 
-The line carries bytes in both directions at ``baud`` (10 bits a byte), the host's bytes
-through ``faults``; the host's writes take at most ``capacity_bytes`` not yet read by the
+The line carries bytes in both directions at ``baud`` (10 bits a byte: its byte rate is
+``baud / 10``, and a low ``baud`` makes a slow link), the host's bytes through ``faults``,
+frame by frame; the host's writes take at most ``capacity_bytes`` not yet read by the
 amplifier (a full line refuses the rest, as a full pty does). The amplifier's STATUS goes
 out on its own schedule (its ``next_status_s``), as events on the clock.
 """
@@ -33,6 +34,7 @@ out on its own schedule (its ``next_status_s``), as events on the clock.
 from __future__ import annotations
 
 import errno as _errno
+import functools
 import math
 import os
 from collections import deque
@@ -59,6 +61,10 @@ from tpad_rt.kernel import amp_stream
 
 #: Bits a byte takes on the line (start, 8 data, stop).
 BITS_PER_BYTE = 10
+#: The host's bytes reach the amplifier frame by frame, each when its last byte is through (what the amplifier acts
+#: on: a frame is whole or nothing), a run without a delimiter in pieces of at most this many (at 921600 baud, 0.7 ms):
+#: a long write arrives as it goes, as on a UART, not all at once at its end.
+PIECE_BYTES = 64
 
 
 class AmplifierSide(Protocol):
@@ -269,13 +275,13 @@ class VirtualLink:
     # --- the line ---
 
     def _send_to_amp(self, data: bytes) -> None:
-        """Put the host's ``data`` on the line (through the faults); it reaches the amplifier once sent."""
-        now_ns = self.clock.now_ns()
-        self._to_amp_free_ns = max(self._to_amp_free_ns, now_ns) + round(len(data) * self._byte_ns)
-        arrival_ns = self._to_amp_free_ns + self._faults.delay_ns
-        self._in_flight += len(data)
-        received = self._line_faults(data)
-        self.clock.at(arrival_ns, lambda: self._arrive(len(data), received))
+        """Put the host's ``data`` on the line (through the faults) at ``baud``: each frame (up to its delimiter; a
+        longer run in pieces of PIECE_BYTES) reaches the amplifier once its last byte is through, as on a UART."""
+        for piece in _pieces(data):
+            self._to_amp_free_ns = max(self._to_amp_free_ns, self.clock.now_ns()) + round(len(piece) * self._byte_ns)
+            arrival_ns = self._to_amp_free_ns + self._faults.delay_ns
+            self._in_flight += len(piece)
+            self.clock.at(arrival_ns, functools.partial(self._arrive, len(piece), self._line_faults(piece)))
 
     def _line_faults(self, data: bytes) -> bytes:
         """``data`` after the drop and corrupt faults (one pair of draws per byte, in order)."""
@@ -335,6 +341,18 @@ class VirtualLink:
         self._status_event_ns = -1
         self.amplifier.advance(self.amp_s(self.clock.now_ns()))
         self._forward()
+
+
+def _pieces(data: bytes) -> list[bytes]:
+    """``data`` cut after each delimiter (0x00) and after every PIECE_BYTES without one."""
+    pieces = []
+    first = 0
+    while first < len(data):
+        end = data.find(0, first, first + PIECE_BYTES)
+        end = first + PIECE_BYTES if end < 0 else end + 1
+        pieces.append(data[first:end])
+        first = end
+    return pieces
 
 
 def _nothing() -> None:

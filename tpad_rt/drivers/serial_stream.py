@@ -9,6 +9,7 @@ as PortAudio does, once per frame, in one numba call that holds no GIL.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -60,14 +61,18 @@ class SerialStreamDriver(Driver):
         serial_amp.warm_up(table)
 
     def open(self, pipeline: Pipeline) -> None:
-        """Open the port, make the handshake, set the carrier to the device's resonance; the envelope's scale the
-        link decided (the amplifier's full scale; the lower of its clamp and the device's max_voltage_v) and the
-        achieved carrier go into the pipeline. BackendError as AmpLink.open says."""
+        """Open the port, make the handshake, set the carrier to the device's resonance, measure the link; the
+        envelope's scale the link decided (the amplifier's full scale; the lower of its clamp and the device's
+        max_voltage_v) and the achieved carrier go into the pipeline. A link too slow for the URL's frames gets
+        larger ones: one line on stderr says so (and the summary; a recording's metadata has the frames in
+        ``block_frames``). BackendError as AmpLink.open says."""
         line = self._open_line(self.target) if self._open_line is not None else None
         link = self.link = self._last_link = serial_amp.AmpLink.open(self.target, carrier_hz=self.device.carrier_hz,
                                                                     max_voltage_v=self.device.max_voltage_v, line=line)
         scale = link.scale  # decided once, from the INFO the handshake took (H1, H3); the streamer clamps to it
         assert scale is not None
+        if link.link_note:  # the link is slower than the URL's frames need: larger frames (H11), said once here
+            print(link.link_note, file=sys.stderr, flush=True)
         pipeline.set_drive(pipeline.device_drive.from_hardware(
             volts_per_full_scale=scale.full_scale_v, max_voltage_v=scale.max_v, carrier_hz=link.carrier_hz,
             source=f"amplifier {link.info.firmware!r} on {self.target.port}" if link.info else self.target.port))
@@ -103,6 +108,8 @@ class SerialStreamDriver(Driver):
             f"bad, {amplifier['amp_frames_rejected']} refused, {amplifier['amp_sequence_gaps']} sequence gaps; "
             f"{amplifier['amp_underruns']} samples underrun, {amplifier['amp_watchdog_trips']} watchdog trips"
             + ("" if amplifier["realtime"] else " (no real-time priority for the streamer here)")]
+        if amplifier["link_note"]:
+            lines.append(amplifier["link_note"])
         if amplifier["tracking"] != "off":
             lines.append(f"tracking ({amplifier['tracking']}): carrier now {amplifier['tracked_carrier_hz']:.2f} Hz "
                          f"after {amplifier['carrier_sets']} SET_CARRIER ({amplifier['carrier_refused']} refused); "

@@ -19,10 +19,15 @@ on_written(link, count) -> int
 settle(link, now_ns) -> int
     after the writes: the stall check, the prefill's end; when to wake (ns), or RUN_OVER
     (``link[LINK_EXIT]`` says why)
+play_position(link, now_ns) -> float
+    the stream index the host estimates the amplifier plays at ``now_ns`` (the DAC time its
+    blocks are stamped with: each frame's delay is the written index less this)
 stream(table, link, buffers, envelope, times) -> int
     the production loop: the steps above on CLOCK_MONOTONIC and the non-blocking
     descriptor ``link[LINK_FD]`` (reads until EAGAIN, writes until EAGAIN, EINTR retried,
     ``clock_nanosleep`` to the wake time), until the run is over; the EXIT_* reason
+frame_line_bytes(samples) -> int
+    the most bytes an ENVELOPE frame of ``samples`` samples takes on the line (2N + 12 up to 121)
 carrier_echo_ok(link, asked_mhz, achieved_mhz) / check_status(link, body, now_ns) / start_checks(link)
     the checks of what the amplifier reports (H2, H10), shared with the Python side
 LINK_*, STAGE_*, EXIT_*, EXIT_NAMES, BUF_*
@@ -48,6 +53,7 @@ BUF_TX. It allocates nothing.
 
 Play position: the host estimates the sample ``p`` the amplifier plays now as
 ``ref_index + (now - ref_ns) * envelope_hz`` (LINK_REF_INDEX, LINK_REF_NS), from when the prefill has been written
+(or, on a link whose rate the handshake measured, when its last byte arrives at that rate, if later: H11)
 until a RUNNING STATUS says which sample (``play_index``, unwrapped from 32 bits) it
 played at its own time ``time_us``. That time is put on the host's clock by the
 smallest offset (receive time - ``time_us``) seen so far: the STATUS the line and the
@@ -239,7 +245,11 @@ LINK_TX_END = 79
 LINK_TX_BEFORE = 80           # LINK_TX_FIRST when the last step left bytes waiting (-1: none)
 LINK_MOVED_NS = 81            # the last time the port took bytes (ns)
 LINK_SKIPPED = 82             # 1: the stream skipped ahead since the last frame (the next is late)
-LINK_SIZE = 83
+LINK_PRIME_NS = 83            # when the prefill began to go out (ns): at begin(), and at each restart's START
+LINK_PRIME_BYTES = 84         # the bytes queued since then while priming (START's, the prefill's frames)
+# --- the Python side writes this before the run ----------------------------------------------------------
+LINK_LINE_BYTES_PER_S = 85    # the link's rate measured at the handshake (H11; 0: unknown): the prefill's transit
+LINK_SIZE = 86
 
 # --- LINK_STAGE ---------------------------------------------------------------------------------
 STAGE_STREAMING = 0           # pacing frames
@@ -539,6 +549,14 @@ def _queue(link: np.ndarray, buffers: np.ndarray, payload_length: int, msg_type:
 
 
 @njit(**_KERNEL)
+def frame_line_bytes(samples: int) -> int:
+    """The most bytes an ENVELOPE frame of ``samples`` samples takes on the line: its body (2 x samples + 10), COBS's
+    code bytes (one per 254 started) and the delimiter; 2 x samples + 12 up to 121 samples (docs/amp-protocol.md 1)."""
+    body_bytes = PAYLOAD + ENVELOPE_SAMPLES + 2 * samples + codec.CRC_BYTES
+    return body_bytes + body_bytes // 254 + 2
+
+
+@njit(**_KERNEL)
 def start_checks(link: np.ndarray) -> None:
     """A new START (LINK_START_INDEX, sent after LINK_START_NS): the play index checks (H10) begin again from it."""
     link[LINK_CHECK_INDEX] = link[LINK_START_INDEX]
@@ -590,7 +608,10 @@ def _queue_envelope(table: np.ndarray, state: np.ndarray, link: np.ndarray, buff
         value = envelope[k]
         level = int(round(value * 32767.0)) if abs(value) <= 1.0 else 0  # NaN is not <= 1
         codec.put_i16(frame, PAYLOAD + ENVELOPE_SAMPLES + 2 * k, min(max(level, -limit), limit))
-    end = _queue(link, buffers, ENVELOPE_SAMPLES + 2 * count, MSG_ENVELOPE, end)
+    queued = _queue(link, buffers, ENVELOPE_SAMPLES + 2 * count, MSG_ENVELOPE, end)
+    if priming:
+        link[LINK_PRIME_BYTES] += queued - end
+    end = queued
     link[LINK_WRITTEN] = first + count
     link[LINK_FRAMES_SENT] += 1
     return end
@@ -701,6 +722,8 @@ def begin(table: np.ndarray, link: np.ndarray, now_ns: int) -> None:
     link[LINK_TX_BEFORE] = -1
     link[LINK_MOVED_NS] = now_ns
     link[LINK_SKIPPED] = 0
+    link[LINK_PRIME_NS] = now_ns
+    link[LINK_PRIME_BYTES] = 0
     link[LINK_STAGE] = STAGE_STREAMING
     link[LINK_REASON] = EXIT_RUNNING
     link[LINK_EXIT] = EXIT_RUNNING
@@ -763,7 +786,10 @@ def _react(cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, link: np.ndarray
         if link[LINK_AMP_WATCHDOG_TRIPS] > link[LINK_TRIPS_AT_START]:
             link[LINK_TRIPS_AT_START] = link[LINK_AMP_WATCHDOG_TRIPS]
             link[LINK_RESTARTS] += 1
-            link[LINK_TX_END] = _queue_start(link, buffers, now_ns, link[LINK_TX_END])
+            before = link[LINK_TX_END]
+            link[LINK_TX_END] = _queue_start(link, buffers, now_ns, before)
+            link[LINK_PRIME_NS] = now_ns
+            link[LINK_PRIME_BYTES] = link[LINK_TX_END] - before
             link[LINK_PRIMED] = 0
             link[LINK_REF_INDEX] = link[LINK_WRITTEN]
             link[LINK_REF_NS] = now_ns
@@ -788,7 +814,7 @@ def _react(cfg: np.ndarray, dev: np.ndarray, state: np.ndarray, link: np.ndarray
 
 
 @njit(**_KERNEL)
-def _play_position(link: np.ndarray, now_ns: int) -> float:
+def play_position(link: np.ndarray, now_ns: int) -> float:
     """The stream index the amplifier plays at ``now_ns``: from the reference, at the envelope rate once primed."""
     if link[LINK_PRIMED] == 0:
         return float(link[LINK_REF_INDEX])
@@ -800,14 +826,12 @@ def _pace(table: np.ndarray, state: np.ndarray, link: np.ndarray, buffers: np.nd
           times: np.ndarray, now_ns: int) -> None:
     """Queue the frames due at ``now_ns``: skip ahead of a play position that passed what was sent, then render
     frames while fewer than the target fill (and a frame, once primed) are ahead of it, never more than the
-    amplifier's buffer, with room left in BUF_TX for a START or a STOP; each followed by a SET_CARRIER if
+    amplifier's buffer ahead of it, with room left in BUF_TX for a START or a STOP; each followed by a SET_CARRIER if
     tracking moved the carrier."""
     rate_hz = link[LINK_ENVELOPE_HZ]
     frame_samples = link[LINK_FRAME_SAMPLES]
-    body_bytes = PAYLOAD + ENVELOPE_SAMPLES + 2 * frame_samples + codec.CRC_BYTES
-    frame_bytes = body_bytes + body_bytes // 254 + 2  # its most COBS bytes, delimiter included
-    room = buffers[BUF_TX].shape[0] - frame_bytes - MAX_ENCODED
-    play = _play_position(link, now_ns)
+    room = buffers[BUF_TX].shape[0] - frame_line_bytes(frame_samples) - MAX_ENCODED
+    play = play_position(link, now_ns)
     if link[LINK_WRITTEN] < play - frame_samples:
         # The amplifier played past what it was sent (an underrun: it plays 0 and moves on), so samples for those
         # indices would be refused as already played: skip the stream ahead of it.
@@ -928,8 +952,13 @@ def settle(link: np.ndarray, now_ns: int) -> int:
         return now_ns
     rate_hz = link[LINK_ENVELOPE_HZ]
     if link[LINK_PRIMED] == 0 and end == 0 and link[LINK_WRITTEN] >= link[LINK_REF_INDEX] + link[LINK_TARGET_FILL]:
-        link[LINK_PRIMED] = 1  # the prefill is out: the amplifier starts playing about now
+        # The prefill is out: the amplifier starts playing once its last byte arrived, at the link's measured rate
+        # from when it began to go out (a long prefill on a slow line is still on its way), or about now.
+        link[LINK_PRIMED] = 1
         link[LINK_REF_NS] = now_ns
+        if link[LINK_LINE_BYTES_PER_S] > 0:
+            link[LINK_REF_NS] = max(now_ns, link[LINK_PRIME_NS] + np.int64(
+                link[LINK_PRIME_BYTES] * 1e9 / link[LINK_LINE_BYTES_PER_S]))
     next_due_ns = link[LINK_REF_NS] + np.int64((link[LINK_WRITTEN] - link[LINK_TARGET_FILL]
                                                 - link[LINK_FRAME_SAMPLES] - link[LINK_REF_INDEX]) * 1e9 / rate_hz)
     return min(now_ns + WAKE_NS, max(next_due_ns, now_ns + MIN_WAKE_NS))

@@ -88,12 +88,13 @@ def _render(input_buffer, output_buffer, frames, time_info, status_flags, user_d
     """Render ``frames`` drive samples into the table's channel (zeros elsewhere); keep the statistics."""
     table = numba.carray(user_data, TAB_SIZE, _I8)
     state = numba.carray(pointer(table[TAB_STATE]), table[TAB_STATE_SIZE], _F8)
-    stats, row, entry_ns = begin_block(table, np.int64(state[STATE_NEXT_INDEX]), frames, _dac_delay_ns(time_info))
+    delay_ns = _dac_delay_ns(time_info)
+    stats, row, entry_ns = begin_block(table, np.int64(state[STATE_NEXT_INDEX]), frames, delay_ns)
     channels = table[TAB_CHANNELS]
     out = numba.carray(output_buffer, frames * channels, _F4)
     for i in range(out.shape[0]):
         out[i] = 0.0
-    render_into(table, state, out, frames, channels, table[TAB_CHANNEL])
+    render_into(table, state, out, frames, channels, table[TAB_CHANNEL], delay_ns)
     finish_block(stats, row, entry_ns, frames, status_flags & BLOCK_LATE, status_flags & BLOCK_PRIMING)
     return PA_CONTINUE
 

@@ -37,7 +37,8 @@ CFG_MODE_STEP_MM = 27         # > 0: x step (mm) of dev[DEV_MODE_GAIN]'s grid fr
 CFG_C0_F = 28                 # the device's static capacitance (a serial amplifier's lock)
 CFG_SHUNT_OHM = 29            # the device's series shunt
 CFG_GAIN_SPAN = 30            # largest / smallest dev[DEV_AMP_M_PER_V], in [1, MAX_GAIN_SPAN]: bounds the model after a press
-CFG_SIZE = 31
+CFG_OUTPUT_LEAD_S = 31        # how far (s) ahead of the output the block's first sample is rendered (0: offline)
+CFG_SIZE = 32
 
 # --- dev: float64[DEV_ROWS, G], written by Python (uniform force grid) -------
 DEV_AMP_M_PER_V = 0           # plate amplitude (m) per peak drive volt
@@ -73,6 +74,10 @@ TEL_COLS = 11
 TEL_NAMES = ("t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu",
              "amplitude_um", "voltage_v", "power_w", "saturated", "plate_w")
 
+#: The most output lead (s) the finger watchdog takes off a finger sample's age (CFG_OUTPUT_LEAD_S is clamped to
+#: [0, this]): an output's reported delay (PortAudio's time info, the serial streamer's buffer, at most its URL's
+#: 1000 ms) beyond it is taken as this much.
+MAX_OUTPUT_LEAD_S = 1.0
 #: The most the plate's amplitude per volt may vary over a device's forces that the press guard follows (CFG_GAIN_SPAN).
 MAX_GAIN_SPAN = 1e6
 #: A plate whose power, as the model has it, is over the power cap times 1 + this (a press) is braked at up to the full

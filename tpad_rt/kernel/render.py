@@ -58,6 +58,7 @@ from tpad_rt.kernel.layout import (
     CFG_MU0,
     CFG_MU_FLOOR,
     CFG_OUTPUT_ENVELOPE,
+    CFG_OUTPUT_LEAD_S,
     CFG_POISSON,
     CFG_POWER_AVG_W,
     CFG_POWER_CAP_W,
@@ -97,6 +98,7 @@ from tpad_rt.kernel.layout import (
     MAX_CARRIER_FRACTION,
     MAX_CONTROL_INTERVAL,
     MAX_GAIN_SPAN,
+    MAX_OUTPUT_LEAD_S,
     MAX_SPEED_MM_S,
     MODEL_GUARD_FRACTION,
     TRACKED_CARRIER_FACTOR,
@@ -482,8 +484,13 @@ def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndar
     """Update the step's finger in ``state`` (position extrapolated, speed, force): 1 if it is active,
     0 if not, -1 for a fault (the sample or the velocity from it is not finite, or is absurd).
 
-    Active: a sample at or before ``t_s``, down, at most ``watchdog_s`` old. When not
-    active, or at a fault, the previous step's finger is kept. A speed above
+    Active: a sample at or before ``t_s``, down, at most ``watchdog_s`` old when the block is rendered: finger
+    times are the stream time of the sample at the output when they were pushed (Renderer.now_s), and an output
+    that plays a block ``CFG_OUTPUT_LEAD_S`` after rendering it (a serial amplifier's buffer, an audio device's
+    latency) renders ``t_s`` that much ahead, so the age is judged at ``t_s - lead``: a finger that stops reporting
+    closes the gate ``watchdog_s`` after its last sample on the host's clock, whatever the lead. The position is
+    extrapolated to ``t_s`` itself (at most ``watchdog_s + lead`` ahead). When not active, or at a fault, the
+    previous step's finger is kept. A speed above
     MAX_SPEED_MM_S is clamped to it (direction kept); a position beyond
     ABSURD_POSITION_MM, extrapolated or not, or a force outside ``[0, ABSURD_FORCE_N]``
     (NaN: unknown, the default applies) is a fault.
@@ -495,7 +502,10 @@ def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndar
         return 0
     age_s = t_s - finger[row, FINGER_T_S]
     watchdog_s = cfg[CFG_WATCHDOG_S]
-    if finger[row, FINGER_DOWN] == 0.0 or age_s > watchdog_s:
+    output_lead_s = cfg[CFG_OUTPUT_LEAD_S]
+    if not 0.0 <= output_lead_s <= MAX_OUTPUT_LEAD_S:  # NaN too: the table's writer clamps it; this is the guard
+        output_lead_s = 0.0
+    if finger[row, FINGER_DOWN] == 0.0 or age_s - output_lead_s > watchdog_s:
         return 0
     x_mm = finger[row, FINGER_X_MM]
     y_mm = finger[row, FINGER_Y_MM]
@@ -516,7 +526,7 @@ def _read_finger(t_s: float, cfg: np.ndarray, state: np.ndarray, finger: np.ndar
         state[STATE_VELOCITY_SAMPLE] = newest + 1.0
     vx = state[STATE_VX_MM_S]
     vy = state[STATE_VY_MM_S]
-    lead_s = min(age_s + cfg[CFG_HORIZON_S], watchdog_s)
+    lead_s = min(age_s + cfg[CFG_HORIZON_S], watchdog_s + output_lead_s)
     x_mm += vx * lead_s
     y_mm += vy * lead_s
     if not (abs(x_mm) <= ABSURD_POSITION_MM and abs(y_mm) <= ABSURD_POSITION_MM):

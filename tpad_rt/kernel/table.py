@@ -6,7 +6,7 @@ TAB_*, SLOT_*, STAT_*, BLOCK_*
     the layout of the pointer table (int64 ``[TAB_SIZE]``), the statistics and the
     per-block record ring; :class:`tpad_rt.realtime.CallbackTable` owns one
 begin_block(table, first_sample, frames, dac_delay_ns) -> (stats, row, entry_ns)
-render_into(table, state, out, frames, channels, channel)
+render_into(table, state, out, frames, channels, channel, dac_delay_ns)
 finish_block(stats, row, entry_ns, frames, underflow, priming)
     one block, as every driver renders it: record its start, render it from the
     table's arrays (the texture slot it finds active), close its record
@@ -58,7 +58,16 @@ from tpad_rt.kernel.jit import njit
 from tpad_rt.kernel import atomics, libc, render
 from tpad_rt.kernel.atomics import load_acquire, store_release
 from tpad_rt.kernel.libc import monotonic_ns, pointer
-from tpad_rt.kernel.layout import CFG_TEXTURE_T0_S, FINGER_COLS, STATE_NEXT_INDEX, TEL_COLS, TEX_PROG_COLS
+from tpad_rt.kernel.layout import (
+    CFG_FS_HZ,
+    CFG_OUTPUT_LEAD_S,
+    CFG_TEXTURE_T0_S,
+    FINGER_COLS,
+    MAX_OUTPUT_LEAD_S,
+    STATE_NEXT_INDEX,
+    TEL_COLS,
+    TEX_PROG_COLS,
+)
 from tpad_rt.kernel.render import render_block
 
 #: The sources compiled into a driver that renders a block (its cache stamp: cache_stamp.stamp_cache).
@@ -189,9 +198,11 @@ def texture_views(table, slot):  # type: ignore[no-untyped-def]
 
 
 @njit(inline="always", nogil=True, error_model="numpy")
-def render_into(table, state, out, frames, channels, channel):  # type: ignore[no-untyped-def]
+def render_into(table, state, out, frames, channels, channel, dac_delay_ns):  # type: ignore[no-untyped-def]
     """Render ``frames`` samples with the table's arrays into ``out[k * channels + channel]`` (other
-    channels untouched) and the drive ring, in pieces of at most the scratch's length. Call it after
+    channels untouched) and the drive ring, in pieces of at most the scratch's length; the block's first sample
+    plays ``dac_delay_ns`` (ns) from now, which the kernel's finger watchdog takes off the fingers' ages
+    (``cfg[CFG_OUTPUT_LEAD_S]`` for each piece, clamped to ``[0, MAX_OUTPUT_LEAD_S]``). Call it after
     :func:`begin_block` (which acquires the finger count the kernel reads)."""
     cfg, dev, _, power_ring, finger, _, telem, telem_count = kernel_views(table)
     finger_count = table[TAB_FINGER_SEEN:TAB_FINGER_SEEN + 1]  # acquired in begin_block
@@ -200,8 +211,11 @@ def render_into(table, state, out, frames, channels, channel):  # type: ignore[n
     cfg[CFG_TEXTURE_T0_S] = numba.carray(pointer(table[TAB_SLOT_T0]), 2, _F8)[active]
     scratch = numba.carray(pointer(table[TAB_SCRATCH]), table[TAB_SCRATCH_FRAMES], _F4)
     drive = numba.carray(pointer(table[TAB_DRIVE]), table[TAB_DRIVE_FRAMES], _F4)
+    lead_s = dac_delay_ns * 1e-9
+    lead_s = min(lead_s, MAX_OUTPUT_LEAD_S) if lead_s > 0.0 else 0.0  # NaN: 0
     done = 0
     while done < frames:
+        cfg[CFG_OUTPUT_LEAD_S] = min(lead_s + done / cfg[CFG_FS_HZ], MAX_OUTPUT_LEAD_S)
         count = min(frames - done, scratch.shape[0])
         piece = scratch[:count]
         start = int(state[STATE_NEXT_INDEX])

@@ -11,9 +11,12 @@ AmpLink.open(target, *, carrier_hz, max_voltage_v=inf, timeout_s=None, line=None
     ``line``, any :class:`~tpad_rt.outputs.serial_line.Line`, e.g. the virtual link of
     :mod:`tpad_rt.amp.virtual_link`), say HELLO with a new nonce, take the INFO that echoes it
     (rule H1), decide the envelope's scale from it (H3: ``.scale``), set the carrier and
-    check the achieved one (H2); BackendError naming the port for one that cannot open,
-    no or a bad answer, an amplifier that contradicts itself, another protocol version,
-    a carrier or envelope rate the amplifier cannot make
+    check the achieved one (H2), measure the link (H11: ``.link_rate``; larger frames than
+    the URL's where it needs them, said in ``.link_note``; :mod:`tpad_rt.outputs.serial_rate`),
+    choose the frame and target fill (``.frame_samples``, ``.target_fill``); BackendError naming
+    the port for one that cannot open, no or a bad answer, an amplifier that contradicts itself,
+    another protocol version, a carrier or envelope rate the amplifier cannot make, a link too
+    slow for the envelope; ConfigError for a ``buffer_ms`` its buffer cannot hold
 AmpLink.start(table, track=False, ramp_ms=STOP_RAMP_MS) / .failure() / .stop(ramp_ms) / .stats() / .info / .scale / .carrier_hz
     stream with the streamer's steps (:mod:`tpad_rt.kernel.amp_stream`) as the line runs
     them (a real port: the GIL-free compiled loop in a thread);
@@ -48,6 +51,7 @@ from tpad_rt.kernel import amp_codec as codec
 from tpad_rt.kernel import amp_stream
 from tpad_rt.kernel.atomics import publish
 from tpad_rt.outputs.base import Consumes, OutputKind
+from tpad_rt.outputs import serial_rate
 from tpad_rt.outputs.serial_line import Line, SerialLine, Streamer
 from tpad_rt.pipeline import LOCK_RANGE
 from tpad_rt.urls import Option, Url, UrlForm, count, number, parse_url
@@ -252,6 +256,8 @@ class AmpLink:
         self.carrier_hz = float("nan")
         self.frame_samples = 0
         self.target_fill = 0
+        self.link_rate: serial_rate.LinkRate | None = None  # measured at the handshake (H11)
+        self.link_note = ""  # how the stream was adapted to a slow link (H11), "" if it was not
         self._tone_index = -1  # the next envelope index tone() writes; -1 before its START
         self._tone_started_ns = 0  # the clock (ns) when tone() sent its last START
 
@@ -268,6 +274,8 @@ class AmpLink:
         try:
             link._hello(HELLO_TIMEOUT_S if timeout_s is None else timeout_s, max_voltage_v)
             link._set_carrier(carrier_hz)
+            link._check_rate()
+            link.link_rate = link._measure_link()
             link._plan()
         except BaseException:
             link.close()
@@ -277,11 +285,16 @@ class AmpLink:
     def _send(self, payload: bytes, msg_type: int) -> int:
         """Send one host frame with ``payload``; its seq."""
         seq = int(self.link[amp_stream.LINK_SEQ])
+        self._write(self._sealed(payload, msg_type))
+        return seq
+
+    def _sealed(self, payload: bytes, msg_type: int) -> bytes:
+        """The next host frame with ``payload``, as it goes on the line (it takes the next seq)."""
+        seq = int(self.link[amp_stream.LINK_SEQ])
         self._frame[codec.PAYLOAD:codec.PAYLOAD + len(payload)] = np.frombuffer(payload, dtype=np.uint8)
         size = codec.seal(self._frame, len(payload), msg_type, seq, self._out)
         self.link[amp_stream.LINK_SEQ] = (seq + 1) & 0xFFFF
-        self._write(bytes(self._out[:size]))
-        return seq
+        return bytes(self._out[:size])
 
     @property
     def line(self) -> Line:
@@ -430,20 +443,120 @@ class AmpLink:
             raise BackendError(_carrier_echo_error(self.target.port, link, asked_mhz, achieved_mhz))
         self.carrier_hz = achieved_mhz / 1000
 
-    def _plan(self) -> None:
-        """Frame size and target fill from the URL and INFO; BackendError if the amplifier cannot take them."""
+    def _check_rate(self) -> None:
+        """BackendError unless INFO offers the URL's envelope rate."""
         info, target = self.info, self.target
         assert info is not None
         if target.envelope_hz not in info.envelope_rates_hz:
             raise BackendError(f"serial: the amplifier takes envelope rates of "
                                f"{', '.join(map(str, info.envelope_rates_hz))} Hz, not {target.envelope_hz} "
                                f"(envelope_hz=)")
-        self.frame_samples = max(1, min(info.max_frame_samples, round(target.frame_ms * 1e-3 * target.envelope_hz)))
-        self.target_fill = max(self.frame_samples, round(target.buffer_ms * 1e-3 * target.envelope_hz))
-        if self.target_fill + self.frame_samples > info.buffer_samples:
-            most_ms = (info.buffer_samples - self.frame_samples) / target.envelope_hz * 1e3
+
+    def _url_frame_samples(self, envelope_hz: int) -> int:
+        """The URL's frame (``frame_ms``) in samples at ``envelope_hz``, within the amplifier's frame limit."""
+        info = self.info
+        assert info is not None
+        return max(1, min(info.max_frame_samples, round(self.target.frame_ms * 1e-3 * envelope_hz)))
+
+    def _plan(self) -> None:
+        """Frame size and target fill from the URL, INFO and the measured link (H11: larger frames if the link
+        needs them, said in ``link_note``); ConfigError for a buffer the amplifier cannot hold, BackendError for a
+        link too slow for any frame."""
+        info, target, rate = self.info, self.target, self.link_rate
+        assert info is not None and rate is not None
+        url_samples = self._url_frame_samples(target.envelope_hz)
+        fill = round(target.buffer_ms * 1e-3 * target.envelope_hz)
+        if max(url_samples, fill) + url_samples > info.buffer_samples:
+            most_ms = (info.buffer_samples - url_samples) / target.envelope_hz * 1e3
             raise ConfigError(f"serial: buffer_ms={target.buffer_ms:g} is more than the amplifier's buffer holds "
                               f"at {target.envelope_hz} Hz (at most {most_ms:g} ms)")
+        samples = serial_rate.frames_for(rate, target.envelope_hz, url_samples, fill, info.max_frame_samples,
+                                         info.buffer_samples)
+        if samples is None:
+            raise BackendError(self._too_slow(url_samples, fill))
+        if samples != url_samples:
+            self.link_note = (
+                f"serial: the link to the amplifier on {target.port} carries {rate.text()}, less than the "
+                f"{serial_rate.needed_bytes_per_s(target.envelope_hz, url_samples) * serial_rate.LINK_MARGIN / 1e3:.1f}"
+                f" kB/s frames of {url_samples} samples need at {target.envelope_hz} Hz with a "
+                f"{serial_rate.LINK_MARGIN:g}x margin: sending frames of {samples} samples "
+                f"({samples / target.envelope_hz * 1e3:g} ms, "
+                f"{serial_rate.needed_bytes_per_s(target.envelope_hz, samples) / 1e3:.1f} kB/s)")
+        self.frame_samples = samples
+        self.target_fill = max(samples, fill)
+
+    def _too_slow(self, url_samples: int, fill: int) -> str:
+        """The one-line refusal of a link too slow for the envelope in any frame the amplifier takes (H11): the
+        measured and needed rates, and an envelope rate INFO offers that the link would carry, if one does."""
+        info, target, rate = self.info, self.target, self.link_rate
+        assert info is not None and rate is not None
+        largest = min(info.max_frame_samples, info.buffer_samples // 2, max(1, info.buffer_samples - fill))
+        need = serial_rate.needed_bytes_per_s(target.envelope_hz, url_samples) * serial_rate.LINK_MARGIN
+        least = serial_rate.needed_bytes_per_s(target.envelope_hz, max(url_samples, largest)) * serial_rate.LINK_MARGIN
+        hint = ""
+        for envelope_hz in sorted(info.envelope_rates_hz, reverse=True):
+            samples = self._url_frame_samples(envelope_hz)
+            if envelope_hz < target.envelope_hz and serial_rate.frames_for(
+                    rate, envelope_hz, samples, round(target.buffer_ms * 1e-3 * envelope_hz), info.max_frame_samples,
+                    info.buffer_samples) is not None:
+                hint = f"; envelope_hz={envelope_hz} fits"
+                break
+        return (f"serial: the link to the amplifier on {target.port} carries {rate.text()} (measured at the "
+                f"handshake), too slow for the envelope at {target.envelope_hz} Hz: it needs {need / 1e3:.1f} kB/s "
+                f"in frames of {url_samples} samples, {least / 1e3:.1f} kB/s in the largest the amplifier takes "
+                f"({serial_rate.LINK_MARGIN:g}x margin included){hint} (docs/amp-protocol.md H11)")
+
+    def _measure_link(self) -> serial_rate.LinkRate:
+        """Measure the link (H11): a burst of KEEPALIVE frames for the URL's frames at its envelope rate, read back
+        through the amplifier's STATUS frames (``frames_ok + frames_bad`` against ``time_us``); bounded by
+        serial_rate.MEASURE_LIMIT_S. BackendError if the amplifier stops reporting meanwhile, or as the reads say."""
+        info = self.info
+        assert info is not None
+        frames = serial_rate.burst_frames(self.target.envelope_hz, self._url_frame_samples(self.target.envelope_hz),
+                                          info.status_period_ms)
+        limit_ns = self._deadline_ns(serial_rate.MEASURE_LIMIT_S)
+        silent_s = (4 * info.status_period_ms + 100) * 1e-3
+        first = self._receive(codec.MSG_STATUS, self._deadline_ns(silent_s))
+        if first is None:
+            raise BackendError(f"serial: the amplifier on {self.target.port} sent no STATUS for {silent_s * 1e3:.0f} ms "
+                               "after its INFO (A8): it hung or the line failed")
+        base, first_us = self._taken(first), int(codec.get_u32(first, codec.PAYLOAD + codec.STATUS_TIME_US))
+        reports = [(first_us, 0)]
+        sent = self._burst(frames, limit_ns)
+        stall = serial_rate.STALL_STATUS_PERIODS
+        while reports[-1][1] < sent and (len(reports) <= stall or reports[-1][1] > reports[-1 - stall][1]
+                                         or reports[-1][1] == 0):
+            body = self._receive(codec.MSG_STATUS, min(limit_ns, self._deadline_ns(silent_s)))
+            if body is None:
+                break
+            time_us = reports[-1][0] + ((int(codec.get_u32(body, codec.PAYLOAD + codec.STATUS_TIME_US))
+                                         - reports[-1][0]) & 0xFFFFFFFF)
+            reports.append((time_us, (self._taken(body) - base) & 0xFFFFFFFF))
+        return serial_rate.link_rate(reports, sent)
+
+    @staticmethod
+    def _taken(body: np.ndarray) -> int:
+        """Host frames a STATUS says the amplifier took: valid and bad (a line fault does not slow the count)."""
+        return int(codec.get_u32(body, codec.PAYLOAD + codec.STATUS_FRAMES_OK)) + \
+            int(codec.get_u32(body, codec.PAYLOAD + codec.STATUS_FRAMES_BAD))
+
+    def _burst(self, frames: int, deadline_ns: int) -> int:
+        """Write ``frames`` KEEPALIVE frames as fast as the line takes them, until ``deadline_ns``; how many went
+        out whole (a part of one left on the line is ended by a delimiter)."""
+        data = b"".join(self._sealed(b"", codec.MSG_KEEPALIVE) for _ in range(frames))
+        line, total = self.line, len(data)
+        while data:
+            taken = line.write(data)
+            data = data[taken:]
+            if data and not taken:
+                if self.clock.now_ns() >= deadline_ns:
+                    break
+                line.wait(deadline_ns, writable=True)
+        sent = (total - len(data)) // serial_rate.KEEPALIVE_LINE_BYTES
+        self.link[amp_stream.LINK_SEQ] = (int(self.link[amp_stream.LINK_SEQ]) - frames + sent) & 0xFFFF
+        if (total - len(data)) % serial_rate.KEEPALIVE_LINE_BYTES:
+            self._write(b"\0")
+        return sent
 
     # --- measuring (calibrate sweep) ---------------------------------------------------
 
@@ -600,6 +713,7 @@ class AmpLink:
         link[amp_stream.LINK_START_INDEX] = index
         link[amp_stream.LINK_STOP_RAMP_MS] = _ramp(ramp_ms)
         link[amp_stream.LINK_CALLBACK] = render_callback_address()
+        link[amp_stream.LINK_LINE_BYTES_PER_S] = round(self.link_rate.bytes_per_s) if self.link_rate else 0
         self._track_with(track)
         self._stream = self._last_stream = self.line.start_stream(
             table.table, link, self._buffers, self._envelope)  # type: ignore[attr-defined]
@@ -747,6 +861,11 @@ class AmpLink:
             "carrier_sets": int(link[s.LINK_CARRIER_SETS]), "carrier_refused": int(link[s.LINK_CARRIER_REFUSED]),
             "lock_offset_hz": link[s.LINK_LOCK_OFFSET_MHZ] / 1e3, "lock_updates": int(link[s.LINK_LOCK_UPDATES]),
             "infos_passed_over": int(link[s.LINK_INFOS_STALE]),
+            "link_kb_s": self.link_rate.bytes_per_s / 1e3 if self.link_rate else math.nan,
+            "link_at_least": bool(self.link_rate and self.link_rate.at_least),
+            "link_needed_kb_s": (serial_rate.needed_bytes_per_s(self.target.envelope_hz, self.frame_samples) / 1e3
+                                 if self.frame_samples else math.nan),
+            "link_note": self.link_note,
         }
 
 

@@ -1,0 +1,140 @@
+"""The link's rate, measured at the handshake (docs/amp-protocol.md H11), on the virtual link and clock.
+
+A burst of KEEPALIVE frames, read back through the amplifier's STATUS (``frames_ok`` against
+its own ``time_us``), measures the line; the virtual link's ``baud`` is its byte rate
+(``baud / 10``). A link that carries the envelope with LINK_MARGIN keeps the URL's frames, a
+slower one gets larger frames (said in one line, in the stats and the play summary), and one
+too slow for any frame the amplifier takes is refused in one line naming the measured and
+needed rates: never a run starved of frames. Deterministic.
+"""
+
+from __future__ import annotations
+
+import pytest
+from virtual_serial import DEVICE, VirtualRun
+
+from tpad_rt.amp.virtual_link import VirtualLink
+from tpad_rt.errors import BackendError
+from tpad_rt.outputs import serial_rate
+from tpad_rt.outputs.serial_rate import LinkRate, frames_for, link_rate, needed_bytes_per_s
+
+MS = 1_000_000
+
+
+def started(baud: int, query: str = "") -> VirtualRun:
+    """A run started on a virtual link of ``baud`` (bytes/s: baud / 10)."""
+    return VirtualRun(VirtualLink.emulating(DEVICE, baud=baud), query=query).start()
+
+
+@pytest.mark.parametrize("baud", [921600, 700000, 500000, 420000])
+def test_the_burst_measures_the_line_s_byte_rate_on_the_amplifier_s_clock(baud: int) -> None:
+    run = started(baud)
+    rate = run.amp_link.link_rate
+    # Frame by frame, quantised by the STATUS frames' 5 ms: within 2 % below the line's rate, never above it.
+    assert not rate.at_least
+    assert baud / 10 * 0.98 <= rate.bytes_per_s <= baud / 10
+    stats = run.stats()
+    assert stats["link_kb_s"] == pytest.approx(rate.bytes_per_s / 1e3)
+    run.stop()
+    stats = run.stats()
+    # The burst's frames were taken in sequence and none tripped anything.
+    assert stats["amp_sequence_gaps"] == stats["amp_frames_bad"] == stats["amp_watchdog_trips"] == 0
+
+
+def test_a_line_faster_than_the_status_frames_resolve_is_measured_as_a_bound_that_passes() -> None:
+    link = VirtualLink.emulating(DEVICE, baud=20_000_000)
+    start_ns = link.clock.now_ns()
+    run = VirtualRun(link).start()
+    rate = run.amp_link.link_rate
+    assert rate.at_least and rate.bytes_per_s >= 2 * needed_bytes_per_s(16000, 8) * serial_rate.LINK_MARGIN
+    assert run.amp_link.frame_samples == 8 and run.amp_link.link_note == ""
+    # The whole handshake, measurement included, is tens of ms of the clock on a good line.
+    assert link.clock.now_ns() - start_ns < 40 * MS
+    run.stop()
+
+
+def test_a_link_too_slow_for_the_url_s_frames_gets_larger_ones_says_so_and_plays_without_a_miss() -> None:
+    run = started(500000)
+    amp_link = run.amp_link
+    assert amp_link.frame_samples == 24  # the smallest frame 50 kB/s carries with the margin at 16 kHz
+    assert needed_bytes_per_s(16000, 24) * serial_rate.LINK_MARGIN <= amp_link.link_rate.bytes_per_s
+    assert amp_link.link_note == (
+        "serial: the link to the amplifier on virtual carries 50.0 kB/s, less than the 70.0 kB/s frames of 8 samples "
+        "need at 16000 Hz with a 1.25x margin: sending frames of 24 samples (1.5 ms, 40.0 kB/s)")
+    run.swipe(1.0)
+    assert run.stop() is None
+    stats = run.stats()
+    assert stats["frame_samples"] == 24 and stats["link_note"] == amp_link.link_note
+    assert stats["amp_underruns"] == stats["amp_frames_rejected"] == stats["late"] == stats["amp_sequence_gaps"] == 0
+    assert amp_link.link_note in run.driver.summary_lines(run.driver.stats())
+
+
+def test_a_link_too_slow_for_any_frame_is_refused_in_one_line_naming_the_rates() -> None:
+    with pytest.raises(BackendError) as refused:
+        started(400000)
+    assert str(refused.value) == (
+        "serial: the link to the amplifier on virtual carries 40.0 kB/s (measured at the handshake), too slow for the "
+        "envelope at 16000 Hz: it needs 70.0 kB/s in frames of 8 samples, 41.1 kB/s in the largest the amplifier "
+        "takes (1.25x margin included); envelope_hz=8000 fits (docs/amp-protocol.md H11)")
+    run = started(400000, "envelope_hz=8000")  # the rate it names does fit
+    run.swipe(0.5)
+    assert run.stop() is None
+    assert run.stats()["amp_underruns"] == run.stats()["amp_frames_rejected"] == 0
+
+
+@pytest.mark.parametrize("baud", [350000, 450000, 600000, 800000])
+def test_a_slow_link_is_adapted_or_refused_never_starved(baud: int) -> None:
+    try:
+        run = started(baud)
+    except BackendError as error:
+        assert "too slow for the envelope" in str(error)
+        return
+    run.swipe(0.5)
+    assert run.stop() is None
+    stats = run.stats()
+    assert stats["amp_underruns"] == stats["amp_frames_rejected"] == stats["late"] == 0
+
+
+class DeafAfterTheCarrier(VirtualLink):
+    """A link whose amplifier reads nothing the host writes after its first two frames (HELLO, SET_CARRIER):
+    no frame of the burst arrives."""
+
+    frames_to_hear = 2
+
+    def put(self, data: bytes) -> int:
+        if self.frames_to_hear <= 0:
+            self.stop_reading()
+        taken = super().put(data)
+        self.frames_to_hear -= data[:max(taken, 0)].count(0)
+        return taken
+
+
+def test_a_burst_that_never_arrives_is_measured_as_nothing_within_the_bound() -> None:
+    link = DeafAfterTheCarrier.emulating(DEVICE)
+    start_ns = link.clock.now_ns()
+    with pytest.raises(BackendError, match=r"carries 0\.0 kB/s \(measured at the handshake\), too slow"):
+        VirtualRun(link).start()
+    assert link.clock.now_ns() - start_ns <= (serial_rate.MEASURE_LIMIT_S + 0.1) * 1e9
+
+
+def test_the_rate_estimate_from_status_reports() -> None:
+    # Two reports while the burst arrived: their difference. 100 frames of 8 bytes between 5 and 15 ms: 80 kB/s.
+    assert link_rate([(0, 0), (5000, 50), (15000, 150), (20000, 175)], 175) == LinkRate(80000.0, False, 175, 0.01)
+    # All of it between two reports 5 ms apart: at least the burst over that time.
+    assert link_rate([(0, 0), (5000, 0), (10000, 175)], 175) == LinkRate(280000.0, True, 175, 0.005)
+    # An amplifier that reads a fast line in bursts of its own (the emulator on a pty): the whole burst's bound.
+    assert link_rate([(0, 0), (5000, 0), (10000, 1472), (15000, 1472), (20000, 1472), (25000, 2000)], 2000) == \
+        LinkRate(800000.0, True, 2000, 0.02)
+    # Nothing came.
+    assert link_rate([(0, 0), (5000, 0), (10000, 0)], 175).bytes_per_s == 0.0
+
+
+def test_frames_grow_until_the_link_carries_them_within_the_amplifier_s_buffer() -> None:
+    def rate(kb_s: float) -> LinkRate:
+        return LinkRate(kb_s * 1e3, False, 1, 1.0)
+
+    assert frames_for(rate(92.0), 16000, 8, 32, 256, 1024) == 8
+    assert frames_for(rate(50.0), 16000, 8, 32, 256, 1024) == 24
+    assert frames_for(rate(40.0), 16000, 8, 32, 256, 1024) is None  # below 2 bytes a sample with the margin
+    assert frames_for(rate(41.5), 16000, 8, 32, 256, 1024) == 174  # 2N + 13 bytes past 121 samples (COBS)
+    assert frames_for(rate(41.5), 16000, 8, 900, 256, 1024) is None  # the buffer holds no such frame past the fill
