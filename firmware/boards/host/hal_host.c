@@ -44,6 +44,7 @@ static struct {
     uint64_t overcurrent_us[OPTIONS_MAX_REPEATS]; /* --fault overcurrent times, ascending */
     size_t overcurrents, overcurrents_done;
     uint64_t end_us;             /* --duration's end; UINT64_MAX: none */
+    uint64_t late_us;            /* the latest a wake-up came after its time, since host_take_late_us */
 } host;
 
 /* --- set-up --- */
@@ -197,6 +198,16 @@ void hal_wait(uint64_t until_us)
     int timeout_ms = (int)((wake - now + 999u) / 1000u);
     struct pollfd fd = {host.pty.master, POLLIN, 0};
     poll(&fd, line_reading(&host.line, now) ? 1 : 0, timeout_ms);
+    uint64_t woke = hal_time_us();
+    if (woke > wake && woke - wake > host.late_us)
+        host.late_us = woke - wake;
+}
+
+uint64_t host_take_late_us(void)
+{
+    uint64_t late = host.late_us;
+    host.late_us = 0;
+    return late;
 }
 
 size_t hal_uart_read(uint8_t *data, size_t cap)

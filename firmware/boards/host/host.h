@@ -35,6 +35,9 @@ void host_discard_output(void);
 /* Whether the disconnect fault's time has come; closes the pty when it has. */
 int host_disconnected(uint64_t now_us);
 
+/* How late (us) hal_wait's latest wake-ups came after the time they were due, the most since the last call. */
+uint64_t host_take_late_us(void);
+
 /* End: close the pty, put the recording in place (0, or -1 with one line in `error`). */
 int host_finish(char *error, size_t error_size);
 
