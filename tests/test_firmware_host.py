@@ -116,6 +116,7 @@ C0_LINE = GOOD.splitlines().index("  c0_nf: 9.88") + 1
     ("Table 1 #2)'", "Table 1 #2)", "line 4: a quoted string that does not end on its line"),
     ("label:", "x" * 2000 + ":", "line 3: a line longer than 1024 characters"),
     ("label:", "la\x01bel:", "line 3: a control character (byte 0x01)"),
+    ("label:", "la\x00bel:", "line 3: a control character (byte 0x00)"),
 ])
 def test_a_bad_device_file_is_one_line_naming_the_file_and_line(tmp_path: Path, old: str, new: str,
                                                                  expected: str) -> None:
@@ -137,6 +138,7 @@ def test_every_shipped_device_file_is_read(tmp_path: Path) -> None:
 def test_a_missing_device_or_an_unwritable_recording_is_one_line(tmp_path: Path) -> None:
     assert_one_line_error(run_amp("--device", str(tmp_path / "none.yaml")),
                           f"{tmp_path / 'none.yaml'}: cannot open the device file (No such file or directory)")
+    assert_one_line_error(run_amp("--device", str(tmp_path)), f"{tmp_path}, line 1: cannot read the device file")
     assert_one_line_error(run_amp("--device", DEVICE, "--record", str(tmp_path)), f"{tmp_path}: not a file name")
     target = tmp_path / "missing" / "amp.csv"
     assert_one_line_error(run_amp("--device", DEVICE, "--record", str(target)),
