@@ -217,6 +217,26 @@ def test_an_overcurrent_fault_is_reported_and_refuses_start(tmp_path: Path) -> N
     assert amp.counters["faults"] == 1 and amp.counters["frames_rejected"] == 1
 
 
+def test_delay_and_stall_faults_hold_the_hosts_bytes_back(tmp_path: Path) -> None:
+    """--fault delay:300: INFO comes no sooner than 300 ms after HELLO was written; --fault stall:0:0.3: nothing is
+    read before 0.3 s on the firmware's clock (its first STATUS after HELLO says so). Lower bounds: a slow machine
+    only adds to them."""
+    with HostAmp(tmp_path / "delay", "--fault", "delay:300") as amp:
+        host = PtyHost(amp.port)
+        written_s = time.monotonic()
+        host.hello(4)
+        assert time.monotonic() - written_s >= 0.3
+        amp.finish()
+        host.close()
+    with HostAmp(tmp_path / "stall", "--fault", "stall:0:0.3") as amp:
+        host = PtyHost(amp.port)
+        host.hello(5)
+        first = host.status(lambda status: True, "a STATUS")
+        amp.finish()
+        host.close()
+    assert first.time_us >= 300_000 + 5_000  # read at 0.3 s at the earliest, then one status period
+
+
 def test_duration_and_disconnect_end_by_themselves_with_status_0(tmp_path: Path) -> None:
     with HostAmp(tmp_path / "duration", "--duration", "0.2") as amp:
         amp.finish(None)
