@@ -92,7 +92,7 @@ int host_setup(const options_t *options, volatile sig_atomic_t *stop, char *erro
 {
     static device_t device;
     double l_h, c_f, r_ohm;
-    memset(&host.pty, 0, sizeof host.pty);
+    host.pty.master = host.pty.slave = -1;
     host.stop = stop;
     host.serving = 1;
     if (device_read(options->device_path, &device, error, error_size) != 0)
@@ -103,9 +103,7 @@ int host_setup(const options_t *options, volatile sig_atomic_t *stop, char *erro
     if (record_open(&host.record, options->record_path, HOST_OUTPUT_RATE_HZ, error, error_size) != 0)
         return -1;
     if (pty_open(&host.pty, error, error_size) != 0) {
-        char ignored[8];
-        host.record.path[0] = '\0';
-        record_close(&host.record, ignored, sizeof ignored);
+        record_abandon(&host.record);
         return -1;
     }
     line_init(&host.line, &host.pty, options);
@@ -137,6 +135,11 @@ void host_set_serving(int serving)
 void host_discard_output(void)
 {
     pty_discard_output(&host.pty);
+}
+
+int host_duration_over(uint64_t now_us)
+{
+    return now_us >= host.end_us;
 }
 
 int host_disconnected(uint64_t now_us)

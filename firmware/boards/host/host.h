@@ -32,6 +32,9 @@ void host_observe(void *ctx, const amp_event_t *event);
 /* A HELLO was acted on: drop the bytes the host has not read yet. */
 void host_discard_output(void);
 
+/* Whether --duration has passed. */
+int host_duration_over(uint64_t now_us);
+
 /* Whether the disconnect fault's time has come; closes the pty when it has. */
 int host_disconnected(uint64_t now_us);
 

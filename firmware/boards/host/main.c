@@ -75,15 +75,14 @@ static void note_late(uint64_t now_us, uint64_t late_us, uint64_t *noted_us)
 }
 
 /* Serve until asked to stop; why it ended. */
-static const char *serve(const options_t *options)
+static const char *serve(void)
 {
-    uint64_t end_us = options->duration_s > 0.0 ? (uint64_t)(options->duration_s * 1e6 + 0.5) : UINT64_MAX;
     uint64_t noted_us = UINT64_MAX; /* when the last note was said: never */
     for (;;) {
         uint64_t now = hal_time_us();
         if (stop_requested)
             return "stopped by a signal";
-        if (now >= end_us)
+        if (host_duration_over(now))
             return "ran for --duration";
         if (host_disconnected(now))
             return "disconnected";
@@ -131,7 +130,7 @@ int main(int argc, char **argv)
     amp_set_hello_hook(&amp, on_hello, NULL);
     printf("amplifier on %s\n", host_port_name());
     fflush(stdout);
-    const char *ending = serve(&options);
+    const char *ending = serve();
     ramp_down();
     amp_counters_t counters;
     amp_counters(&amp, &counters);
