@@ -307,6 +307,51 @@ static void test_ramp_exact(void) {
         }
 }
 
+static unsigned hello_hooks;
+static size_t queued_at_hook;
+static void on_hello_hook(void *ctx) {
+    hello_hooks++;
+    queued_at_hook = ((amp_t *)ctx)->tx_head - ((amp_t *)ctx)->tx_tail;
+}
+
+/* The board's HELLO hook runs after the core dropped its queue, before INFO; the watchdog's reference. */
+static void test_hello_hook(void) {
+    session_init(&s, &test_board, 0);
+    CHECK_EQ(amp_last_valid_us(&s.amp), UINT64_MAX);
+    amp_set_hello_hook(&s.amp, on_hello_hook, &s.amp);
+    hello_hooks = 0;
+    host_hello(&s, 1, 700);
+    CHECK_EQ(hello_hooks, 1);
+    CHECK_EQ(queued_at_hook, 0);
+    CHECK_EQ(amp_last_valid_us(&s.amp), 700);
+    host_send(&s, MSG_KEEPALIVE, NULL, 0, 900);
+    CHECK_EQ(amp_last_valid_us(&s.amp), 900);
+    const uint8_t bad[] = { 0x02, 0x55, 0x00 };
+    amp_receive(&s.amp, bad, sizeof bad, 1000); /* a bad frame is not a valid one */
+    CHECK_EQ(amp_last_valid_us(&s.amp), 900);
+    take_sent(&s);
+    CHECK_EQ(count_sent(&s, MSG_INFO), 1);
+}
+
+/* Indices play on across 2**32 (the buffer's slots run on: the size divides 2**32). */
+static void test_index_wrap(void) {
+    session_init(&s, &test_board, 0);
+    r.count = 0;
+    amp_set_observer(&s.amp, record_event, &r);
+    session_running(&s, T0, 0xFFFFFFF8u, 1000);
+    int16_t more[16];
+    for (int i = 0; i < 16; i++)
+        more[i] = (int16_t)(2000 + i);
+    host_envelope(&s, 8, more, 16, T0); /* 0xFFFFFFF8 + 16 is 8 */
+    amp_advance(&s.amp, T0 + 32 * 125 / 2);
+    CHECK_EQ(r.count, 33);
+    for (uint32_t n = 1; n <= 32; n++)
+        CHECK_EQ(r.events[n].index, (int64_t)(uint32_t)(0xFFFFFFF8u + n - 1u));
+    CHECK_EQ(r.events[32].envelope_uv, amp_sample_uv(&s.amp, 2015));
+    CHECK_EQ(counters_of(&s.amp).underruns, 0);
+    CHECK_EQ(counters_of(&s.amp).play_index, 24);
+}
+
 /* The queue for the host is bounded: a host that never reads loses whole frames, counted. */
 static void test_tx_queue(void) {
     session_init(&s, &test_board, 0);
@@ -339,4 +384,6 @@ void test_rules(void) {
     test_restart();
     test_ramp_exact();
     test_tx_queue();
+    test_hello_hook();
+    test_index_wrap();
 }
