@@ -116,6 +116,7 @@ C0_LINE = GOOD.splitlines().index("  c0_nf: 9.88") + 1
     ("Table 1 #2)'", "Table 1 #2)", "line 4: a quoted string that does not end on its line"),
     ("label:", "x" * 2000 + ":", "line 3: a line longer than 1024 characters"),
     ("label:", "la\x01bel:", "line 3: a control character (byte 0x01)"),
+    ("label:", "la\x00bel:", "line 3: a control character (byte 0x00)"),
 ])
 def test_a_bad_device_file_is_one_line_naming_the_file_and_line(tmp_path: Path, old: str, new: str,
                                                                  expected: str) -> None:
@@ -137,6 +138,7 @@ def test_every_shipped_device_file_is_read(tmp_path: Path) -> None:
 def test_a_missing_device_or_an_unwritable_recording_is_one_line(tmp_path: Path) -> None:
     assert_one_line_error(run_amp("--device", str(tmp_path / "none.yaml")),
                           f"{tmp_path / 'none.yaml'}: cannot open the device file (No such file or directory)")
+    assert_one_line_error(run_amp("--device", str(tmp_path)), f"{tmp_path}, line 1: cannot read the device file")
     assert_one_line_error(run_amp("--device", DEVICE, "--record", str(tmp_path)), f"{tmp_path}: not a file name")
     target = tmp_path / "missing" / "amp.csv"
     assert_one_line_error(run_amp("--device", DEVICE, "--record", str(target)),
@@ -213,6 +215,26 @@ def test_an_overcurrent_fault_is_reported_and_refuses_start(tmp_path: Path) -> N
         amp.finish()
         host.close()
     assert amp.counters["faults"] == 1 and amp.counters["frames_rejected"] == 1
+
+
+def test_delay_and_stall_faults_hold_the_hosts_bytes_back(tmp_path: Path) -> None:
+    """--fault delay:300: INFO comes no sooner than 300 ms after HELLO was written; --fault stall:0:0.3: nothing is
+    read before 0.3 s on the firmware's clock (its first STATUS after HELLO says so). Lower bounds: a slow machine
+    only adds to them."""
+    with HostAmp(tmp_path / "delay", "--fault", "delay:300") as amp:
+        host = PtyHost(amp.port)
+        written_s = time.monotonic()
+        host.hello(4)
+        assert time.monotonic() - written_s >= 0.3
+        amp.finish()
+        host.close()
+    with HostAmp(tmp_path / "stall", "--fault", "stall:0:0.3") as amp:
+        host = PtyHost(amp.port)
+        host.hello(5)
+        first = host.status(lambda status: True, "a STATUS")
+        amp.finish()
+        host.close()
+    assert first.time_us >= 300_000 + 5_000  # read at 0.3 s at the earliest, then one status period
 
 
 def test_duration_and_disconnect_end_by_themselves_with_status_0(tmp_path: Path) -> None:

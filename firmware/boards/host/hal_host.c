@@ -44,6 +44,7 @@ static struct {
     uint64_t overcurrent_us[OPTIONS_MAX_REPEATS]; /* --fault overcurrent times, ascending */
     size_t overcurrents, overcurrents_done;
     uint64_t end_us;             /* --duration's end; UINT64_MAX: none */
+    uint64_t late_us;            /* the latest a wake-up came after its time, since host_take_late_us */
 } host;
 
 /* --- set-up --- */
@@ -91,7 +92,7 @@ int host_setup(const options_t *options, volatile sig_atomic_t *stop, char *erro
 {
     static device_t device;
     double l_h, c_f, r_ohm;
-    memset(&host.pty, 0, sizeof host.pty);
+    host.pty.master = host.pty.slave = -1;
     host.stop = stop;
     host.serving = 1;
     if (device_read(options->device_path, &device, error, error_size) != 0)
@@ -102,9 +103,7 @@ int host_setup(const options_t *options, volatile sig_atomic_t *stop, char *erro
     if (record_open(&host.record, options->record_path, HOST_OUTPUT_RATE_HZ, error, error_size) != 0)
         return -1;
     if (pty_open(&host.pty, error, error_size) != 0) {
-        char ignored[8];
-        host.record.path[0] = '\0';
-        record_close(&host.record, ignored, sizeof ignored);
+        record_abandon(&host.record);
         return -1;
     }
     line_init(&host.line, &host.pty, options);
@@ -136,6 +135,11 @@ void host_set_serving(int serving)
 void host_discard_output(void)
 {
     pty_discard_output(&host.pty);
+}
+
+int host_duration_over(uint64_t now_us)
+{
+    return now_us >= host.end_us;
 }
 
 int host_disconnected(uint64_t now_us)
@@ -197,6 +201,16 @@ void hal_wait(uint64_t until_us)
     int timeout_ms = (int)((wake - now + 999u) / 1000u);
     struct pollfd fd = {host.pty.master, POLLIN, 0};
     poll(&fd, line_reading(&host.line, now) ? 1 : 0, timeout_ms);
+    uint64_t woke = hal_time_us();
+    if (woke > wake && woke - wake > host.late_us)
+        host.late_us = woke - wake;
+}
+
+uint64_t host_take_late_us(void)
+{
+    uint64_t late = host.late_us;
+    host.late_us = 0;
+    return late;
 }
 
 size_t hal_uart_read(uint8_t *data, size_t cap)

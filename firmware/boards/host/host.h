@@ -32,8 +32,14 @@ void host_observe(void *ctx, const amp_event_t *event);
 /* A HELLO was acted on: drop the bytes the host has not read yet. */
 void host_discard_output(void);
 
+/* Whether --duration has passed. */
+int host_duration_over(uint64_t now_us);
+
 /* Whether the disconnect fault's time has come; closes the pty when it has. */
 int host_disconnected(uint64_t now_us);
+
+/* How late (us) hal_wait's latest wake-ups came after the time they were due, the most since the last call. */
+uint64_t host_take_late_us(void);
 
 /* End: close the pty, put the recording in place (0, or -1 with one line in `error`). */
 int host_finish(char *error, size_t error_size);

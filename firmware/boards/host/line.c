@@ -1,7 +1,6 @@
 /* line.c - the pty as the firmware receives it, through the line faults (line.h). */
 #include "line.h"
 
-#include <errno.h>
 #include <math.h>
 #include <unistd.h>
 

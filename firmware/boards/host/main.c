@@ -14,6 +14,9 @@
 
 /* The SCHED_FIFO priority asked for, as amp emulate: a microcontroller that nothing else delays. */
 #define REALTIME_PRIORITY 10
+/* A pass this late (us) while the output plays is said on stderr, at most once a second (as amp emulate):
+ * the firmware's timing was not a microcontroller's. */
+#define LATE_PASS_US 20000u
 /* After the output is told to stop: the ramp (R) and this much more (ms) at most. */
 #define STOP_GRACE_MS 50u
 
@@ -58,18 +61,32 @@ static void on_hello(void *ctx)
     pending.count = 1;
 }
 
-/* Serve until asked to stop; why it ended. */
-static const char *serve(const options_t *options)
+/* Say on stderr (at most once a second) that the loop woke `late_us` late while the output played. */
+static void note_late(uint64_t now_us, uint64_t late_us, uint64_t *noted_us)
 {
-    uint64_t end_us = options->duration_s > 0.0 ? (uint64_t)(options->duration_s * 1e6 + 0.5) : UINT64_MAX;
+    amp_counters_t counters;
+    amp_counters(&amp, &counters);
+    if (late_us <= LATE_PASS_US || counters.state == AMP_IDLE ||
+        (*noted_us != UINT64_MAX && now_us < *noted_us + 1000000u))
+        return;
+    *noted_us = now_us;
+    fprintf(stderr, "tpad-amp: the firmware ran %lu ms late (a busy machine?): frames waiting meanwhile were read "
+                    "late, and may have let the watchdog trip\n", (unsigned long)(late_us / 1000u));
+}
+
+/* Serve until asked to stop; why it ended. */
+static const char *serve(void)
+{
+    uint64_t noted_us = UINT64_MAX; /* when the last note was said: never */
     for (;;) {
         uint64_t now = hal_time_us();
         if (stop_requested)
             return "stopped by a signal";
-        if (now >= end_us)
+        if (host_duration_over(now))
             return "ran for --duration";
         if (host_disconnected(now))
             return "disconnected";
+        note_late(now, host_take_late_us(), &noted_us);
         amp_run_once(&amp, &pending);
     }
 }
@@ -113,7 +130,7 @@ int main(int argc, char **argv)
     amp_set_hello_hook(&amp, on_hello, NULL);
     printf("amplifier on %s\n", host_port_name());
     fflush(stdout);
-    const char *ending = serve(&options);
+    const char *ending = serve();
     ramp_down();
     amp_counters_t counters;
     amp_counters(&amp, &counters);

@@ -112,6 +112,15 @@ void record_output(record_t *record, double output_v, double current_a)
     write_complete(record);
 }
 
+void record_abandon(record_t *record)
+{
+    if (record->file == NULL)
+        return;
+    fclose(record->file);
+    record->file = NULL;
+    unlink(record->temp);
+}
+
 int record_close(record_t *record, char *error, size_t error_size)
 {
     if (record->file == NULL)

@@ -46,6 +46,9 @@ void record_event(record_t *record, const amp_event_t *event, double last_frame_
 /* One output sample the output stage made: its voltage (V) and the mean series current over it (A). */
 void record_output(record_t *record, double output_v, double current_a);
 
+/* Give the recording up: the temporary file is removed. */
+void record_abandon(record_t *record);
+
 /* Write what is pending and put the file in place: 0, or -1 with one line in `error`. */
 int record_close(record_t *record, char *error, size_t error_size);
 

@@ -12,6 +12,7 @@
 
 #define MAX_LINE 1024   /* longest line (characters, without its newline) */
 #define MAX_DEPTH 8     /* deepest nesting of mappings */
+#define MAX_LINES 10000 /* longest file (lines): the shipped ones have about 50 */
 
 typedef struct {
     const char *path;
@@ -197,36 +198,52 @@ static int parse_line(const where_t *at, const char *line, yaml_doc_t *doc, leve
     return 0;
 }
 
+/* The next line of `file` into `line` (MAX_LINE characters and a NUL), without its "\n" or "\r\n": 1, 0 at
+ * the end of the file, -1 with the error set (too long, a NUL or a control character, a read error). */
+static int next_line(const where_t *at, FILE *file, char *line)
+{
+    size_t length = 0;
+    int c;
+    while ((c = fgetc(file)) != EOF && c != '\n') {
+        if (length == MAX_LINE)
+            return fail(at, "a line longer than %d characters", MAX_LINE);
+        if (c == 0 || (c < 0x20 && c != '\t' && c != '\r'))
+            return fail(at, "a control character (byte 0x%02x)", (unsigned)c);
+        line[length++] = (char)c;
+    }
+    if (ferror(file))
+        return fail(at, "cannot read the device file (%s)", strerror(errno));
+    if (length > 0 && line[length - 1] == '\r')
+        length--;
+    line[length] = '\0';
+    return c != EOF || length > 0;
+}
+
 int yaml_read(const char *path, yaml_doc_t *doc, char *error, size_t error_size)
 {
     where_t at = {path, 0, error, error_size};
     FILE *file = fopen(path, "r");
     if (file == NULL)
         return fail(&at, "cannot open the device file (%s)", strerror(errno));
-    char line[MAX_LINE + 2];
+    char line[MAX_LINE + 1];
     level_t levels[MAX_DEPTH];
     int depth = 0, status = 0;
     doc->count = 0;
-    while (status == 0 && fgets(line, sizeof line, file) != NULL) {
+    while (status == 0) {
         at.line++;
-        size_t length = strlen(line);
-        if (length > 0 && line[length - 1] == '\n')
-            line[--length] = '\0';
-        else if (!feof(file))
-            status = fail(&at, "a line longer than %d characters", MAX_LINE);
-        if (status == 0 && length > 0 && line[length - 1] == '\r')
-            line[--length] = '\0';
-        if (status == 0 && strlen(line) != length)
-            status = fail(&at, "a NUL byte in the line");
-        for (size_t i = 0; status == 0 && i < length; i++)
-            if ((unsigned char)line[i] < 0x20 && line[i] != '\t')
-                status = fail(&at, "a control character (byte 0x%02x)", (unsigned)(unsigned char)line[i]);
-        if (status == 0)
+        if (at.line > MAX_LINES) {
+            status = fail(&at, "more than %d lines", MAX_LINES);
+            break;
+        }
+        int got = next_line(&at, file, line);
+        if (got <= 0) {
+            status = got;
+            break;
+        }
+        if (strchr(line, '\r') != NULL)
+            status = fail(&at, "a control character (byte 0x0d)");
+        else
             status = parse_line(&at, line, doc, levels, &depth);
-    }
-    if (status == 0 && ferror(file)) {
-        at.line = 0;
-        status = fail(&at, "cannot read the device file");
     }
     fclose(file);
     return status;
