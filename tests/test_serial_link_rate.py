@@ -10,6 +10,10 @@ needed rates: never a run starved of frames. Deterministic.
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import textwrap
+
 import pytest
 from virtual_serial import DEVICE, VirtualRun
 
@@ -138,3 +142,41 @@ def test_frames_grow_until_the_link_carries_them_within_the_amplifier_s_buffer()
     assert frames_for(rate(40.0), 16000, 8, 32, 256, 1024) is None  # below 2 bytes a sample with the margin
     assert frames_for(rate(41.5), 16000, 8, 32, 256, 1024) == 174  # 2N + 13 bytes past 121 samples (COBS)
     assert frames_for(rate(41.5), 16000, 8, 900, 256, 1024) is None  # the buffer holds no such frame past the fill
+
+
+#: Opens a link on the virtual link, plays a tone and stops, in a fresh process; prints the compiled functions
+#: the host asked for after AmpLink.open's warm_checks (numba compiles, or loads from its cache, on first use).
+_LATE_COMPILES = textwrap.dedent("""
+    import numba.core.dispatcher as dispatcher
+    from tpad_rt.amp.virtual_link import VirtualLink
+    from tpad_rt.device import Device
+    from tpad_rt.outputs import serial_amp
+    warmed, late = [], []
+    warm_checks, compile_for_args = serial_amp.warm_checks, dispatcher.Dispatcher._compile_for_args
+    def warm():
+        warm_checks()
+        warmed.append(True)
+    def watched(self, *args, **kwargs):
+        if warmed:
+            late.append(self.py_func.__qualname__)
+        return compile_for_args(self, *args, **kwargs)
+    serial_amp.warm_checks, dispatcher.Dispatcher._compile_for_args = warm, watched
+    device = Device.default()
+    link = serial_amp.AmpLink.open(serial_amp.parse_serial_url("serial://virtual"), carrier_hz=device.carrier_hz,
+                                   line=VirtualLink.emulating(device))
+    try:
+        link.tone(5.0, 0.02)
+    finally:
+        link.stop(ramp_ms=5.0)
+    print(warmed, late)
+""")
+
+
+def test_nothing_is_compiled_once_the_port_is_open() -> None:
+    """Whatever the host calls from Python after opening the port (the handshake, the link check, a tone) was
+    compiled before it by warm_checks: a compile then delays the timed handshake, and a Ctrl-C landing in LLVM
+    printed llvmlite's traceback (the link check's frame_line_bytes did). In a fresh process, where nothing was
+    compiled by earlier tests."""
+    done = subprocess.run([sys.executable, "-c", _LATE_COMPILES], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["[True]", "[]"]

@@ -891,6 +891,7 @@ def warm_checks() -> None:
     amp_stream.check_status(link, body, 0)
     amp_stream.carrier_echo_ok(link, 1, 1)
     amp_stream.carrier_echo_tolerance_mhz(link, 1)
+    amp_stream.frame_line_bytes(1)  # the link check's need (tpad_rt.outputs.serial_rate)
 
 
 def warm_up(table: object) -> None:
