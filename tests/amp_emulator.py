@@ -9,16 +9,14 @@ way out whatever happened.
 from __future__ import annotations
 
 import signal
-import subprocess
 import sys
 from pathlib import Path
 from types import TracebackType
 
 import numpy as np
+from amp_process import START_TIMEOUT_S, start_amplifier
 
 REPO = Path(__file__).resolve().parents[1]
-#: Seconds the emulator may take to start (imports, numba cache loads) or to end.
-START_TIMEOUT_S = 120.0
 
 
 class Emulator:
@@ -27,17 +25,9 @@ class Emulator:
     def __init__(self, folder: Path, *flags: str):
         folder.mkdir(parents=True, exist_ok=True)
         self.record = folder / "amp.npz"
-        self.process = subprocess.Popen([sys.executable, "-m", "tpad_rt", "amp", "emulate", "--record",
-                                         str(self.record), *flags], cwd=REPO, stdin=subprocess.DEVNULL,
-                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        assert self.process.stdout is not None
-        first = self.process.stdout.readline()
-        prefix = "amplifier emulator on "
-        if not first.startswith(prefix):
-            self.process.kill()
-            _, err = self.process.communicate(timeout=START_TIMEOUT_S)
-            raise AssertionError(f"emulator did not start: {first!r} {err!r}")
-        self.port = first[len(prefix):].strip()
+        self.process, self.port = start_amplifier(
+            [sys.executable, "-m", "tpad_rt", "amp", "emulate", "--record", str(self.record), *flags],
+            "amplifier emulator on ", "the emulator", cwd=REPO)
         self.summary = ""
 
     def finish(self, sig: int | None = signal.SIGTERM) -> dict[str, np.ndarray]:

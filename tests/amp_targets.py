@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from amp_process import start_amplifier
 from tpad_rt.amp import wire
 from tpad_rt.amp.emulator import (
     Amplifier, Circuit, Plate, Recorder, amplifier_info, sim_rate_hz,
@@ -240,17 +241,7 @@ class LineTarget(Target):
         super().__init__()
         self.name = name
         self.final_counters: dict[str, int] = {}
-        self.process = subprocess.Popen(command, cwd=REPO, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                        stderr=subprocess.PIPE, text=True)
-        assert self.process.stdout is not None
-        ready, _, _ = select.select([self.process.stdout], [], [], START_TIMEOUT_S)
-        first = self.process.stdout.readline() if ready else ""
-        prefix = "amplifier on "
-        if not first.startswith(prefix):
-            self.process.kill()
-            _, err = self.process.communicate(timeout=START_TIMEOUT_S)
-            raise AssertionError(f"{name} did not start: {first!r} {err!r}")
-        self.port = first[len(prefix):].strip()
+        self.process, self.port = start_amplifier(command, "amplifier on ", name, cwd=REPO)
         self.fd = os.open(self.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         tty.setraw(self.fd)
 

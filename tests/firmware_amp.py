@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import re
 import signal
-import subprocess
 from pathlib import Path
 from types import TracebackType
 
 import numpy as np
 
+from amp_process import start_amplifier
 from firmware_build import build
 from tpad_rt.shipped import DEVICES_DIR
 
@@ -53,17 +53,8 @@ class HostAmp:
         folder.mkdir(parents=True, exist_ok=True)
         self.record = folder / "amp.csv"
         device = () if "--device" in flags else ("--device", str(DEFAULT_DEVICE))
-        self.process = subprocess.Popen([str(tpad_amp()), *device, "--record", str(self.record), *flags],
-                                        stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                        text=True)
-        assert self.process.stdout is not None
-        first = self.process.stdout.readline()
-        prefix = "amplifier on "
-        if not first.startswith(prefix):
-            self.process.kill()
-            _, err = self.process.communicate(timeout=START_TIMEOUT_S)
-            raise AssertionError(f"tpad-amp did not start: {first!r} {err!r}")
-        self.port = first[len(prefix):].strip()
+        self.process, self.port = start_amplifier([str(tpad_amp()), *device, "--record", str(self.record), *flags],
+                                                  "amplifier on ", "tpad-amp")
         self.summary = ""
         self.stderr = ""
         self.counters: dict[str, int] = {}

@@ -20,6 +20,7 @@ from pathlib import Path
 from types import TracebackType
 
 import pytest
+from amp_process import start_amplifier
 from cli_run import Run, tpad_rt
 from conftest import require_program
 from firmware_build import build
@@ -40,16 +41,8 @@ class RunQemu:
     """``firmware/run-qemu microbit`` in its own process; ``.port`` is the pty to give the host."""
 
     def __init__(self) -> None:
-        self.process = subprocess.Popen([str(RUN_QEMU), "microbit"], cwd=REPO, stdin=subprocess.DEVNULL,
-                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        assert self.process.stdout is not None
-        first = self.process.stdout.readline()
-        prefix = "amplifier on "
-        if not first.startswith(prefix):
-            self.process.kill()
-            _, err = self.process.communicate(timeout=WAIT_S)
-            raise AssertionError(f"run-qemu did not start: {first!r} {err!r}")
-        self.port = first[len(prefix):].strip()
+        self.process, self.port = start_amplifier([str(RUN_QEMU), "microbit"], "amplifier on ", "run-qemu",
+                                                  cwd=REPO)
 
     def stop(self, sig: int = signal.SIGTERM) -> str:
         """End it with ``sig`` (by PID), check it exited 0, and return its last line."""
