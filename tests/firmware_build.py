@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO_ROOT, require_program
+from conftest import REPO_ROOT, require_program, require_system
 
 FIRMWARE = REPO_ROOT / "firmware"
 BUILD = FIRMWARE / "build"
@@ -43,11 +43,22 @@ _FAILED_LINES = 30
 _built: dict[str, Path] = {}
 
 
+def _arm_libc_present() -> bool:
+    """True when the ARM compiler finds its C library (libnewlib-arm-none-eabi, only a recommendation of
+    gcc-arm-none-eabi): -print-file-name answers the bare name when it does not."""
+    done = subprocess.run(["arm-none-eabi-gcc", "-print-file-name=libc.a"], capture_output=True, text=True,
+                          check=False)
+    path = Path(done.stdout.strip())
+    return done.returncode == 0 and path.is_absolute() and path.is_file()
+
+
 def make_target(target: str) -> subprocess.CompletedProcess[str]:
     """Run ``make -C firmware target`` under the lock; the finished process (stdout and stderr merged)."""
     require_program("make")
     for program in _PROGRAMS.get(target, ("gcc",)):
         require_program(program)
+        if program == "arm-none-eabi-gcc":
+            require_system(_arm_libc_present(), "the ARM C library (libnewlib-arm-none-eabi)")
     BUILD.mkdir(parents=True, exist_ok=True)
     with open(BUILD / ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
