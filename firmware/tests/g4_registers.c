@@ -48,7 +48,9 @@ static int model_on;
 static uint64_t polls;
 static int switched;              /* SYSCLK went to the PLL */
 static uint32_t at_switch_hpre, at_switch_r1mode, at_switch_latency, at_switch_pllrdy;
-static uint32_t dac_last, dac_largest_step, dac_writes_seen;
+/* The DAC's output (DOR1) as the model moves it, from when EN1 is first seen set. */
+static int dac_on;
+static uint32_t dac_first, dac_last, dac_largest_step, dac_writes_seen;
 
 void g4_test_poll(void)
 {
@@ -79,16 +81,27 @@ void g4_test_poll(void)
         if (*cr & 1u)
             *reg(adcs[i], 0x00) |= 1u; /* ADRDY */
     }
-    if (*reg(G4_DAC1, 0x00) & 1u)
+    /* RCC_CSR.RMVF clears the reset flags (bits 31:25) and reads 0 (§7.4 RCC_CSR). */
+    uint32_t *csr = reg(G4_RCC, 0x94);
+    if (*csr & 1u << 23)
+        *csr &= ~(0x7Fu << 25 | 1u << 23);
+    /* DAC channel 1 (§22.4): DHR12R1 (0x08) goes to DOR1 (0x2C) one clock after it is written
+     * when TEN1 (bit 1) = 0, enabled or not; with TEN1 = 1 at TIM6's events only. */
+    uint32_t dac_cr = *reg(G4_DAC1, 0x00), *dor = reg(G4_DAC1, 0x2C);
+    if (!(dac_cr & 2u) || (*reg(G4_TIM6, 0x00) & 1u))
+        *dor = *reg(G4_DAC1, 0x08) & 0xFFFu;
+    if (dac_cr & 1u) {
         *reg(G4_DAC1, 0x34) |= 1u << 11; /* DAC1RDY */
-    uint32_t dhr = *reg(G4_DAC1, 0x08);
-    if (*reg(G4_TIM6, 0x00) & 1u) {    /* TIM6 runs: DHR12R1 goes out at its events */
-        uint32_t step = dhr > dac_last ? dhr - dac_last : dac_last - dhr;
+        if (!dac_on) { /* the pin, floating since the reset, is driven from here on */
+            dac_on = 1;
+            dac_first = dac_last = *dor;
+        }
+        uint32_t step = *dor > dac_last ? *dor - dac_last : dac_last - *dor;
         if (step > dac_largest_step)
             dac_largest_step = step;
-        if (dhr != dac_last)
+        if (*dor != dac_last)
             dac_writes_seen++;
-        dac_last = dhr;
+        dac_last = *dor;
     }
     uint32_t cr1 = *reg(G4_USART2, 0x00);
     if (cr1 & 1u)
@@ -97,10 +110,23 @@ void g4_test_poll(void)
 
 void g4_test_wait_for_interrupt(void) {}
 
-/* The reset values the set-up starts from (each register's "Reset value" in RM0440). */
-static void power_on(void)
+/* RCC_CSR's flags for each kind of reset (§7.4 RCC_CSR; the chip drives NRST low on every
+ * reset, so PINRSTF comes with each): power-on is a brown-out reset (reset value 0x0C000000). */
+#define CSR_PINRSTF (1u << 26)
+#define CSR_POWER_ON (1u << 27 | CSR_PINRSTF)
+#define CSR_IWDG (1u << 29 | CSR_PINRSTF)
+#define CSR_SOFTWARE (1u << 28 | CSR_PINRSTF)
+#define CSR_WWDG (1u << 30 | CSR_PINRSTF)
+#define CSR_LOW_POWER (1u << 31 | CSR_PINRSTF)
+#define CSR_OPTION_BYTES (1u << 25 | CSR_PINRSTF)
+
+/* The reset values the set-up starts from (each register's "Reset value" in RM0440), and the
+ * reset flags of the reset being simulated. RAM (g4_dac_record) is left as it is: a warm reset
+ * keeps it, and a test of power-on sets it as it likes. */
+static void reset(uint32_t rcc_csr)
 {
     memset(g4_test_blocks, 0, sizeof g4_test_blocks);
+    *reg(G4_RCC, 0x94) = rcc_csr;          /* RCC_CSR (§7.4) */
     *reg(G4_RCC, 0x00) = 0x00000500u;      /* RCC_CR: HSION, HSIRDY (§7.4) */
     *reg(G4_RCC, 0x08) = 0x00000005u;      /* RCC_CFGR: SW = SWS = HSI16 */
     *reg(G4_RCC, 0x0C) = 0x00001000u;      /* RCC_PLLCFGR */
@@ -115,7 +141,8 @@ static void power_on(void)
     *reg(G4_ADC1, 0x0C) = *reg(G4_ADC2, 0x0C) = 0x80000000u; /* ADC_CFGR: JQDIS */
     *reg(G4_IWDG, 0x08) = 0x00000FFFu;     /* IWDG_RLR (§34.4) */
     switched = 0;
-    dac_last = dac_largest_step = dac_writes_seen = 0u;
+    dac_on = 0;
+    dac_first = dac_last = dac_largest_step = dac_writes_seen = 0u;
     polls = 0;
 }
 
@@ -200,10 +227,14 @@ static void test_dac(void)
     check("DAC_CR.WAVE1 (none)", field(G4_DAC1, 0x00, 6, 2), 0u, "RM0440 §22.7 DAC_CR");
     check("DAC_MCR.HFSEL (AHB > 160 MHz)", field(G4_DAC1, 0x3C, 14, 2), 2u, "RM0440 §22.7 DAC_MCR");
     check("DAC_MCR.MODE1 (buffered, to the pin)", field(G4_DAC1, 0x3C, 0, 3), 0u, "RM0440 §22.7 DAC_MCR");
-    /* The start-up ramp: 0 to mid-scale (2048) one code at a time, no step. */
+    /* After power-on: PA4 driven first at code 0 (the coupling capacitor is discharged), then
+     * up to mid-scale (2048) one code at a time, no step; the reset flags cleared. */
+    check("power-on: the DAC's first code", dac_first, 0u, "docs/firmware.md Resets; RM0440 §7.4 RCC_CSR.BORRSTF");
     check("DAC_DHR12R1 after the ramp", *reg(G4_DAC1, 0x08), 2048u, "RM0440 §22.7 DAC_DHR12R1");
+    check("DAC_DOR1 after the ramp", *reg(G4_DAC1, 0x2C), 2048u, "RM0440 §22.7 DAC_DOR1");
     check("the ramp's largest step (codes)", dac_largest_step, 1u, "docs/firmware.md: no step");
     check("the ramp's codes seen", dac_writes_seen, 2048u, "docs/firmware.md: 0 to 2048");
+    check("RCC_CSR reset flags cleared (RMVF)", *reg(G4_RCC, 0x94) >> 25, 0u, "RM0440 §7.4 RCC_CSR");
 }
 
 static void test_dma(void)
@@ -317,7 +348,7 @@ static void test_output_ring(void)
     check("sample 32767 -> code", g4_dac_ring[256], 4095u, "offset binary, 12 bits");
     check("sample -32767 -> code", g4_dac_ring[257], 1u, "offset binary, 12 bits");
     check("sample 0 -> code", g4_dac_ring[258], 2048u, "offset binary, 12 bits");
-    check("sample -32768 -> code", g4_dac_ring[259], 0u, "offset binary, 12 bits");
+    check("sample -32768 -> code (read as -32767)", g4_dac_ring[259], 1u, "board.c: symmetric, no code 0");
     check("room after 4", hal_output_room(), 1024u - 260u, "board.c");
     /* The DMA plays half 0: the interrupt refills it with mid-scale (0 V). */
     dma_advance(512);
@@ -393,9 +424,65 @@ static void test_time_and_serial(void)
     check("serials of two UIDs differ", (uint64_t)(strcmp(a, b) != 0), 1u, "RM0440 §48.1 UID");
 }
 
+/* One hal_init after a reset with these flags and this record in RAM; its DAC's first code. */
+static uint32_t first_code_after(const char *what, uint32_t rcc_csr, uint32_t record_code, uint32_t record_check)
+{
+    char label[96];
+    reset(rcc_csr);
+    g4_dac_record.code = record_code;
+    g4_dac_record.check = record_check;
+    hal_init();
+    snprintf(label, sizeof label, "%s: set-up complete", what);
+    check(label, hal_faults() & 8u, 0u, "board.c");
+    snprintf(label, sizeof label, "%s: mid-scale at the end", what);
+    check(label, *reg(G4_DAC1, 0x2C), 2048u, "RM0440 §22.7 DAC_DOR1");
+    snprintf(label, sizeof label, "%s: no step of more than 1 code once driven", what);
+    check(label, dac_largest_step <= 1u, 1u, "docs/firmware.md Resets: no step");
+    snprintf(label, sizeof label, "%s: reset flags cleared", what);
+    check(label, *reg(G4_RCC, 0x94) >> 25, 0u, "RM0440 §7.4 RCC_CSR.RMVF");
+    return dac_first;
+}
+
+/* Each kind of reset: the first code PA4 is driven at is the level the coupling capacitor holds
+ * (docs/firmware.md, "Resets"). The record a finished start-up leaves: mid-scale. */
+static void test_resets(void)
+{
+    const uint32_t key = 0x7a0d5c3bu, mid = 2048u;
+    check("the record after start-up", g4_dac_record.code, mid, "g4_setup.h g4_dac_record");
+    check("the record's check", g4_dac_record.check, mid ^ key, "g4_setup.h g4_dac_record");
+    static const struct {
+        const char *what;
+        uint32_t csr;
+    } warm[] = {
+        {"IWDG reset", CSR_IWDG}, {"software reset", CSR_SOFTWARE}, {"NRST pin reset", CSR_PINRSTF},
+        {"WWDG reset", CSR_WWDG}, {"low-power reset", CSR_LOW_POWER}, {"option-byte reset", CSR_OPTION_BYTES},
+    };
+    for (size_t i = 0; i < sizeof warm / sizeof warm[0]; i++) {
+        char label[96];
+        snprintf(label, sizeof label, "%s after start-up: the DAC's first code", warm[i].what);
+        check(label, first_code_after(warm[i].what, warm[i].csr, mid, mid ^ key), mid,
+              "RM0440 §7.4 RCC_CSR; docs/firmware.md Resets");
+        snprintf(label, sizeof label, "%s after start-up: codes stepped", warm[i].what);
+        check(label, dac_writes_seen, 0u, "docs/firmware.md Resets: no ramp");
+    }
+    /* An IWDG reset 25 ms into the start-up ramp (code 1000): on from 1000. */
+    check("IWDG reset during the ramp: the DAC's first code", first_code_after("IWDG mid-ramp", CSR_IWDG, 1000u, 1000u ^ key),
+          1000u, "docs/firmware.md Resets");
+    check("IWDG reset during the ramp: codes stepped", dac_writes_seen, 1048u, "1000 to 2048");
+    /* A warm reset with no valid record (a debugger or another program changed RAM): mid-scale. */
+    check("IWDG reset, record not valid: first code", first_code_after("IWDG no record", CSR_IWDG, 1000u, 1000u),
+          mid, "docs/firmware.md Resets");
+    check("software reset, record out of range: first code",
+          first_code_after("software no record", CSR_SOFTWARE, 4000u, 4000u ^ key), mid, "docs/firmware.md Resets");
+    /* Power-on (and brown-out), whatever RAM holds: from 0. */
+    check("power-on, RAM holding a record: first code", first_code_after("power-on", CSR_POWER_ON, mid, mid ^ key), 0u,
+          "RM0440 §7.4 RCC_CSR.BORRSTF; docs/firmware.md Resets");
+    check("power-on: codes stepped", dac_writes_seen, 2048u, "0 to 2048");
+}
+
 int main(void)
 {
-    power_on();
+    reset(CSR_POWER_ON);
     model_on = 1;
     const hal_board_t *board = hal_init();
     check("board output rate = TIM6 event rate", board->output_rate_hz,
@@ -414,8 +501,9 @@ int main(void)
     test_output_ring();
     test_uart();
     test_time_and_serial();
+    test_resets();
     /* A board whose flags never come: every wait is bounded, and the fault is reported. */
-    power_on();
+    reset(CSR_POWER_ON);
     model_on = 0;
     hal_init();
     check("hal_init returns, supply fault reported", hal_faults() & 8u, 8u, "board.c: bounded waits");

@@ -291,8 +291,12 @@ void hal_output_write(const int16_t *samples, size_t n)
 {
     size_t room = hal_output_room();
     size_t fits = n < room ? n : room;
-    for (size_t i = 0; i < fits; i++) /* offset binary: -32767..32767 -> codes 1..4095 */
-        g4_dac_ring[(write_position + i) % G4_RING_SAMPLES] = (uint16_t)(G4_DAC_MID + samples[i] / 16);
+    for (size_t i = 0; i < fits; i++) {
+        /* Offset binary: -32767..32767 -> codes 1..4095, symmetric about mid-scale; -32768 is
+         * read as -32767 (code 1), so no sample reaches code 0. */
+        int32_t sample = samples[i] < -32767 ? -32767 : samples[i];
+        g4_dac_ring[(write_position + i) % G4_RING_SAMPLES] = (uint16_t)((int32_t)G4_DAC_MID + sample / 16);
+    }
     if (fits > 0u)
         note_pairs(write_position, (uint32_t)fits);
     write_position += fits;

@@ -100,6 +100,12 @@ extern uint32_t g4_test_blocks[G4_BLOCK_COUNT][G4_BLOCK_BYTES / 4u];
 #define RCC_APB1ENR1_PWREN (1u << 28)
 #define RCC_CCIPR 0x88u
 #define RCC_CCIPR_USART2SEL_SHIFT 2u /* USART2SEL[1:0]: 00 = PCLK1 is USART2's kernel clock */
+#define RCC_CSR 0x94u                /* the reset flags, kept across system resets until RMVF: */
+#define RCC_CSR_RMVF (1u << 23)      /* write 1: clear every reset flag */
+#define RCC_CSR_BORRSTF (1u << 27)   /* brown-out, which power-on is (RCC_CSR's reset value 0x0C000000:
+                                      * BORRSTF and PINRSTF); the others are warm resets: OBLRSTF 25,
+                                      * PINRSTF 26 (with every reset: the chip drives NRST itself),
+                                      * SFTRSTF 28, IWDGRSTF 29, WWDGRSTF 30, LPWRRSTF 31 */
 
 /* --- RM0440 §9.4 GPIO registers --- */
 #define GPIO_MODER 0x00u             /* 2 bits a pin: 00 input, 10 alternate, 11 analog */
@@ -159,6 +165,8 @@ extern uint32_t g4_test_blocks[G4_BLOCK_COUNT][G4_BLOCK_BYTES / 4u];
 #define DAC_CR_TSEL1_TIM6_TRGO 7u
 #define DAC_CR_DMAEN1 (1u << 12)
 #define DAC_DHR12R1 0x08u            /* 12-bit right-aligned data, channel 1 */
+#define DAC_DOR1 0x2Cu               /* the code channel 1 outputs (read-only, 12 bits) */
+#define DAC_DOR1_MASK 0xFFFu
 #define DAC_SR 0x34u                 /* */
 #define DAC_SR_DAC1RDY (1u << 11)
 #define DAC_MCR 0x3Cu                /* */

@@ -23,8 +23,8 @@
 /* Cycles of a volatile loop that last >= 1 us at up to 170 MHz (each pass takes >= 2 cycles). */
 #define ONE_US_LOOPS 100u
 
-/* The DAC's start-up ramp from 0 V to mid-scale: one code every 25 us, 51 ms in all, so that
- * the AC-coupled power stage (docs/firmware.md) sees no step. */
+/* The DAC's ramp from its first code up to mid-scale: one code every 25 us (from 0: 51.2 ms),
+ * so that the AC-coupled power stage (docs/firmware.md, "Resets") sees no step. */
 #define DAC_RAMP_STEP_US 25u
 /* ADC (RM0440 §21.4, its voltage regulator and calibration): the regulator's start-up time
  * (t_ADCVREG_STUP, 20 us in the datasheet), and the 4 ADC clocks after calibration before ADEN
@@ -50,6 +50,13 @@
 #define AF_USART2 7u
 #define ADC1_CHANNEL 1u  /* ADC1_IN1 on PA0 */
 #define ADC2_CHANNEL 2u  /* ADC2_IN2 on PA1 */
+
+/* The record survives warm resets in .noinit (link.ld); the host test keeps it in plain RAM. */
+#ifdef G4_REGISTER_TEST
+volatile g4_dac_record_t g4_dac_record;
+#else
+__attribute__((section(".noinit"))) volatile g4_dac_record_t g4_dac_record;
+#endif
 
 static uint32_t timeouts;
 static int timer_stuck; /* TIM2 never moved: later delays are not waited for (counted once) */
@@ -161,9 +168,39 @@ static void time_setup(void)
     G4_REG(TIM2_BASE, TIM_CR1) = TIM_CR1_CEN;
 }
 
-/* TIM6's update (TRGO) at the output rate steps the DAC and both ADCs; DAC1 channel 1 is
- * triggered by it and ramps to mid-scale, then TIM6 stops until the DMA rings are armed. */
-static void output_setup(void)
+/* The reset's cause (RCC_CSR's flags, RM0440 §7.4), read and cleared for the next reset. */
+static uint32_t take_reset_flags(void)
+{
+    uint32_t flags = G4_REG(RCC_BASE, RCC_CSR);
+    G4_REG(RCC_BASE, RCC_CSR) |= RCC_CSR_RMVF;
+    return flags;
+}
+
+static void record_dac(uint32_t code)
+{
+    g4_dac_record.code = code;
+    g4_dac_record.check = code ^ G4_DAC_RECORD_KEY;
+}
+
+/* The code PA4 must start at so that the coupling capacitor (charged to the DAC's last resting
+ * level, PA4 floating while the chip is in reset) sees no step: 0 after power-on or a brown-out
+ * (the capacitor discharged, as far as the firmware can know); after any warm reset the recorded
+ * code, or mid-scale when the record is not valid (RAM changed by a debugger or another program,
+ * which this firmware assumes left the output at mid-scale as it does). */
+static uint32_t first_dac_code(uint32_t reset_flags)
+{
+    if (reset_flags & RCC_CSR_BORRSTF)
+        return 0u;
+    uint32_t code = g4_dac_record.code;
+    if ((code ^ G4_DAC_RECORD_KEY) == g4_dac_record.check && code <= G4_DAC_MID)
+        return code;
+    return G4_DAC_MID;
+}
+
+/* TIM6's update (TRGO) at the output rate steps the DAC and both ADCs; DAC1 channel 1 starts at
+ * first_code, is triggered by TIM6 and ramps to mid-scale, then TIM6 stops until the DMA rings
+ * are armed. */
+static void output_setup(uint32_t first_code)
 {
     G4_REG(TIM6_BASE, TIM_CR1) = 0u;
     G4_REG(TIM6_BASE, TIM_PSC) = 0u;
@@ -171,13 +208,21 @@ static void output_setup(void)
     G4_REG(TIM6_BASE, TIM_CR2) = TIM_CR2_MMS_UPDATE << TIM_CR2_MMS_SHIFT;
     G4_REG(TIM6_BASE, TIM_EGR) = TIM_EGR_UG;
     G4_REG(DAC1_BASE, DAC_MCR) = DAC_MCR_HFSEL_ABOVE_160MHZ << DAC_MCR_HFSEL_SHIFT;
-    G4_REG(DAC1_BASE, DAC_DHR12R1) = 0u;
+    /* The first code into DOR1 before the channel is on: with no trigger (TEN1 = 0) DHR goes to
+     * DOR one clock later, the channel's digital side working while EN1 = 0 (RM0440 §22.4, "DAC
+     * channel enable" and "DAC conversion"); with TEN1 = 1 DOR would hold its reset 0 until the
+     * first TIM6 event, a step to 0 V of up to one sample. */
+    G4_REG(DAC1_BASE, DAC_CR) = 0u;
+    G4_REG(DAC1_BASE, DAC_DHR12R1) = first_code;
+    wait_for(DAC1_BASE, DAC_DOR1, DAC_DOR1_MASK, first_code);
+    record_dac(first_code);
     G4_REG(DAC1_BASE, DAC_CR) = DAC_CR_TSEL1_TIM6_TRGO << DAC_CR_TSEL1_SHIFT | DAC_CR_TEN1;
     G4_REG(DAC1_BASE, DAC_CR) |= DAC_CR_EN1;
     wait_for(DAC1_BASE, DAC_SR, DAC_SR_DAC1RDY, DAC_SR_DAC1RDY);
     G4_REG(TIM6_BASE, TIM_CR1) = TIM_CR1_CEN;
-    for (uint32_t code = 1u; code <= G4_DAC_MID; code++) {
+    for (uint32_t code = first_code + 1u; code <= G4_DAC_MID; code++) {
         G4_REG(DAC1_BASE, DAC_DHR12R1) = code;
+        record_dac(code);
         delay_us(DAC_RAMP_STEP_US);
     }
     G4_REG(TIM6_BASE, TIM_CR1) = 0u;
@@ -263,11 +308,12 @@ uint32_t g4_setup(void)
 {
     timeouts = 0;
     timer_stuck = 0;
+    uint32_t first_code = first_dac_code(take_reset_flags());
     clock_setup();
     gpio_setup();
     usart2_setup();
     time_setup();
-    output_setup();
+    output_setup(first_code);
     adc_setup();
     rings_setup();
     nvic_enable(IRQ_USART2, PRIORITY_USART2);

@@ -24,9 +24,22 @@ extern volatile uint16_t g4_current_ring[G4_RING_SAMPLES];
 #define G4_DAC_MID 2048u          /* the 12-bit DAC's mid-scale: output sample 0 */
 #define G4_FAULT_PIN 9u           /* PA9 (Arduino D8): the power stage's fault line, active low */
 
-/* Set the board up with the output at mid-scale (A7): clocks, pins, USART2, TIM2, the DAC's
- * start-up ramp to mid-scale, the ADCs, the three DMA rings, interrupts, and last the IWDG.
- * Returns how many ready flags never came within their bounded wait (0 when all did). */
+/* The code the DAC last rested at (the start-up ramp's progress, then mid-scale for good: the
+ * carrier plays around it), kept in RAM that a warm reset leaves alone and startup.c does not
+ * clear (.noinit): the level the AC coupling capacitor holds. Valid when check == code ^
+ * G4_DAC_RECORD_KEY. */
+typedef struct {
+    uint32_t code;
+    uint32_t check;
+} g4_dac_record_t;
+extern volatile g4_dac_record_t g4_dac_record;
+#define G4_DAC_RECORD_KEY 0x7a0d5c3bu
+
+/* Set the board up with the output at mid-scale (A7): the reset's cause (RCC_CSR, then cleared),
+ * clocks, pins, USART2, TIM2, the DAC from the first code the reset calls for (0 after power-on,
+ * the recorded code after a warm reset) up to mid-scale, the ADCs, the three DMA rings,
+ * interrupts, and last the IWDG. Returns how many ready flags never came within their bounded
+ * wait (0 when all did). */
 uint32_t g4_setup(void);
 
 #endif /* TPAD_G4_SETUP_H */
