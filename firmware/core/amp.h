@@ -20,8 +20,8 @@
  *   valid frame (R = 10 ms ramp, 2 ms the emulator's read allowance);
  * - ramps (HELLO's, STOP's, A4's, A6's) are start * (1 - done / samples) over
  *   max(1, ramp_ms * envelope_hz / 1000) samples, through A1 and A2 like any sample;
- * - the output is held during PRIMING; at rest (IDLE, FAULT) it goes to 0 through A2 (the
- *   emulator holds it, which differs only after a STOP ramp shorter than the slew allows);
+ * - the output is held during PRIMING; at rest (IDLE, FAULT) it goes to 0 through A2 (the emulator
+ *   does the same: after a STOP ramp shorter than the slew allows, too);
  * - STATUS every status_period_ms on whole microseconds counted from amp_init's now_us,
  *   restarted by HELLO; one more than 100 ms overdue is skipped, not sent late.
  *
@@ -106,7 +106,7 @@ typedef void (*amp_observer_t)(void *ctx, const amp_event_t *event);
 
 /* One played envelope sample waiting for synthesis. */
 typedef struct {
-    int32_t amplitude_q15;  /* envelope / full scale * 32768 (signed) */
+    int32_t peak_lsb;       /* the output sample at the sine's peak: envelope / full scale * 32767, rounded */
     uint32_t carrier_mhz;
     uint32_t outputs;       /* output samples it makes: output_rate_hz / envelope_hz */
 } amp_played_t;
@@ -156,7 +156,7 @@ typedef struct amp {
     uint32_t tx_head, tx_tail;   /* bytes written / taken, free-running */
     uint8_t tx_mid_frame;        /* the last byte taken was not a delimiter */
     /* carrier synthesis */
-    uint64_t q15_per_uv_q32;      /* 32768 / full_scale_uv, times 2**32 */
+    uint64_t lsb_per_uv_q32;      /* 32767 / full_scale_uv, times 2**32 (rounded down) */
     uint32_t phase;               /* the carrier's phase, cycles * 2**32 */
     uint32_t phase_rem;           /* sub-step remainder, over phase_den */
     uint32_t phase_den;           /* output_rate_hz * 1000 */
