@@ -49,7 +49,13 @@
 #define AMP_STATUS_PERIOD_MS 5u      /* A8 */
 #define AMP_MAX_STATUS_LAG_US 100000u /* a periodic STATUS later than this is skipped */
 #define AMP_MIN_SLEW_MV_PER_MS 100000u /* A2: slew = max(this, max_mv) mV per ms */
-#define AMP_CARRIER_STEP_MHZ 10u     /* the carrier step, unless the accumulator needs a coarser one */
+#define AMP_CARRIER_STEP_MHZ 10u     /* the carrier step (INFO's carrier_step_mhz) */
+#define AMP_MAX_OUTPUT_RATE_HZ 4000000u /* hal.h's output_rate_hz: at most this (250 outputs per sample) */
+#define AMP_MAX_FULL_SCALE_MV 1000000u  /* hal.h's full_scale_mv: 1000 V (microvolt sums stay in int32) */
+
+/* amp_init's answer: the board's constants are within hal.h's ranges, or the first that is not. */
+enum { AMP_BOARD_OK = 0, AMP_BOARD_OUTPUT_RATE = 1, AMP_BOARD_FULL_SCALE = 2, AMP_BOARD_MAX_MV = 3,
+       AMP_BOARD_MEASURES = 4, AMP_BOARD_CARRIERS = 5 };
 
 /* --- the wire (sections 2.1, 2.2) --- */
 #define AMP_MAX_BODY 522u                                       /* an ENVELOPE of 256 samples */
@@ -113,8 +119,9 @@ typedef struct {
 
 /* The full state. Boards allocate it statically and touch it only through the functions below. */
 typedef struct amp {
-    /* the board and what INFO says */
+    /* the board (amp_init's copy: the refused board's in place of one out of range) and what INFO says */
     const hal_board_t *board;
+    hal_board_t board_used;
     char serial[16];
     uint32_t carrier_min_mhz, carrier_max_mhz, carrier_step_mhz;
     uint32_t max_mv, full_scale_uv, max_uv, slew_mv_per_ms;
@@ -189,11 +196,18 @@ typedef struct amp {
  */
 
 /* Power-up (A7): output 0, IDLE, no carrier, no STATUS before the first HELLO; STATUS time_us
- * counts from `now_us`. Call once, before any other function. `board` (hal_init's) must outlive
- * amp; its limits are taken as they are, except full scale (capped at 1000 V) and the clamp
- * (max_mv, at most full scale). `serial` is INFO's serial: up to 15 characters, up to a NUL
- * (a char[16] from hal_serial_number, or a shorter string). */
-void amp_init(amp_t *amp, const hal_board_t *board, const char *serial, uint64_t now_us);
+ * counts from `now_us`. Call once, before any other function. `board` (hal_init's) is copied (its
+ * name must outlive amp). Returns AMP_BOARD_OK when its constants are within hal.h's ranges; else
+ * the first out of range (AMP_BOARD_*; amp_board_problem says it in words), and the core runs a
+ * refused board: the protocol answers (INFO: max_mv 0, carriers 0 .. 0, measures 0), but no
+ * carrier is made, no ADC pair is taken and every applied envelope is 0 (a clamp of 0 V).
+ * `serial` is INFO's serial: up to 15 characters, up to a NUL (a char[16] from
+ * hal_serial_number, or a shorter string). */
+int amp_init(amp_t *amp, const hal_board_t *board, const char *serial, uint64_t now_us);
+
+/* What amp_init's answer `problem` means: the range the board's constant broke ("within range" for
+ * AMP_BOARD_OK). */
+const char *amp_board_problem(int problem);
 
 /* `n` bytes from the line (any bytes: every one is validated) arrived at `now_us`. Each frame they
  * complete acts at now_us after what is due up to then, in order; answers are queued for
@@ -267,7 +281,8 @@ uint64_t amp_last_valid_us(const amp_t *amp);
 size_t amp_sizeof(void);
 
 /* The main loop on hal.h: hal_init, hal_serial_number, amp_init(hal_time_us()), then forever
- * amp_run_once on a static amp_t. Never returns. */
+ * amp_run_once on a static amp_t (a refused board too: its output stays 0, its INFO says max_mv 0).
+ * Never returns. */
 void amp_run(void);
 
 /* One pass of amp_run's loop on `amp`: hal_uart_read -> amp_receive (at most 16 reads of 64 bytes,

@@ -5,8 +5,7 @@
  * den = output_rate_hz * 1000 / step, the increment is (m * 2**32) / den = inc_q + inc_r / den, and
  * the remainder accumulates in phase_rem (over den): the phase never drifts from the ideal one, so
  * every carrier that is a multiple of the step is made exactly. The step (INFO's carrier_step_mhz)
- * is 10 mHz unless den would not fit 32 bits (an output rate above 42.9 MHz): then the smallest
- * multiple of 10 mHz that divides output_rate_hz * 1000 into a den that fits (amp_init).
+ * is 10 mHz: den fits 32 bits for every output rate amp_init takes (at most 4 MHz).
  * The phase starts at 0 at power-up and advances only while samples are made (the emulator's Plate). */
 #include "amp_core.h"
 

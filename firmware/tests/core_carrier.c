@@ -228,10 +228,27 @@ static void test_peak_at_the_clamp(void) {
     }
 }
 
+/* Huge per-LSB constants: STATUS's rms values saturate at 2**32 - 1 (a double past uint32 was cast
+ * before: undefined), and the saturated current trips the overcurrent (A6). */
+static void test_rms_saturates(void) {
+    hal_board_t huge = test_board;
+    huge.voltage_uv_per_lsb = huge.current_na_per_lsb = 0xFFFFFFFFu;
+    session_init(&s, &huge, 0);
+    session_running(&s, 0, 0, 1000);
+    for (uint64_t t = 1000; t <= 3000 && s.amp.state != AMP_FAULT; t += 1000) {
+        amp_advance(&s.amp, t);
+        measure_known(30000.0, 0.0, 30000.0, 0.0, amp_synthesize(&s.amp, out, sizeof out / sizeof *out));
+    }
+    CHECK_EQ(s.amp.voltage_mv_rms, UINT32_MAX);
+    CHECK_EQ(s.amp.current_ua_rms, UINT32_MAX);
+    CHECK_EQ(s.amp.faults, AMP_FAULT_OVERCURRENT);
+}
+
 void test_carrier(void) {
     test_sine();
     test_peak_at_the_clamp();
     test_synthesis();
     test_demodulation();
     test_overcurrent();
+    test_rms_saturates();
 }

@@ -72,5 +72,6 @@ void test_protocol(void);
 void test_rules(void);
 void test_carrier(void);
 void test_run(void);
+void test_board_ranges(void);
 
 #endif
