@@ -1,4 +1,5 @@
 /* amp.c - the core's life: power-up (A7), faults (A6), the board going away, what it reports. */
+#include <stddef.h>
 #include <string.h>
 
 #include "amp_core.h"
@@ -131,4 +132,20 @@ uint64_t amp_last_valid_us(const amp_t *amp) {
 
 size_t amp_sizeof(void) {
     return sizeof(amp_t);
+}
+
+/* A field's offset and size (bytes). */
+#define BOARD_FIELD(f) { offsetof(hal_board_t, f), sizeof(((hal_board_t *)0)->f) }
+
+size_t amp_board_layout(size_t *offsets, size_t *sizes, size_t cap) {
+    static const size_t fields[][2] = {
+        BOARD_FIELD(name), BOARD_FIELD(output_rate_hz), BOARD_FIELD(full_scale_mv), BOARD_FIELD(max_mv),
+        BOARD_FIELD(carrier_min_mhz), BOARD_FIELD(carrier_max_mhz), BOARD_FIELD(max_current_ma),
+        BOARD_FIELD(measures), BOARD_FIELD(voltage_uv_per_lsb), BOARD_FIELD(current_na_per_lsb),
+    };
+    for (size_t i = 0; i < cap && i < sizeof fields / sizeof *fields; i++) {
+        offsets[i] = fields[i][0];
+        sizes[i] = fields[i][1];
+    }
+    return sizeof(hal_board_t);
 }

@@ -280,6 +280,11 @@ uint64_t amp_last_valid_us(const amp_t *amp);
 /* sizeof(amp_t), for callers that allocate it without this header (ctypes). */
 size_t amp_sizeof(void);
 
+/* hal_board_t's layout, for callers that build one without hal.h (ctypes): the offset and size (bytes)
+ * of each of its fields in hal.h's order, up to `cap` of them, into `offsets` and `sizes`; returns
+ * sizeof(hal_board_t). */
+size_t amp_board_layout(size_t *offsets, size_t *sizes, size_t cap);
+
 /* The main loop on hal.h: hal_init, hal_serial_number, amp_init(hal_time_us()), then forever
  * amp_run_once on a static amp_t (a refused board too: its output stays 0, its INFO says max_mv 0).
  * Never returns. */
