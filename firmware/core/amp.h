@@ -11,8 +11,10 @@
  * them); the conformance suite runs both side by side on a virtual clock:
  * - the envelope sample clock: sample n is due at anchor + n / envelope_hz (exact rational
  *   microseconds, no drift), anchored at the START that found the clock stopped; the clock
- *   stops when the output is at rest (0, IDLE or FAULT, no ramp). The emulator also runs its
- *   clock on while its simulated plate rings: give it a quiet plate to compare anchors exactly;
+ *   stops when the output is at rest (0, IDLE or FAULT, no ramp) at the end of a call and at every
+ *   4096th sample one call plays (the emulator's batch: a jump of hours plays at most 4096 samples
+ *   at rest). The emulator also runs its clock on while its simulated plate rings: give it a quiet
+ *   plate to compare anchors exactly;
  * - due samples and STATUS are made in time order (a sample first on a tie) by every call
  *   taking now_us, before that call's own work (a frame received at t acts after the samples
  *   due up to t);
