@@ -17,6 +17,7 @@ int main(void) {
     test_carrier();
     test_run();
     test_board_ranges();
+    test_random();
     if (check_failures) {
         fprintf(stderr, "core tests: %d checks FAILED\n", check_failures);
         return EXIT_FAILURE;
