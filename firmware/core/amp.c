@@ -46,7 +46,7 @@ int amp_init(amp_t *amp, const hal_board_t *board, const char *serial, uint64_t 
         problem = set_carriers(amp, board);
     if (problem != AMP_BOARD_OK) {
         amp->board_used = refused_board;
-        set_carriers(amp, &refused_board);
+        (void)set_carriers(amp, &refused_board); /* 0 .. 0: never refused */
     }
     board = amp->board = &amp->board_used;
     for (size_t i = 0; i < 15 && serial[i] != 0; i++)

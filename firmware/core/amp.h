@@ -201,7 +201,7 @@ typedef struct amp {
  * counts from `now_us`. Call once, before any other function. `board` (hal_init's) is copied (its
  * name must outlive amp). Returns AMP_BOARD_OK when its constants are within hal.h's ranges; else
  * the first out of range (AMP_BOARD_*; amp_board_problem says it in words), and the core runs a
- * refused board: the protocol answers (INFO: max_mv 0, carriers 0 .. 0, measures 0), but no
+ * refused board: the protocol answers (INFO: full scale 1 mV, max_mv 0, carriers 0 .. 0, measures 0), but no
  * carrier is made, no ADC pair is taken and every applied envelope is 0 (a clamp of 0 V).
  * `serial` is INFO's serial: up to 15 characters, up to a NUL (a char[16] from
  * hal_serial_number, or a shorter string). */
