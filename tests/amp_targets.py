@@ -417,7 +417,7 @@ def load_core(path: Path) -> ctypes.CDLL:
     lib = ctypes.CDLL(str(path))
     u8p, u64 = ctypes.POINTER(ctypes.c_uint8), ctypes.c_uint64
     signatures = {
-        "amp_init": (None, [ctypes.c_void_p, ctypes.POINTER(HalBoard), ctypes.c_char_p, u64]),
+        "amp_init": (ctypes.c_int, [ctypes.c_void_p, ctypes.POINTER(HalBoard), ctypes.c_char_p, u64]),
         "amp_receive": (None, [ctypes.c_void_p, u8p, ctypes.c_size_t, u64]),
         "amp_advance": (None, [ctypes.c_void_p, u64]),
         "amp_fault": (None, [ctypes.c_void_p, ctypes.c_uint8, u64]),
@@ -426,11 +426,24 @@ def load_core(path: Path) -> ctypes.CDLL:
         "amp_counters": (None, [ctypes.c_void_p, ctypes.POINTER(AmpCounters)]),
         "amp_set_observer": (None, [ctypes.c_void_p, OBSERVER, ctypes.c_void_p]),
         "amp_sizeof": (ctypes.c_size_t, []),
+        "amp_board_layout": (ctypes.c_size_t, [ctypes.POINTER(ctypes.c_size_t), ctypes.POINTER(ctypes.c_size_t),
+                                               ctypes.c_size_t]),
     }
     for name, (result, arguments) in signatures.items():
         function = getattr(lib, name)
         function.restype, function.argtypes = result, arguments
     return lib
+
+
+def board_layout_mismatch(lib: ctypes.CDLL) -> str | None:
+    """How HalBoard differs from hal.h's hal_board_t as the library was built (amp_board_layout: its size,
+    each field's offset and size), or None."""
+    count = len(HalBoard._fields_)
+    offsets, sizes = (ctypes.c_size_t * count)(), (ctypes.c_size_t * count)()
+    theirs = (lib.amp_board_layout(offsets, sizes, count), list(zip(offsets, sizes)))
+    fields = [getattr(HalBoard, field[0]) for field in HalBoard._fields_]
+    ours = (ctypes.sizeof(HalBoard), [(field.offset, field.size) for field in fields])
+    return None if theirs == ours else f"hal.h's (size, [(offset, size)]): {theirs}; HalBoard's: {ours}"
 
 
 def board_for(info: wire.Info, output_rate_hz: int) -> HalBoard:
@@ -463,7 +476,8 @@ class CoreTarget(VirtualTarget):
         self._tx = (ctypes.c_uint8 * 4096)()
         self._synth = (ctypes.c_int16 * self.SYNTH_CHUNK)()
         self._observer = OBSERVER(self._observe)  # kept: the core calls it
-        lib.amp_init(self._amp, ctypes.byref(self._board), b"CONF-1", ORIGIN_US)
+        refused = lib.amp_init(self._amp, ctypes.byref(self._board), b"CONF-1", ORIGIN_US)
+        assert refused == 0, f"the core refused the conformance board (amp.h AMP_BOARD_* {refused})"
         lib.amp_set_observer(self._amp, self._observer, None)
 
     def _observe(self, _ctx: int | None, event_p: ctypes._Pointer[AmpEvent]) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import ctypes
 import re
 
+from amp_targets import HalBoard, board_layout_mismatch, load_core
 from firmware_build import build, make_target
 from tpad_rt.amp import wire
 
@@ -33,32 +34,24 @@ def test_core_line_coverage_is_at_least_90_percent() -> None:
     assert int(found.group(2)) > 500  # every core file was measured
 
 
-class _Board(ctypes.Structure):
-    """hal.h's hal_board_t."""
-
-    _fields_ = [("name", ctypes.c_char_p), ("output_rate_hz", ctypes.c_uint32),
-                ("full_scale_mv", ctypes.c_uint32), ("max_mv", ctypes.c_uint32),
-                ("carrier_min_mhz", ctypes.c_uint32), ("carrier_max_mhz", ctypes.c_uint32),
-                ("max_current_ma", ctypes.c_uint32), ("measures", ctypes.c_uint8),
-                ("voltage_uv_per_lsb", ctypes.c_uint32), ("current_na_per_lsb", ctypes.c_uint32)]
+def test_the_ctypes_board_has_hal_hs_layout() -> None:
+    """tests/amp_targets.py's HalBoard (what every ctypes caller builds) has hal.h's hal_board_t layout:
+    its size and every field's offset as the library reports them (amp_board_layout)."""
+    assert board_layout_mismatch(load_core(build("lib"))) is None
 
 
 def test_core_library_answers_hello_through_ctypes() -> None:
     """``make -C firmware lib``: libtpadamp.so loads (no board symbols missing) and answers the
     document's HELLO with an INFO that echoes its nonce."""
-    library = ctypes.CDLL(str(build("lib")))
-    library.amp_sizeof.restype = ctypes.c_size_t
-    library.amp_init.argtypes = [ctypes.c_void_p, ctypes.POINTER(_Board), ctypes.c_char_p, ctypes.c_uint64]
-    library.amp_receive.argtypes = [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_size_t, ctypes.c_uint64]
-    library.amp_transmit.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t]
-    library.amp_transmit.restype = ctypes.c_size_t
-    board = _Board(b"py", 192000, 125000, 100000, 10_000_000, 80_000_000, 2000, 7, 5000, 1000)
+    library = load_core(build("lib"))
+    board = HalBoard(b"py", 192000, 125000, 100000, 10_000_000, 80_000_000, 2000, 7, 5000, 1000)
     amp = ctypes.create_string_buffer(library.amp_sizeof())
-    library.amp_init(amp, ctypes.byref(board), b"PY-1", 0)
-    library.amp_receive(amp, HELLO_LINE, len(HELLO_LINE), 1000)
-    out = ctypes.create_string_buffer(512)
+    assert library.amp_init(amp, ctypes.byref(board), b"PY-1", 0) == 0
+    hello = (ctypes.c_uint8 * len(HELLO_LINE)).from_buffer_copy(HELLO_LINE)
+    library.amp_receive(amp, hello, len(HELLO_LINE), 1000)
+    out = (ctypes.c_uint8 * 512)()
     sent_bytes = library.amp_transmit(amp, out, 512)
-    frames = wire.FrameSplitter().feed(out.raw[:sent_bytes])
+    frames = wire.FrameSplitter().feed(bytes(out[:sent_bytes]))
     assert len(frames) == 1 and frames[0] is not None
     frame = wire.decode(frames[0])  # the Python codec reads the C core's INFO
     assert frame is not None and (frame.version, frame.type, frame.seq) == (2, wire.Type.INFO, 0)

@@ -117,6 +117,9 @@ C0_LINE = GOOD.splitlines().index("  c0_nf: 9.88") + 1
     ("label:", "x" * 2000 + ":", "line 3: a line longer than 1024 characters"),
     ("label:", "la\x01bel:", "line 3: a control character (byte 0x01)"),
     ("label:", "la\x00bel:", "line 3: a control character (byte 0x00)"),
+    # the core refuses the board it makes: full scale (1.25 x max_voltage_v) past 1000 V
+    ("max_voltage_v: 40.0", "max_voltage_v: 800.1",
+     "the amplifier it makes is out of range: full_scale_mv must be 1 .. 1000000 (1000 V)"),
 ])
 def test_a_bad_device_file_is_one_line_naming_the_file_and_line(tmp_path: Path, old: str, new: str,
                                                                  expected: str) -> None:

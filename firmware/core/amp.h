@@ -11,8 +11,10 @@
  * them); the conformance suite runs both side by side on a virtual clock:
  * - the envelope sample clock: sample n is due at anchor + n / envelope_hz (exact rational
  *   microseconds, no drift), anchored at the START that found the clock stopped; the clock
- *   stops when the output is at rest (0, IDLE or FAULT, no ramp). The emulator also runs its
- *   clock on while its simulated plate rings: give it a quiet plate to compare anchors exactly;
+ *   stops when the output is at rest (0, IDLE or FAULT, no ramp) at the end of a call and at every
+ *   4096th sample one call plays (the emulator's batch: a jump of hours plays at most 4096 samples
+ *   at rest). The emulator also runs its clock on while its simulated plate rings: give it a quiet
+ *   plate to compare anchors exactly;
  * - due samples and STATUS are made in time order (a sample first on a tie) by every call
  *   taking now_us, before that call's own work (a frame received at t acts after the samples
  *   due up to t);
@@ -20,8 +22,8 @@
  *   valid frame (R = 10 ms ramp, 2 ms the emulator's read allowance);
  * - ramps (HELLO's, STOP's, A4's, A6's) are start * (1 - done / samples) over
  *   max(1, ramp_ms * envelope_hz / 1000) samples, through A1 and A2 like any sample;
- * - the output is held during PRIMING; at rest (IDLE, FAULT) it goes to 0 through A2 (the
- *   emulator holds it, which differs only after a STOP ramp shorter than the slew allows);
+ * - the output is held during PRIMING; at rest (IDLE, FAULT) it goes to 0 through A2 (the emulator
+ *   does the same: after a STOP ramp shorter than the slew allows, too);
  * - STATUS every status_period_ms on whole microseconds counted from amp_init's now_us,
  *   restarted by HELLO; one more than 100 ms overdue is skipped, not sent late.
  *
@@ -49,7 +51,13 @@
 #define AMP_STATUS_PERIOD_MS 5u      /* A8 */
 #define AMP_MAX_STATUS_LAG_US 100000u /* a periodic STATUS later than this is skipped */
 #define AMP_MIN_SLEW_MV_PER_MS 100000u /* A2: slew = max(this, max_mv) mV per ms */
-#define AMP_CARRIER_STEP_MHZ 10u     /* the carrier step, unless the accumulator needs a coarser one */
+#define AMP_CARRIER_STEP_MHZ 10u     /* the carrier step (INFO's carrier_step_mhz) */
+#define AMP_MAX_OUTPUT_RATE_HZ 4000000u /* hal.h's output_rate_hz: at most this (250 outputs per sample) */
+#define AMP_MAX_FULL_SCALE_MV 1000000u  /* hal.h's full_scale_mv: 1000 V (microvolt sums stay in int32) */
+
+/* amp_init's answer: the board's constants are within hal.h's ranges, or the first that is not. */
+enum { AMP_BOARD_OK = 0, AMP_BOARD_OUTPUT_RATE = 1, AMP_BOARD_FULL_SCALE = 2, AMP_BOARD_MAX_MV = 3,
+       AMP_BOARD_MEASURES = 4, AMP_BOARD_CARRIERS = 5 };
 
 /* --- the wire (sections 2.1, 2.2) --- */
 #define AMP_MAX_BODY 522u                                       /* an ENVELOPE of 256 samples */
@@ -106,15 +114,16 @@ typedef void (*amp_observer_t)(void *ctx, const amp_event_t *event);
 
 /* One played envelope sample waiting for synthesis. */
 typedef struct {
-    int32_t amplitude_q15;  /* envelope / full scale * 32768 (signed) */
+    int32_t peak_lsb;       /* the output sample at the sine's peak: envelope / full scale * 32767, rounded */
     uint32_t carrier_mhz;
     uint32_t outputs;       /* output samples it makes: output_rate_hz / envelope_hz */
 } amp_played_t;
 
 /* The full state. Boards allocate it statically and touch it only through the functions below. */
 typedef struct amp {
-    /* the board and what INFO says */
+    /* the board (amp_init's copy: the refused board's in place of one out of range) and what INFO says */
     const hal_board_t *board;
+    hal_board_t board_used;
     char serial[16];
     uint32_t carrier_min_mhz, carrier_max_mhz, carrier_step_mhz;
     uint32_t max_mv, full_scale_uv, max_uv, slew_mv_per_ms;
@@ -156,7 +165,7 @@ typedef struct amp {
     uint32_t tx_head, tx_tail;   /* bytes written / taken, free-running */
     uint8_t tx_mid_frame;        /* the last byte taken was not a delimiter */
     /* carrier synthesis */
-    uint64_t q15_per_uv_q32;      /* 32768 / full_scale_uv, times 2**32 */
+    uint64_t lsb_per_uv_q32;      /* 32767 / full_scale_uv, times 2**32 (rounded down) */
     uint32_t phase;               /* the carrier's phase, cycles * 2**32 */
     uint32_t phase_rem;           /* sub-step remainder, over phase_den */
     uint32_t phase_den;           /* output_rate_hz * 1000 */
@@ -189,11 +198,18 @@ typedef struct amp {
  */
 
 /* Power-up (A7): output 0, IDLE, no carrier, no STATUS before the first HELLO; STATUS time_us
- * counts from `now_us`. Call once, before any other function. `board` (hal_init's) must outlive
- * amp; its limits are taken as they are, except full scale (capped at 1000 V) and the clamp
- * (max_mv, at most full scale). `serial` is INFO's serial: up to 15 characters, up to a NUL
- * (a char[16] from hal_serial_number, or a shorter string). */
-void amp_init(amp_t *amp, const hal_board_t *board, const char *serial, uint64_t now_us);
+ * counts from `now_us`. Call once, before any other function. `board` (hal_init's) is copied (its
+ * name must outlive amp). Returns AMP_BOARD_OK when its constants are within hal.h's ranges; else
+ * the first out of range (AMP_BOARD_*; amp_board_problem says it in words), and the core runs a
+ * refused board: the protocol answers (INFO: full scale 1 mV, max_mv 0, carriers 0 .. 0, measures 0), but no
+ * carrier is made, no ADC pair is taken and every applied envelope is 0 (a clamp of 0 V).
+ * `serial` is INFO's serial: up to 15 characters, up to a NUL (a char[16] from
+ * hal_serial_number, or a shorter string). */
+int amp_init(amp_t *amp, const hal_board_t *board, const char *serial, uint64_t now_us);
+
+/* What amp_init's answer `problem` means: the range the board's constant broke ("within range" for
+ * AMP_BOARD_OK). */
+const char *amp_board_problem(int problem);
 
 /* `n` bytes from the line (any bytes: every one is validated) arrived at `now_us`. Each frame they
  * complete acts at now_us after what is due up to then, in order; answers are queued for
@@ -266,8 +282,14 @@ uint64_t amp_last_valid_us(const amp_t *amp);
 /* sizeof(amp_t), for callers that allocate it without this header (ctypes). */
 size_t amp_sizeof(void);
 
+/* hal_board_t's layout, for callers that build one without hal.h (ctypes): the offset and size (bytes)
+ * of each of its fields in hal.h's order, up to `cap` of them, into `offsets` and `sizes`; returns
+ * sizeof(hal_board_t). */
+size_t amp_board_layout(size_t *offsets, size_t *sizes, size_t cap);
+
 /* The main loop on hal.h: hal_init, hal_serial_number, amp_init(hal_time_us()), then forever
- * amp_run_once on a static amp_t. Never returns. */
+ * amp_run_once on a static amp_t (a refused board too: its output stays 0, its INFO says max_mv 0).
+ * Never returns. */
 void amp_run(void);
 
 /* One pass of amp_run's loop on `amp`: hal_uart_read -> amp_receive (at most 16 reads of 64 bytes,

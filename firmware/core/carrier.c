@@ -5,8 +5,7 @@
  * den = output_rate_hz * 1000 / step, the increment is (m * 2**32) / den = inc_q + inc_r / den, and
  * the remainder accumulates in phase_rem (over den): the phase never drifts from the ideal one, so
  * every carrier that is a multiple of the step is made exactly. The step (INFO's carrier_step_mhz)
- * is 10 mHz unless den would not fit 32 bits (an output rate above 42.9 MHz): then the smallest
- * multiple of 10 mHz that divides output_rate_hz * 1000 into a den that fits (amp_init).
+ * is 10 mHz: den fits 32 bits for every output rate amp_init takes (at most 4 MHz).
  * The phase starts at 0 at power-up and advances only while samples are made (the emulator's Plate). */
 #include "amp_core.h"
 
@@ -45,8 +44,15 @@ void amp_carrier_init(amp_t *amp) {
     if (board->output_rate_hz == 0)
         return;
     amp->phase_den = (uint32_t)((uint64_t)board->output_rate_hz * 1000u / amp->carrier_step_mhz);
-    amp->q15_per_uv_q32 = ((uint64_t)32768u << 32) / amp->full_scale_uv;
+    amp->lsb_per_uv_q32 = ((uint64_t)32767u << 32) / amp->full_scale_uv; /* rounded down: never above */
     set_increment(amp, 0);
+}
+
+/* peak_lsb * sine_q15 / 32767, rounded half away from zero (C99 division truncates toward zero): its
+ * magnitude never exceeds |peak_lsb| (|sine_q15| <= 32767), and equals it at the sine's peak. */
+static int16_t output_sample(int32_t peak_lsb, int32_t sine_q15) {
+    int32_t product = peak_lsb * sine_q15;
+    return (int16_t)((product + (product < 0 ? -16383 : 16383)) / 32767);
 }
 
 /* Drop the oldest played sample: its phase runs on (the board took too few samples). */
@@ -63,7 +69,7 @@ static void drop_oldest(amp_t *amp) {
 /* A fault (A6): what is queued, and what plays in FAULT, is made at 0; the board cuts its own queue. */
 void amp_carrier_cut(amp_t *amp) {
     for (uint32_t k = amp->played_tail; k != amp->played_head; k++)
-        amp->played[k & (AMP_SYNTH_QUEUE - 1u)].amplitude_q15 = 0;
+        amp->played[k & (AMP_SYNTH_QUEUE - 1u)].peak_lsb = 0;
     amp->output_cut = 1;
 }
 
@@ -77,8 +83,9 @@ void amp_carrier_played(amp_t *amp, int32_t envelope_uv, uint32_t carrier_mhz) {
         drop_oldest(amp);
     amp_played_t *played = &amp->played[amp->played_head & (AMP_SYNTH_QUEUE - 1u)];
     uint32_t magnitude_uv = (uint32_t)(envelope_uv < 0 ? -envelope_uv : envelope_uv);
-    int32_t q15 = (int32_t)((magnitude_uv * amp->q15_per_uv_q32 + 0x80000000u) >> 32);
-    played->amplitude_q15 = envelope_uv < 0 ? -q15 : q15;
+    /* round(|envelope| / full scale * 32767): 32767 at full scale, at most round(max / full * 32767) */
+    int32_t peak_lsb = (int32_t)((magnitude_uv * amp->lsb_per_uv_q32 + 0x80000000u) >> 32);
+    played->peak_lsb = envelope_uv < 0 ? -peak_lsb : peak_lsb;
     played->carrier_mhz = carrier_mhz;
     played->outputs = amp->board->output_rate_hz / amp->rate_hz;
     amp->played_head++;
@@ -96,7 +103,7 @@ size_t amp_synthesize(amp_t *amp, int16_t *out, size_t cap) {
                 amp->measure_phase[amp->written & (AMP_MEASURE_RING - 1u)] = phase;
                 amp->written++;
             }
-            out[n++] = (int16_t)((played->amplitude_q15 * amp_sine_q15(phase) + 16384) >> 15);
+            out[n++] = output_sample(played->peak_lsb, amp_sine_q15(phase));
         }
         if (amp->played_done == played->outputs) {
             amp->played_done = 0;

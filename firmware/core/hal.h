@@ -22,20 +22,25 @@ typedef struct {
     /* INFO's firmware string is "tpad-amp <version>"; the board's name goes into its serial. */
     const char *name;
     /* Output (carrier) samples per second: a multiple of every envelope rate the board offers
-     * (8000 and 16000 Hz); 0 when the board makes no carrier (a protocol-only board). */
+     * (8000 and 16000 Hz), so a multiple of 16000, at most 4000000 (AMP_MAX_OUTPUT_RATE_HZ);
+     * 0 when the board makes no carrier (a protocol-only board). */
     uint32_t output_rate_hz;
     /* Peak output (mV, at the amplifier's output: the drive the device's circuit model takes)
-     * of output sample 32767, and the clamp (A1, mV peak, <= full_scale_mv). */
+     * of output sample 32767, 1 .. 1000000 (1000 V), and the clamp (A1, mV peak,
+     * 1 .. full_scale_mv). */
     uint32_t full_scale_mv;
     uint32_t max_mv;
-    /* The carriers the board can make (mHz), and the overcurrent trip (mA rms; 0 = none). */
+    /* The carriers the board can make (mHz; the range must hold a multiple of 10 mHz below half
+     * the output rate), and the overcurrent trip (mA rms; 0 = none; any value). */
     uint32_t carrier_min_mhz;
     uint32_t carrier_max_mhz;
     uint32_t max_current_ma;
-    /* INFO's measures bits (1 current, 2 voltage, 4 phase): 0 when the board has no ADC. */
+    /* INFO's measures bits (1 current, 2 voltage, 4 phase; 0 .. 7): 0 when the board has no ADC. */
     uint8_t measures;
     /* What one ADC step is: microvolts (at the amplifier's output) and nanoamperes (through
-     * the plate) per least significant bit of hal_adc_read's samples. */
+     * the plate) per least significant bit of hal_adc_read's samples; any value, not 0 for what
+     * measures names (STATUS's rms values saturate at 2**32 - 1). amp_init refuses a board with a
+     * constant out of these ranges (amp.h: AMP_BOARD_*). */
     uint32_t voltage_uv_per_lsb;
     uint32_t current_na_per_lsb;
 } hal_board_t;

@@ -4,7 +4,7 @@
 #include "amp_core.h"
 
 /* s / 32767 * full_scale, toward zero: full_scale_uv = uv_q * 32767 + uv_r, so s * uv_q is exact and
- * s * uv_r < 2**30 (amp_init caps full scale at 1000 V: s * uv_q < 2**31). -32768 reads as -32767. */
+ * s * uv_r < 2**30 (amp_init refuses full scale above 1000 V: s * uv_q < 2**31). -32768 reads as -32767. */
 int32_t amp_sample_uv(const amp_t *amp, int16_t sample) {
     int32_t s = sample < -32767 ? -32767 : sample;
     int32_t q = (int32_t)(amp->full_scale_uv / 32767u), r = (int32_t)(amp->full_scale_uv % 32767u);

@@ -30,6 +30,13 @@ static double fit(double det, double ss, double sc, double cc, int64_t xs, int64
     return sqrt(a * a + b * b) * 32767.0;
 }
 
+/* A peak (LSB) as rms in the unit 1000 times that of `per_lsb`, rounded, saturating at 2**32 - 1 (a
+ * huge per-LSB constant, or a fit of few samples; NaN too). */
+static uint32_t rms_u32(double peak_lsb, uint32_t per_lsb) {
+    double rms = peak_lsb / sqrt(2.0) * per_lsb / 1000.0 + 0.5;
+    return rms < 4294967295.0 ? (uint32_t)rms : UINT32_MAX;
+}
+
 static void end_window(amp_t *amp) {
     const hal_board_t *board = amp->board;
     double ss = (double)amp->sum_ss, sc = (double)amp->sum_sc, cc = (double)amp->sum_cc;
@@ -43,8 +50,8 @@ static void end_window(amp_t *amp) {
             cdeg -= 36000.0;
         if (cdeg < -18000.0)
             cdeg += 36000.0;
-        amp->voltage_mv_rms = (uint32_t)(v_peak / sqrt(2.0) * board->voltage_uv_per_lsb / 1000.0 + 0.5);
-        amp->current_ua_rms = (uint32_t)(i_peak / sqrt(2.0) * board->current_na_per_lsb / 1000.0 + 0.5);
+        amp->voltage_mv_rms = rms_u32(v_peak, board->voltage_uv_per_lsb);
+        amp->current_ua_rms = rms_u32(i_peak, board->current_na_per_lsb);
         amp->phase_cdeg = (int16_t)(v_peak > 0.0 && i_peak > 0.0 ? floor(cdeg + 0.5) : 0.0);
     } else { /* no carrier in the window: nothing to fit */
         amp->voltage_mv_rms = amp->current_ua_rms = 0;

@@ -6,6 +6,9 @@
 #include "amp_core.h"
 
 #define TRIP_US ((AMP_WATCHDOG_MS - AMP_RAMP_MS) * 1000u - AMP_READ_ALLOWANCE_US)
+/* The emulator's MAX_BATCH: within one advance it stops a clock at rest at every 4096th sample, and at
+ * the end (its flush); the same here bounds the samples a jump of hours plays. */
+#define FLUSH_SAMPLES 4096u
 
 /* Start the clock at now_us unless it already runs at rate_hz (START; the anchor stays). */
 void amp_clock_start(amp_t *amp, uint64_t now_us, uint32_t rate_hz) {
@@ -90,7 +93,7 @@ static int sample_due_by(const amp_t *amp, uint64_t t_us) {
 void amp_advance(amp_t *amp, uint64_t now_us) {
     if (now_us < amp->now_us)
         now_us = amp->now_us;
-    uint32_t period_us = AMP_STATUS_PERIOD_MS * 1000u;
+    uint32_t period_us = AMP_STATUS_PERIOD_MS * 1000u, played = 0;
     for (;;) {
         if (amp->has_hello) { /* a STATUS overdue by more than 100 ms (the board was stopped) is skipped */
             uint64_t elapsed_us = now_us - amp->origin_us;
@@ -103,6 +106,11 @@ void amp_advance(amp_t *amp, uint64_t now_us) {
         int sample_first = sample_due_by(amp, status_at_us < now_us ? status_at_us : now_us);
         if (sample_first) {
             play(amp);
+            if (++played == FLUSH_SAMPLES) {
+                played = 0;
+                if (at_rest(amp))
+                    amp->rate_hz = 0;
+            }
         } else if (status_at_us <= now_us) {
             amp_send_status(amp, amp->next_status_us);
             amp->next_status_us += period_us;

@@ -199,9 +199,56 @@ static void test_overcurrent(void) {
     CHECK_EQ(s.amp.phase_cdeg, 0);
 }
 
+/* The output's peak at the clamp: a 48 kHz carrier at 192 kHz puts a sample on the sine's peak
+ * (phase 1/4); the envelope at max_mv makes exactly round(max / full * 32767) there and nowhere more
+ * (49477 / 24738: the G4's full scale at half, where scaling by 32768 made one LSB more). */
+static void test_peak_at_the_clamp(void) {
+    static const uint32_t max_mvs[] = { 24738u, 40000u, 49477u, 1u };
+    for (size_t b = 0; b < sizeof max_mvs / sizeof *max_mvs; b++) {
+        hal_board_t board = test_board;
+        board.full_scale_mv = 49477u;
+        board.max_mv = max_mvs[b];
+        session_init(&s, &board, 0);
+        int16_t top[256];
+        for (int i = 0; i < 256; i++)
+            top[i] = 32767;
+        host_hello(&s, 1, 0);
+        host_set_carrier(&s, 48000000u, 0);
+        host_start(&s, 16000u, 0, 256, 0);
+        host_envelope(&s, 0, top, 256, 0);
+        int peak = 0;
+        for (uint64_t t = 1000; t <= 15000; t += 1000) {
+            amp_advance(&s.amp, t);
+            size_t n = amp_synthesize(&s.amp, out, sizeof out / sizeof *out);
+            CHECK(n >= 16 * PER_SAMPLE);
+            for (size_t k = 0; k < n; k++)
+                peak = abs(out[k]) > peak ? abs(out[k]) : peak;
+        }
+        CHECK_EQ(peak, (int)lround(max_mvs[b] / 49477.0 * 32767));
+    }
+}
+
+/* Huge per-LSB constants: STATUS's rms values saturate at 2**32 - 1 (a double past uint32 was cast
+ * before: undefined), and the saturated current trips the overcurrent (A6). */
+static void test_rms_saturates(void) {
+    hal_board_t huge = test_board;
+    huge.voltage_uv_per_lsb = huge.current_na_per_lsb = 0xFFFFFFFFu;
+    session_init(&s, &huge, 0);
+    session_running(&s, 0, 0, 1000);
+    for (uint64_t t = 1000; t <= 3000 && s.amp.state != AMP_FAULT; t += 1000) {
+        amp_advance(&s.amp, t);
+        measure_known(30000.0, 0.0, 30000.0, 0.0, amp_synthesize(&s.amp, out, sizeof out / sizeof *out));
+    }
+    CHECK_EQ(s.amp.voltage_mv_rms, UINT32_MAX);
+    CHECK_EQ(s.amp.current_ua_rms, UINT32_MAX);
+    CHECK_EQ(s.amp.faults, AMP_FAULT_OVERCURRENT);
+}
+
 void test_carrier(void) {
     test_sine();
+    test_peak_at_the_clamp();
     test_synthesis();
     test_demodulation();
     test_overcurrent();
+    test_rms_saturates();
 }

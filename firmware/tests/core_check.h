@@ -72,5 +72,7 @@ void test_protocol(void);
 void test_rules(void);
 void test_carrier(void);
 void test_run(void);
+void test_board_ranges(void);
+void test_random(void);
 
 #endif

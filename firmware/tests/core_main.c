@@ -16,6 +16,8 @@ int main(void) {
     test_rules();
     test_carrier();
     test_run();
+    test_board_ranges();
+    test_random();
     if (check_failures) {
         fprintf(stderr, "core tests: %d checks FAILED\n", check_failures);
         return EXIT_FAILURE;

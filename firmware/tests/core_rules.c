@@ -373,6 +373,23 @@ static void test_tx_queue(void) {
     CHECK_EQ(counters_of(&s.amp).tx_dropped, c.tx_dropped);
 }
 
+/* A jump of an hour (a board stopped, then resumed): the watchdog's ramp, then the clock stops at the
+ * first 4096th sample at rest (the emulator's batch), not after an hour of samples at rest. */
+static void test_hour_jump(void) {
+    running_with(8000, 1024);
+    size_t before = r.count;
+    uint64_t hour_us = 3600ull * 1000000u;
+    amp_advance(&s.amp, T0 + hour_us);
+    CHECK_EQ(r.count - before, 4096 + 1); /* and the trip */
+    CHECK_EQ(counters_of(&s.amp).watchdog_trips, 1);
+    CHECK_EQ(counters_of(&s.amp).state, AMP_IDLE);
+    CHECK_EQ(r.events[r.count - 1].envelope_uv, 0);
+    CHECK_EQ(amp_next_due_us(&s.amp) > T0 + hour_us, 1); /* only STATUS: the clock stopped */
+    size_t after = r.count;
+    amp_advance(&s.amp, T0 + 2 * hour_us);
+    CHECK_EQ(r.count, after);
+}
+
 void test_rules(void) {
     test_a1_a2_a3();
     test_a4_watchdog();
@@ -386,4 +403,5 @@ void test_rules(void) {
     test_tx_queue();
     test_hello_hook();
     test_index_wrap();
+    test_hour_jump();
 }

@@ -125,7 +125,13 @@ int main(int argc, char **argv)
     realtime_priority();
     const hal_board_t *board = hal_init();
     hal_serial_number(serial);
-    amp_init(&amp, board, serial, hal_time_us());
+    int problem = amp_init(&amp, board, serial, hal_time_us());
+    if (problem != AMP_BOARD_OK) { /* the device file's figures make a board the core refuses */
+        fprintf(stderr, "tpad-amp: %s: the amplifier it makes is out of range: %s\n", options.device_path,
+                amp_board_problem(problem));
+        host_finish(error, sizeof error);
+        return 1;
+    }
     amp_set_observer(&amp, host_observe, &amp);
     amp_set_hello_hook(&amp, on_hello, NULL);
     printf("amplifier on %s\n", host_port_name());
