@@ -691,14 +691,25 @@ class AmpLink:
 
     # --- streaming --------------------------------------------------------------------
 
+    def lead_bound_s(self) -> float:
+        """The most a frame the streamer renders can lead the sample the amplifier plays (s): it renders while
+        fewer than the target fill and a frame are ahead of the play position, and never more than the
+        amplifier's buffer less a frame (amp_stream's pacing)."""
+        info = self.info
+        assert info is not None
+        ahead = min(self.target_fill + self.frame_samples, info.buffer_samples - self.frame_samples)
+        return max(ahead, 0) / self.target.envelope_hz
+
     def start(self, table: object, track: bool = False, ramp_ms: float = STOP_RAMP_MS) -> None:
         """START at the table's next sample (prefill: the target fill), then stream in a thread of its own;
         with ``track`` (the kernel's cfg tracking too) send the carrier of each control step as it moves, and
         lock it onto the plate's resonance if the amplifier measures voltage, current and phase. A failure
-        that ends the stream sends STOP with ``ramp_ms`` (ms; :meth:`stop` gives its own)."""
+        that ends the stream sends STOP with ``ramp_ms`` (ms; :meth:`stop` gives its own). The table's lead bound
+        is set to :meth:`lead_bound_s`."""
         link = self.link
         info = self.info
         assert info is not None
+        table.set_lead_bound_s(self.lead_bound_s())  # type: ignore[attr-defined]
         index = int(table.next_sample)  # type: ignore[attr-defined]
         payload = (self.target.envelope_hz.to_bytes(4, "little") + (index & 0xFFFFFFFF).to_bytes(4, "little")
                    + min(self.target_fill, info.buffer_samples).to_bytes(2, "little"))
