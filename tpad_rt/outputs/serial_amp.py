@@ -509,12 +509,12 @@ class AmpLink:
     def _measure_link(self) -> serial_rate.LinkRate:
         """Measure the link (H11): a burst of KEEPALIVE frames for the URL's frames at its envelope rate, read back
         through the amplifier's STATUS frames (``frames_ok + frames_bad`` against ``time_us``); bounded by
-        serial_rate.MEASURE_LIMIT_S. BackendError if the amplifier stops reporting meanwhile, or as the reads say."""
+        serial_rate.measure_limit_s. BackendError if the amplifier stops reporting meanwhile, or as the reads say."""
         info = self.info
         assert info is not None
         frames = serial_rate.burst_frames(self.target.envelope_hz, self._url_frame_samples(self.target.envelope_hz),
                                           info.status_period_ms)
-        limit_ns = self._deadline_ns(serial_rate.MEASURE_LIMIT_S)
+        limit_ns = self._deadline_ns(serial_rate.measure_limit_s(info.status_period_ms))
         silent_s = (4 * info.status_period_ms + 100) * 1e-3
         first = self._receive(codec.MSG_STATUS, self._deadline_ns(silent_s))
         if first is None:
