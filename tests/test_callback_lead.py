@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tpad_rt.cli.play import lead_over_line
 from tpad_rt.device import Device
 from tpad_rt.drivers.audio_callback import lead_bound_s
 from tpad_rt.kernel import layout
@@ -90,3 +91,9 @@ def test_an_audio_stream_s_bound_is_its_reported_latency_and_a_block() -> None:
     assert lead_bound_s(np.nan, 256, 48000) == pytest.approx(256 / 48000)
     assert lead_bound_s(-1.0, 256, 48000) == pytest.approx(256 / 48000)
     assert lead_bound_s(1e9, 256, 48000) == layout.MAX_OUTPUT_LEAD_S
+
+
+def test_play_says_once_in_its_summary_when_a_delay_was_above_the_bound() -> None:
+    assert lead_over_line(3, 10.0, "callback", "DAC") == (
+        "the host reported a delay from callback to DAC above the 10.00 ms the output can have (or not a number) for "
+        "3 callbacks: the finger watchdog took 10.00 ms for them")
