@@ -118,6 +118,17 @@ def test_an_amplifier_that_reads_in_bursts_keeps_the_url_s_frames_on_a_link_that
     assert stats["amp_underruns"] == stats["amp_frames_rejected"] == stats["late"] == stats["amp_sequence_gaps"] == 0
 
 
+def test_an_amplifier_that_reads_every_30_ms_is_waited_for_not_taken_for_a_lost_burst() -> None:
+    # The measurement ends after 4 STATUS periods without more of the burst, and at least two BOUND_READ_PERIOD_S:
+    # with 4 periods alone (20 ms) it ended after the first read, at 48.6 kB/s. Never above the line's 100 kB/s.
+    link = VirtualLink.emulating(DEVICE, baud=1_000_000, read_period_ns=30 * MS)
+    run = VirtualRun(link, query="buffer_ms=40").start()
+    rate = run.amp_link.link_rate
+    assert rate.frames == serial_rate.burst_frames(16000, 8, 5)
+    assert needed_bytes_per_s(16000, 8) * serial_rate.LINK_MARGIN <= rate.bytes_per_s <= 100e3 / 0.98
+    run.stop()
+
+
 def test_the_whole_burst_bound_passes_a_link_of_bound_passes_times_the_need_however_late_it_is_read() -> None:
     # The burst alone, at exactly BOUND_PASSES x the need, with the most slack the bound allows for: a STATUS period
     # before it, one after it and BOUND_READ_PERIOD_S of reading late.

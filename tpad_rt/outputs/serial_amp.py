@@ -523,7 +523,7 @@ class AmpLink:
         base, first_us = self._taken(first), int(codec.get_u32(first, codec.PAYLOAD + codec.STATUS_TIME_US))
         reports = [(first_us, 0)]
         sent = self._burst(frames, limit_ns)
-        stall = serial_rate.STALL_STATUS_PERIODS
+        stall = serial_rate.stall_status_periods(info.status_period_ms)
         while reports[-1][1] < sent and (len(reports) <= stall or reports[-1][1] > reports[-1 - stall][1]
                                          or reports[-1][1] == 0):
             body = self._receive(codec.MSG_STATUS, min(limit_ns, self._deadline_ns(silent_s)))

@@ -15,6 +15,8 @@ burst_frames(envelope_hz, frame_samples, status_period_ms) -> int
     of BOUND_PASSES times the rate the envelope needs with the margin
 measure_limit_s(status_period_ms) -> float
     the longest the measurement lasts (s), from its start (the first STATUS awaited)
+stall_status_periods(status_period_ms) -> int
+    the STATUS periods without more of the burst that end the measurement
 LinkRate(bytes_per_s, at_least, frames, elapsed_s) / link_rate(reports, frames) -> LinkRate
     the rate the amplifier's own STATUS frames show the burst arrived at
 frames_for(rate, envelope_hz, frame_samples, fill_samples, max_frame_samples, buffer_samples) -> int | None
@@ -58,7 +60,8 @@ BOUND_READ_PERIOD_S = 0.02
 #: MEASURE_BURSTS times the burst's duration at the rate needed if that is longer (a link this slow carries less).
 MEASURE_MIN_S = 1.0
 MEASURE_BURSTS = 2
-#: It also ends when, once the burst began arriving, this many STATUS periods pass without more of it (the rest was lost).
+#: It also ends when, once the burst began arriving, this many STATUS periods pass without more of it (the rest was
+#: lost), and at least two BOUND_READ_PERIOD_S (an amplifier reading now and then is not taken for a lost burst).
 STALL_STATUS_PERIODS = 4
 
 
@@ -89,6 +92,12 @@ def measure_limit_s(status_period_ms: int) -> float:
     burst's duration at the rate needed if longer (1 s up to a 40 ms STATUS period, 2.2 s at the 100 ms the
     protocol allows)."""
     return max(MEASURE_MIN_S, MEASURE_BURSTS * burst_s(status_period_ms))
+
+
+def stall_status_periods(status_period_ms: int) -> int:
+    """STATUS periods that, once the burst began arriving, pass without more of it before the measurement ends:
+    STALL_STATUS_PERIODS, and at least two BOUND_READ_PERIOD_S (8 at the emulator's 5 ms)."""
+    return max(STALL_STATUS_PERIODS, math.ceil(2 * BOUND_READ_PERIOD_S * 1e3 / status_period_ms))
 
 
 @dataclass(frozen=True)
