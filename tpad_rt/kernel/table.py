@@ -210,8 +210,9 @@ def texture_views(table, slot):  # type: ignore[no-untyped-def]
 def render_into(table, state, out, frames, channels, channel, dac_delay_ns):  # type: ignore[no-untyped-def]
     """Render ``frames`` samples with the table's arrays into ``out[k * channels + channel]`` (other
     channels untouched) and the drive ring, in pieces of at most the scratch's length; the block's first sample
-    plays ``dac_delay_ns`` (ns) from now, which the kernel's finger watchdog takes off the fingers' ages
-    (``cfg[CFG_OUTPUT_LEAD_S]`` for each piece, clamped to ``[0, MAX_OUTPUT_LEAD_S]``). Call it after
+    plays ``dac_delay_ns`` (ns) from now (the callback's, within TAB_LEAD_BOUND_NS), which the kernel's finger
+    watchdog takes off the fingers' ages (``cfg[CFG_OUTPUT_LEAD_S]`` for each piece, clamped to
+    ``[0, MAX_OUTPUT_LEAD_S]``). Call it after
     :func:`begin_block` (which acquires the finger count the kernel reads)."""
     cfg, dev, _, power_ring, finger, _, telem, telem_count = kernel_views(table)
     finger_count = table[TAB_FINGER_SEEN:TAB_FINGER_SEEN + 1]  # acquired in begin_block
