@@ -21,6 +21,7 @@ from virtual_serial import DEVICE, GRATING, VirtualRun
 from tpad_rt.amp.virtual_link import VirtualLink
 from tpad_rt.errors import ConfigError
 from tpad_rt.kernel import layout
+from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.render import render_block
 from tpad_rt.physics.friction import relative_friction
 from tpad_rt.pipeline import Pipeline, RenderOptions
@@ -31,10 +32,11 @@ LARGEST_MS = 63.5
 
 
 @functools.cache
-def levels(buffer_ms: float) -> tuple[float, float, float, int, int]:
+def levels(buffer_ms: float) -> tuple[float, float, float, int, int, int]:
     """A 1.2 s swipe at 100 mm/s with ``buffer_ms``: the friction the emulated plate gave (1st and 99th percentile
-    over the middle of the swipe), the 99th percentile of the applied envelope (V) there, the underruns and the
-    blocks the kernel rendered with the finger taken as gone (FLAG_WATCHDOG) while it slid."""
+    over the middle of the swipe), the 99th percentile of the applied envelope (V) there, the underruns, the
+    blocks the kernel rendered with the finger taken as gone (FLAG_WATCHDOG) while it slid, and the frames whose
+    lead was above the bound the streamer set (AmpLink.lead_bound_s)."""
     link = VirtualLink.emulating(DEVICE)
     run = VirtualRun(link, query=f"buffer_ms={buffer_ms:g}").start()
     run.swipe(1.2, speed_mm_s=100.0, x0_mm=10.0)
@@ -48,15 +50,17 @@ def levels(buffer_ms: float) -> tuple[float, float, float, int, int]:
     sliding = (telemetry["t"] > 0.1) & (telemetry["t"] < 1.1)
     gone = np.count_nonzero(telemetry["saturated"][sliding].astype(np.int64) & layout.FLAG_WATCHDOG)
     return (float(np.percentile(friction, 1)), float(np.percentile(friction, 99)),
-            float(np.percentile(np.abs(recording["envelope_v"][middle]), 99)), run.stats()["amp_underruns"], gone)
+            float(np.percentile(np.abs(recording["envelope_v"][middle]), 99)), run.stats()["amp_underruns"], gone,
+            int(run.table.stats[tab.STAT_LEAD_OVER]))
 
 
 @pytest.mark.parametrize("buffer_ms", [2.0, 40.0, 60.0, LARGEST_MS])
 def test_every_buffer_the_amplifier_takes_plays_the_grating_at_its_levels(buffer_ms: float) -> None:
     grating = yaml.safe_load(GRATING.read_text())["friction"]
-    low, high, peak_v, underruns, gone = levels(buffer_ms)
+    low, high, peak_v, underruns, gone, lead_over = levels(buffer_ms)
     reference = levels(2.0)
     assert gone == 0, f"the finger was taken as gone in {gone} blocks while it slid"
+    assert lead_over == 0, "the streamer's bound on its lead is below a lead it had"
     assert underruns == 0
     assert low == pytest.approx(grating["low"], rel=0.02) and high == pytest.approx(grating["high"], rel=0.02)
     assert (low, high, peak_v) == pytest.approx(reference[:3], rel=0.005)

@@ -398,7 +398,9 @@ class Renderer:
         reports from a callback to the DAC (median over the recent blocks, from the
         time stamps PortAudio passes each callback; 0 on paced outputs; PortAudio's
         stream-level ``outputLatency`` is not reported: JACK's dummy driver says 0 there
-        while its callbacks' time stamps say 0.33 ms); ``faults``, ``fault_steps``, ``fault_samples``, ``fault_causes``: the kernel's fault
+        while its callbacks' time stamps say 0.33 ms); ``lead_bound_ms``, the most of that delay the output can
+        have (CallbackTable.set_lead_bound_s), and ``lead_over_blocks``, blocks whose reported delay was above it
+        or not a number (taken as the bound); ``faults``, ``fault_steps``, ``fault_samples``, ``fault_causes``: the kernel's fault
         guard (docs/kernel.md "Faults"), since the renderer was made.
         """
         if self._table is not None:
@@ -411,7 +413,8 @@ class Renderer:
         else:
             counters, blocks = np.zeros(tab.STAT_SIZE, dtype=np.int64), np.zeros((0, tab.BLOCK_COLS), dtype=np.int64)
         result.update(callbacks=int(counters[tab.STAT_CALLBACKS]), frames=int(counters[tab.STAT_FRAMES]),
-                      underflows=int(counters[tab.STAT_UNDERFLOWS]),
+                      underflows=int(counters[tab.STAT_UNDERFLOWS]), lead_over_blocks=int(counters[tab.STAT_LEAD_OVER]),
+                      lead_bound_ms=table.lead_bound_s * 1e3 if table is not None else 0.0,
                       played_s=int(counters[tab.STAT_FRAMES]) / self.rate_hz)
         result.update(self._driver.stats())
         compute_us = blocks[:, tab.BLOCK_COMPUTE_NS] * 1e-3

@@ -10,7 +10,8 @@ CallbackTable(arrays, texture, *, channels=1, channel=0, scratch_frames=4096, dr
     statistics (``.stats``) and the per-block records (``.blocks``)
     ``.user_data``: the address to pass as ``userData``; ``.set_texture(texture, t0_s, running)``;
     ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.drive_end()``; ``.copy()``;
-    ``.call(out, callback=None)``
+    ``.set_lead_bound_s(seconds)`` / ``.lead_bound_s`` (the most output lead the driver's output can have);
+    ``.call(out, callback=None, dac_delay_s=0.0)``
 monotonic_ns() -> int
     the clock the callback stamps blocks with (CLOCK_MONOTONIC, ns)
 
@@ -21,6 +22,7 @@ call :meth:`CallbackTable.set_texture`; any thread may read.
 from __future__ import annotations
 
 import ctypes
+import math
 import time
 from typing import Any
 
@@ -29,7 +31,7 @@ import numpy as np
 from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.atomics import publish
-from tpad_rt.kernel.layout import CFG_FS_HZ, CFG_TEXTURE_T0_S, STATE_NEXT_INDEX
+from tpad_rt.kernel.layout import CFG_FS_HZ, CFG_TEXTURE_T0_S, MAX_OUTPUT_LEAD_S, STATE_NEXT_INDEX
 from tpad_rt.pipeline import KernelArrays
 from tpad_rt.texture import CompiledTexture
 
@@ -166,6 +168,18 @@ class CallbackTable:
         row = self.blocks[(callbacks - 1) % len(self.blocks)]
         return int(row[tab.BLOCK_SAMPLE_INDEX] + row[tab.BLOCK_FRAMES])
 
+    def set_lead_bound_s(self, seconds: float) -> None:
+        """The most lead (s) the driver's output can have (its buffer, its reported latency plus a block), within
+        ``[0, MAX_OUTPUT_LEAD_S]`` (NaN: 0): a block's reported delay above it is taken as this much and counted
+        (``stats[STAT_LEAD_OVER]``). Write it before the output starts; 0 (no lead) until then."""
+        bounded_s = min(seconds, MAX_OUTPUT_LEAD_S) if seconds > 0.0 else 0.0
+        self.table[tab.TAB_LEAD_BOUND_NS] = math.ceil(bounded_s * 1e9)
+
+    @property
+    def lead_bound_s(self) -> float:
+        """The bound :meth:`set_lead_bound_s` wrote (s)."""
+        return int(self.table[tab.TAB_LEAD_BOUND_NS]) * 1e-9
+
     @property
     def next_sample(self) -> int:
         """The sample index the next callback renders first."""
@@ -179,20 +193,22 @@ class CallbackTable:
                              scratch_frames=len(self.scratch), drive_frames=len(self.drive),
                              block_rows=len(self.blocks))
         twin.slot_t0_s[:] = self.slot_t0_s
+        twin.table[tab.TAB_LEAD_BOUND_NS] = self.table[tab.TAB_LEAD_BOUND_NS]
         return twin
 
-    def call(self, out: np.ndarray, callback: Any = None) -> None:
+    def call(self, out: np.ndarray, callback: Any = None, dac_delay_s: float = 0.0) -> None:
         """Run ``callback`` (None: ``render_callback``) once from Python on ``out`` (float32, frames x
         channels), as PortAudio would.
 
-        Its time info says the samples play at once (DAC time = current time). The
-        ctypes call releases the GIL while the callback runs.
+        Its time info says the first sample plays ``dac_delay_s`` (s) from now (DAC time - current time;
+        any float, as a driver might report it). The ctypes call releases the GIL while the callback runs.
         """
         callback = cb.render_callback if callback is None else callback
         channels = int(self.table[tab.TAB_CHANNELS])
         if out.dtype != np.float32 or not out.flags.c_contiguous or out.size % channels:
             raise ValueError(f"out: must be C-contiguous float32 holding whole frames of {channels} channels")
-        callback.ctypes(None, _address(out), out.size // channels, _TIME_INFO(0.0, 0.0, 0.0), 0, self.user_data)
+        callback.ctypes(None, _address(out), out.size // channels, _TIME_INFO(0.0, 0.0, dac_delay_s), 0,
+                         self.user_data)
 
 
 def _texture_of(slot: tuple[np.ndarray, ...]) -> CompiledTexture:

@@ -8,7 +8,7 @@ stalls, STOP) runs deterministically, as fast as the host computes, to the nanos
 
 API map
 -------
-VirtualLink(clock, amplifier, *, name="virtual", baud=921600, capacity_bytes=4096)
+VirtualLink(clock, amplifier, *, name="virtual", baud=921600, capacity_bytes=4096, read_period_ns=0)
     a :class:`tpad_rt.outputs.serial_line.Line` to ``amplifier`` (a
     :class:`tpad_rt.amp.emulator.Amplifier`, or any :class:`AmplifierSide`); give it to ``AmpLink.open(..., line=)`` or a
     ``SerialStreamDriver(..., open_line=)``. Its stream runs the steps of
@@ -27,8 +27,10 @@ link.recording() -> dict         the samples the amplifier applied (the emulator
 The line carries bytes in both directions at ``baud`` (10 bits a byte: its byte rate is
 ``baud / 10``, and a low ``baud`` makes a slow link), the host's bytes through ``faults``,
 frame by frame; the host's writes take at most ``capacity_bytes`` not yet read by the
-amplifier (a full line refuses the rest, as a full pty does). The amplifier's STATUS goes
-out on its own schedule (its ``next_status_s``), as events on the clock.
+amplifier (a full line refuses the rest, as a full pty does). With ``read_period_ns`` the
+amplifier reads what waits only at multiples of it on the host's clock (ns), all at once (the
+emulator on a pty, a firmware polling its UART's FIFO); 0: each frame as it arrives. The
+amplifier's STATUS goes out on its own schedule (its ``next_status_s``), as events on the clock.
 """
 
 from __future__ import annotations
@@ -107,12 +109,14 @@ class VirtualLink:
     """
 
     def __init__(self, clock: VirtualClock, amplifier: AmplifierSide, *, name: str = "virtual", baud: int = 921600,
-                 capacity_bytes: int = 4096):
+                 capacity_bytes: int = 4096, read_period_ns: int = 0):
         self.name = name
         self.clock = clock
         self.amplifier = amplifier
         amplifier.on_hello = self._drop_unread_by_host
         self.capacity_bytes = capacity_bytes
+        self.read_period_ns = read_period_ns
+        self._read_event_ns = -1  # the amplifier's next read of what waits (read_period_ns), scheduled
         self._byte_ns = BITS_PER_BYTE * 1e9 / baud
         self._faults = LineFaults()
         self._rng = np.random.default_rng(0)
@@ -121,7 +125,7 @@ class VirtualLink:
         self._to_amp_free_ns = 0  # when the line towards the amplifier has sent all it took
         self._to_host_free_ns = 0
         self._in_flight = 0  # bytes on their way to the amplifier
-        self._unread = bytearray()  # bytes that reached the amplifier while it did not read
+        self._unread = bytearray()  # bytes that reached the amplifier and wait for it to read them
         self._to_host: deque[tuple[int, bytes]] = deque()  # (arrival ns, bytes) for the host
         self._status_event_ns = -1  # the amplifier's next STATUS event, scheduled
         self.reading = True
@@ -299,10 +303,25 @@ class VirtualLink:
         self._in_flight -= sent
         if not self.alive:
             return
-        if not self.reading:
+        if not self.reading or self.read_period_ns > 0:
             self._unread += data
+            if self.reading:
+                self._schedule_read()
             return
         self._feed(data)
+
+    def _schedule_read(self) -> None:
+        """The amplifier reads what waits at the next multiple of read_period_ns (ns) after now."""
+        due_ns = (self.clock.now_ns() // self.read_period_ns + 1) * self.read_period_ns
+        if due_ns != self._read_event_ns:
+            self._read_event_ns = due_ns
+            self.clock.at(due_ns, self._read_waiting)
+
+    def _read_waiting(self) -> None:
+        self._read_event_ns = -1
+        if self.reading and self.alive and self._unread:
+            data, self._unread = bytes(self._unread), bytearray()
+            self._feed(data)
 
     def _feed(self, data: bytes) -> None:
         """The amplifier reads ``data`` now: each frame it completes is received at this time."""

@@ -358,6 +358,8 @@ class Session:
             lines.append(f"faults: {stats['faults']} ({stats['fault_steps']} control steps, "
                          f"{stats['fault_blocks']} blocks; {', '.join(stats['fault_causes'])}): the drive ramped to 0 "
                          "each time and came back with the next valid data (docs/kernel.md \"Faults\")")
+        if stats["lead_over_blocks"]:
+            lines.append(lead_over_line(stats["lead_over_blocks"], stats["lead_bound_ms"], block, output))
         lines += self.renderer.driver.summary_lines(stats)
         if self.judged_blocks:
             lines.append(f"friction |texture under the finger - simulated plate| over {self.judged_blocks} touching "
@@ -366,3 +368,10 @@ class Session:
                          f"({100 * self.departed_blocks / self.judged_blocks:.1f} %) further than "
                          f"{DEPARTURE_TOLERANCE_MU:g}{self.ramp_text()}")
         return [line.replace("nan", "n/a") for line in lines]
+
+
+def lead_over_line(blocks: int, bound_ms: float, block: str, output: str) -> str:
+    """The summary's line for ``blocks`` {block}s whose reported delay to the {output} was above the ``bound_ms``
+    (ms) the output can have, or not a number: the finger watchdog took the bound for them."""
+    return (f"the host reported a delay from {block} to {output} above the {bound_ms:.2f} ms the output can have "
+            f"(or not a number) for {blocks} {block}s: the finger watchdog took {bound_ms:.2f} ms for them")

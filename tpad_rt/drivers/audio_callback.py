@@ -20,6 +20,7 @@ from tpad_rt.drivers.stall_watch import StallWatch
 from tpad_rt.errors import BackendError
 from tpad_rt.kernel import callback as cb
 from tpad_rt.kernel import table as tab
+from tpad_rt.kernel.layout import MAX_OUTPUT_LEAD_S
 from tpad_rt.outputs import audio
 from tpad_rt.pipeline import RenderOptions
 from tpad_rt.realtime import CallbackTable
@@ -83,6 +84,7 @@ class AudioCallbackDriver(Driver):
         assert address is not None
         self.stream = audio.AudioStream(self.audio_device, self.rate_hz, self.block_frames, self.channels,
                                         address, table.user_data)
+        table.set_lead_bound_s(lead_bound_s(self.stream.output_latency_s, self.block_frames, self.rate_hz))
         self.stream.start()
 
     def poll(self, table: CallbackTable) -> BaseException | None:
@@ -139,6 +141,15 @@ class AudioCallbackDriver(Driver):
         """PortAudio's stream time (s), NaN when no stream runs."""
         stream = self.stream
         return stream.time_s() if stream is not None else math.nan
+
+
+def lead_bound_s(output_latency_s: float, block_frames: int, rate_hz: int) -> float:
+    """The most lead (s) a stream can have: the output latency PortAudio reported when it opened (NaN or
+    negative: none) plus a block (a JACK server in asynchronous mode buffers a period more than it reports), at
+    most MAX_OUTPUT_LEAD_S. A
+    callback's time info saying more is taken as this much (CallbackTable.set_lead_bound_s)."""
+    latency_s = output_latency_s if output_latency_s >= 0.0 else 0.0
+    return min(latency_s + block_frames / rate_hz, MAX_OUTPUT_LEAD_S)
 
 
 def _lost_error(device: audio.AudioDevice) -> BackendError:

@@ -36,6 +36,7 @@ from tpad_rt.kernel.table import (
     STAT_SIZE,
     TAB_CHANNEL,
     TAB_CHANNELS,
+    TAB_LEAD_BOUND_NS,
     TAB_SIZE,
     TAB_STATE,
     TAB_STATE_SIZE,
@@ -66,36 +67,44 @@ _SIGNATURE = types.int32(types.voidptr, types.voidptr, types.uint64, types.voidp
 
 
 @njit(inline="always", nogil=True, error_model="numpy")
-def _dac_delay_ns(time_info):  # type: ignore[no-untyped-def]
-    """outputBufferDacTime - currentTime (ns) of PortAudio's PaStreamCallbackTimeInfo (adc, current, dac; s)."""
+def _dac_delay_ns(time_info, table):  # type: ignore[no-untyped-def]
+    """outputBufferDacTime - currentTime (ns) of PortAudio's PaStreamCallbackTimeInfo (adc, current, dac; s),
+    within ``[0, table[TAB_LEAD_BOUND_NS]]``, and whether it was above that bound or not a number:
+    ``(delay_ns, over)`` (a negative delay is 0, not over)."""
     times = numba.carray(time_info, 3, _F8)
-    return np.int64((times[2] - times[1]) * 1e9)
+    delay_ns = (times[2] - times[1]) * 1e9
+    bound_ns = table[TAB_LEAD_BOUND_NS]
+    if not delay_ns <= bound_ns:  # NaN too
+        return np.int64(bound_ns), True
+    return np.int64(delay_ns) if delay_ns > 0.0 else np.int64(0), False
 
 
 def _silence(input_buffer, output_buffer, frames, time_info, status_flags, user_data):  # type: ignore[no-untyped-def]
     """Write zeros to every channel; keep the statistics (the empty-callback baseline)."""
     table = numba.carray(user_data, TAB_SIZE, _I8)
     stats = numba.carray(pointer(table[TAB_STATS]), STAT_SIZE, _I8)
-    stats, row, entry_ns = begin_block(table, stats[STAT_FRAMES], frames, _dac_delay_ns(time_info))
+    delay_ns, lead_over = _dac_delay_ns(time_info, table)
+    stats, row, entry_ns = begin_block(table, stats[STAT_FRAMES], frames, delay_ns)
     out = numba.carray(output_buffer, frames * table[TAB_CHANNELS], _F4)
     for i in range(out.shape[0]):
         out[i] = 0.0
-    finish_block(stats, row, entry_ns, frames, status_flags & BLOCK_LATE, status_flags & BLOCK_PRIMING)
+    finish_block(stats, row, entry_ns, frames, status_flags & BLOCK_LATE, status_flags & BLOCK_PRIMING, lead_over)
     return PA_CONTINUE
 
 
 def _render(input_buffer, output_buffer, frames, time_info, status_flags, user_data):  # type: ignore[no-untyped-def]
-    """Render ``frames`` drive samples into the table's channel (zeros elsewhere); keep the statistics."""
+    """Render ``frames`` drive samples into the table's channel (zeros elsewhere); keep the statistics. The
+    block's lead is its reported delay within the driver's bound (:func:`_dac_delay_ns`)."""
     table = numba.carray(user_data, TAB_SIZE, _I8)
     state = numba.carray(pointer(table[TAB_STATE]), table[TAB_STATE_SIZE], _F8)
-    delay_ns = _dac_delay_ns(time_info)
+    delay_ns, lead_over = _dac_delay_ns(time_info, table)
     stats, row, entry_ns = begin_block(table, np.int64(state[STATE_NEXT_INDEX]), frames, delay_ns)
     channels = table[TAB_CHANNELS]
     out = numba.carray(output_buffer, frames * channels, _F4)
     for i in range(out.shape[0]):
         out[i] = 0.0
     render_into(table, state, out, frames, channels, table[TAB_CHANNEL], delay_ns)
-    finish_block(stats, row, entry_ns, frames, status_flags & BLOCK_LATE, status_flags & BLOCK_PRIMING)
+    finish_block(stats, row, entry_ns, frames, status_flags & BLOCK_LATE, status_flags & BLOCK_PRIMING, lead_over)
     return PA_CONTINUE
 
 

@@ -74,9 +74,10 @@ TEL_COLS = 11
 TEL_NAMES = ("t", "x_mm", "y_mm", "speed_mm_s", "force_n", "target_mu",
              "amplitude_um", "voltage_v", "power_w", "saturated", "plate_w")
 
-#: The most output lead (s) the finger watchdog takes off a finger sample's age (CFG_OUTPUT_LEAD_S is clamped to
-#: [0, this]): an output's reported delay (PortAudio's time info, the serial streamer's buffer, at most its URL's
-#: 1000 ms) beyond it is taken as this much.
+#: The most output lead (s) the finger watchdog takes off a finger sample's age, whatever the output (CFG_OUTPUT_LEAD_S
+#: is clamped to [0, this]). Each driver's own bound is tighter (kernel.table's TAB_LEAD_BOUND_NS: the serial
+#: streamer's target fill plus a frame, PortAudio's reported output latency plus a block): a reported delay above
+#: that is taken as the bound and counted.
 MAX_OUTPUT_LEAD_S = 1.0
 #: The most the plate's amplitude per volt may vary over a device's forces that the press guard follows (CFG_GAIN_SPAN).
 MAX_GAIN_SPAN = 1e6

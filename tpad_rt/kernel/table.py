@@ -7,7 +7,7 @@ TAB_*, SLOT_*, STAT_*, BLOCK_*
     per-block record ring; :class:`tpad_rt.realtime.CallbackTable` owns one
 begin_block(table, first_sample, frames, dac_delay_ns) -> (stats, row, entry_ns)
 render_into(table, state, out, frames, channels, channel, dac_delay_ns)
-finish_block(stats, row, entry_ns, frames, underflow, priming)
+finish_block(stats, row, entry_ns, frames, underflow, priming, lead_over)
     one block, as every driver renders it: record its start, render it from the
     table's arrays (the texture slot it finds active), close its record
 kernel_views(table) -> (cfg, dev, state, power_ring, finger, finger_count, telem, telem_count)
@@ -37,7 +37,12 @@ The pointer table (int64; addresses are ``ndarray.ctypes.data``):
   rendered (sample ``n`` at ``n % frames``), for recordings;
 - the statistics (int64 ``[STAT_SIZE]``) and the per-block record ring (int64
   ``[TAB_BLOCK_ROWS, BLOCK_COLS]``, row ``blocks % rows``);
-- ``TAB_FINGER_SEEN``: the finger count the running block acquired (below).
+- ``TAB_FINGER_SEEN``: the finger count the running block acquired (below);
+- ``TAB_LEAD_BOUND_NS``: the most lead (ns, at most MAX_OUTPUT_LEAD_S) the driver's output can
+  honestly have, which the driver writes before it starts (0 until then: no lead). A block's
+  reported delay (PortAudio's time info, the serial streamer's buffer) above it, or not a
+  number, is taken as this much and counted (``STAT_LEAD_OVER``); a negative one as 0. So a
+  bogus time stamp never stretches the finger watchdog past ``watchdog_ms`` plus this.
 
 The Python side publishes with release stores (:func:`tpad_rt.kernel.atomics.publish`)
 and a driver reads with acquire loads, so it never sees an index before the data it
@@ -102,7 +107,8 @@ TAB_STATS = 23                # int64[STAT_SIZE]
 TAB_BLOCKS = 24               # int64[TAB_BLOCK_ROWS, BLOCK_COLS]
 TAB_BLOCK_ROWS = 25
 TAB_FINGER_SEEN = 26          # finger_count as this callback acquired it (written by the callback)
-TAB_SLOTS = 27                # two texture slots of SLOT_SIZE entries each
+TAB_LEAD_BOUND_NS = 27        # the most output lead (ns) the driver's output can have: a larger reported delay is taken as this
+TAB_SLOTS = 28                # two texture slots of SLOT_SIZE entries each
 # --- a texture slot: offsets from TAB_SLOTS + k * SLOT_SIZE -------------------------
 SLOT_PROG = 0                 # prog [SLOT_PROG_ROWS, TEX_PROG_COLS] int64
 SLOT_PROG_ROWS = 1
@@ -120,7 +126,8 @@ STAT_CALLBACKS = 0            # blocks so far (callbacks, or frames streamed; wr
 STAT_FRAMES = 1               # frames written so far
 STAT_UNDERFLOWS = 2           # blocks that came late (paOutputUnderflow; a frame after a skip ahead)
 STAT_PRIMING = 3              # blocks rendered before the output played (paPrimingOutput; prefill)
-STAT_SIZE = 4
+STAT_LEAD_OVER = 4            # blocks whose reported delay was above TAB_LEAD_BOUND_NS, or not a number
+STAT_SIZE = 5
 
 # --- per-block records: int64[rows, BLOCK_COLS], row STAT_CALLBACKS % rows -------
 BLOCK_SAMPLE_INDEX = 0        # stream sample index of the block's first sample
@@ -157,8 +164,10 @@ def begin_block(table, first_sample, frames, dac_delay_ns):  # type: ignore[no-u
 
 
 @njit(inline="always", nogil=True, error_model="numpy")
-def finish_block(stats, row, entry_ns, frames, underflow, priming):  # type: ignore[no-untyped-def]
+def finish_block(stats, row, entry_ns, frames, underflow, priming, lead_over):  # type: ignore[no-untyped-def]
     """Close a block's record: compute time, counters (the block count last)."""
+    if lead_over:
+        stats[STAT_LEAD_OVER] += 1
     if underflow:
         stats[STAT_UNDERFLOWS] += 1
     if priming:
@@ -201,8 +210,9 @@ def texture_views(table, slot):  # type: ignore[no-untyped-def]
 def render_into(table, state, out, frames, channels, channel, dac_delay_ns):  # type: ignore[no-untyped-def]
     """Render ``frames`` samples with the table's arrays into ``out[k * channels + channel]`` (other
     channels untouched) and the drive ring, in pieces of at most the scratch's length; the block's first sample
-    plays ``dac_delay_ns`` (ns) from now, which the kernel's finger watchdog takes off the fingers' ages
-    (``cfg[CFG_OUTPUT_LEAD_S]`` for each piece, clamped to ``[0, MAX_OUTPUT_LEAD_S]``). Call it after
+    plays ``dac_delay_ns`` (ns) from now (the callback's, within TAB_LEAD_BOUND_NS), which the kernel's finger
+    watchdog takes off the fingers' ages (``cfg[CFG_OUTPUT_LEAD_S]`` for each piece, clamped to
+    ``[0, MAX_OUTPUT_LEAD_S]``). Call it after
     :func:`begin_block` (which acquires the finger count the kernel reads)."""
     cfg, dev, _, power_ring, finger, _, telem, telem_count = kernel_views(table)
     finger_count = table[TAB_FINGER_SEEN:TAB_FINGER_SEEN + 1]  # acquired in begin_block

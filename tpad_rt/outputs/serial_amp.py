@@ -509,12 +509,12 @@ class AmpLink:
     def _measure_link(self) -> serial_rate.LinkRate:
         """Measure the link (H11): a burst of KEEPALIVE frames for the URL's frames at its envelope rate, read back
         through the amplifier's STATUS frames (``frames_ok + frames_bad`` against ``time_us``); bounded by
-        serial_rate.MEASURE_LIMIT_S. BackendError if the amplifier stops reporting meanwhile, or as the reads say."""
+        serial_rate.measure_limit_s. BackendError if the amplifier stops reporting meanwhile, or as the reads say."""
         info = self.info
         assert info is not None
         frames = serial_rate.burst_frames(self.target.envelope_hz, self._url_frame_samples(self.target.envelope_hz),
                                           info.status_period_ms)
-        limit_ns = self._deadline_ns(serial_rate.MEASURE_LIMIT_S)
+        limit_ns = self._deadline_ns(serial_rate.measure_limit_s(info.status_period_ms))
         silent_s = (4 * info.status_period_ms + 100) * 1e-3
         first = self._receive(codec.MSG_STATUS, self._deadline_ns(silent_s))
         if first is None:
@@ -523,7 +523,7 @@ class AmpLink:
         base, first_us = self._taken(first), int(codec.get_u32(first, codec.PAYLOAD + codec.STATUS_TIME_US))
         reports = [(first_us, 0)]
         sent = self._burst(frames, limit_ns)
-        stall = serial_rate.STALL_STATUS_PERIODS
+        stall = serial_rate.stall_status_periods(info.status_period_ms)
         while reports[-1][1] < sent and (len(reports) <= stall or reports[-1][1] > reports[-1 - stall][1]
                                          or reports[-1][1] == 0):
             body = self._receive(codec.MSG_STATUS, min(limit_ns, self._deadline_ns(silent_s)))
@@ -691,14 +691,25 @@ class AmpLink:
 
     # --- streaming --------------------------------------------------------------------
 
+    def lead_bound_s(self) -> float:
+        """The most a frame the streamer renders can lead the sample the amplifier plays (s): it renders while
+        fewer than the target fill and a frame are ahead of the play position, and never more than the
+        amplifier's buffer less a frame (amp_stream's pacing)."""
+        info = self.info
+        assert info is not None
+        ahead = min(self.target_fill + self.frame_samples, info.buffer_samples - self.frame_samples)
+        return max(ahead, 0) / self.target.envelope_hz
+
     def start(self, table: object, track: bool = False, ramp_ms: float = STOP_RAMP_MS) -> None:
         """START at the table's next sample (prefill: the target fill), then stream in a thread of its own;
         with ``track`` (the kernel's cfg tracking too) send the carrier of each control step as it moves, and
         lock it onto the plate's resonance if the amplifier measures voltage, current and phase. A failure
-        that ends the stream sends STOP with ``ramp_ms`` (ms; :meth:`stop` gives its own)."""
+        that ends the stream sends STOP with ``ramp_ms`` (ms; :meth:`stop` gives its own). The table's lead bound
+        is set to :meth:`lead_bound_s`."""
         link = self.link
         info = self.info
         assert info is not None
+        table.set_lead_bound_s(self.lead_bound_s())  # type: ignore[attr-defined]
         index = int(table.next_sample)  # type: ignore[attr-defined]
         payload = (self.target.envelope_hz.to_bytes(4, "little") + (index & 0xFFFFFFFF).to_bytes(4, "little")
                    + min(self.target_fill, info.buffer_samples).to_bytes(2, "little"))

@@ -2,14 +2,21 @@
 
 API map
 -------
-LINK_MARGIN, KEEPALIVE_LINE_BYTES, BURST_STATUS_PERIODS, BURST_MIN_S, MEASURE_LIMIT_S, STALL_STATUS_PERIODS
+LINK_MARGIN, KEEPALIVE_LINE_BYTES, BOUND_PASSES, BOUND_READ_PERIOD_S, MEASURE_MIN_S, MEASURE_BURSTS,
+STALL_STATUS_PERIODS
     the margin the link must have over the envelope's need, a KEEPALIVE's bytes on the
-    line, how long the burst lasts at the rate it must show, the measurement's bounds
+    line, the links the whole-burst bound passes, the measurement's bounds
 needed_bytes_per_s(envelope_hz, frame_samples) -> float
     what the envelope takes on the line in frames of ``frame_samples`` (bytes/s, no margin)
+burst_s(status_period_ms) -> float
+    how long the burst lasts at the rate it must show (s)
 burst_frames(envelope_hz, frame_samples, status_period_ms) -> int
-    the KEEPALIVE frames of the burst: BURST_STATUS_PERIODS STATUS periods (at least
-    BURST_MIN_S) at the rate the envelope needs with the margin
+    the KEEPALIVE frames of the burst: long enough for the whole-burst bound to pass a link
+    of BOUND_PASSES times the rate the envelope needs with the margin
+measure_limit_s(status_period_ms) -> float
+    the longest the measurement lasts (s), from its start (the first STATUS awaited)
+stall_status_periods(status_period_ms) -> int
+    the STATUS periods without more of the burst that end the measurement
 LinkRate(bytes_per_s, at_least, frames, elapsed_s) / link_rate(reports, frames) -> LinkRate
     the rate the amplifier's own STATUS frames show the burst arrived at
 frames_for(rate, envelope_hz, frame_samples, fill_samples, max_frame_samples, buffer_samples) -> int | None
@@ -22,10 +29,16 @@ the line takes them, and reads the STATUS frames the amplifier sends every
 ``status_period_ms`` meanwhile: ``frames_ok + frames_bad`` against ``time_us``, the
 amplifier's own clock. The rate is the higher of two the link showed: between the first and
 the last STATUS taken while the burst arrived (exact on a line the burst keeps busy), and
-the whole burst over the time from the STATUS before it to the one after it (a lower bound,
-the one left when the burst came within two STATUS periods or in bursts of its own); the
-burst is long enough (BURST_STATUS_PERIODS periods at the rate needed) for that bound to
-pass a link that can carry the envelope. The protocol's bytes do not change.
+the whole burst over the time from the STATUS taken before it was written to the first after
+all of it (a lower bound,
+the one left when the burst came within two STATUS periods or the amplifier read it in
+bursts of its own). That bound counts more time than the burst took: up to a STATUS period
+before it, one after it, and the wait of an amplifier that reads what came only now and then
+(at most BOUND_READ_PERIOD_S apart), so it can only pass a link faster than the rate needed:
+the burst is sized (:func:`burst_s`) for it to pass every link of at least BOUND_PASSES times
+that rate with the margin (87.5 kB/s for 0.5 ms frames at 16 kHz); a link between the two
+whose amplifier reads in bursts may be measured low and get larger frames (or be refused),
+never starved. The protocol's bytes do not change.
 """
 
 from __future__ import annotations
@@ -39,12 +52,16 @@ from tpad_rt.kernel.amp_stream import frame_line_bytes
 LINK_MARGIN = 1.25
 #: A KEEPALIVE on the line: a 6-byte body, COBS's code byte and the delimiter.
 KEEPALIVE_LINE_BYTES = 8
-#: The burst lasts this many STATUS periods at the rate the envelope needs with the margin, at least BURST_MIN_S (s).
-BURST_STATUS_PERIODS = 4
-BURST_MIN_S = 0.01
-#: The measurement ends this long (s) after it began whatever came: a link this slow carries less than the burst.
-MEASURE_LIMIT_S = 1.0
-#: It also ends when, once the burst began arriving, this many STATUS periods pass without more of it (the rest was lost).
+#: The whole-burst bound passes every link of at least this times the rate the envelope needs with the margin ...
+BOUND_PASSES = 1.25
+#: ... whose amplifier reads what came at least this often (s).
+BOUND_READ_PERIOD_S = 0.02
+#: The measurement ends this long (s) after it began (the first STATUS awaited) whatever came, or after
+#: MEASURE_BURSTS times the burst's duration at the rate needed if that is longer (a link this slow carries less).
+MEASURE_MIN_S = 1.0
+MEASURE_BURSTS = 2
+#: It also ends when, once the burst began arriving, this many STATUS periods pass without more of it (the rest was
+#: lost), and at least two BOUND_READ_PERIOD_S (an amplifier reading now and then is not taken for a lost burst).
 STALL_STATUS_PERIODS = 4
 
 
@@ -54,10 +71,33 @@ def needed_bytes_per_s(envelope_hz: int, frame_samples: int) -> float:
     return frame_line_bytes(frame_samples) * envelope_hz / frame_samples
 
 
+def burst_s(status_period_ms: int) -> float:
+    """How long (s) the burst lasts at the rate it must show, N. The whole-burst bound of a burst of B bytes on a link
+    of R bytes/s is at least B / (B / R + S), S = 2 status periods + BOUND_READ_PERIOD_S; for it to be >= N at
+    R = k N (k = BOUND_PASSES): B >= S N k / (k - 1), a burst of S k / (k - 1) s at N (150 ms with the emulator's
+    5 ms period)."""
+    slack_s = 2 * status_period_ms * 1e-3 + BOUND_READ_PERIOD_S
+    return slack_s * BOUND_PASSES / (BOUND_PASSES - 1.0)
+
+
 def burst_frames(envelope_hz: int, frame_samples: int, status_period_ms: int) -> int:
-    """KEEPALIVE frames in the burst that measures the link for frames of ``frame_samples`` at ``envelope_hz``."""
-    burst_s = max(BURST_STATUS_PERIODS * status_period_ms * 1e-3, BURST_MIN_S)
-    return math.ceil(needed_bytes_per_s(envelope_hz, frame_samples) * LINK_MARGIN * burst_s / KEEPALIVE_LINE_BYTES)
+    """KEEPALIVE frames in the burst that measures the link for frames of ``frame_samples`` at ``envelope_hz``:
+    :func:`burst_s` at the rate needed with LINK_MARGIN."""
+    need = needed_bytes_per_s(envelope_hz, frame_samples) * LINK_MARGIN
+    return math.ceil(need * burst_s(status_period_ms) / KEEPALIVE_LINE_BYTES)
+
+
+def measure_limit_s(status_period_ms: int) -> float:
+    """The longest the measurement lasts (s) from its start: MEASURE_MIN_S, or MEASURE_BURSTS times the
+    burst's duration at the rate needed if longer (1 s up to a 40 ms STATUS period, 2.2 s at the 100 ms the
+    protocol allows)."""
+    return max(MEASURE_MIN_S, MEASURE_BURSTS * burst_s(status_period_ms))
+
+
+def stall_status_periods(status_period_ms: int) -> int:
+    """STATUS periods that, once the burst began arriving, pass without more of it before the measurement ends:
+    STALL_STATUS_PERIODS, and at least two BOUND_READ_PERIOD_S (8 at the emulator's 5 ms)."""
+    return max(STALL_STATUS_PERIODS, math.ceil(2 * BOUND_READ_PERIOD_S * 1e3 / status_period_ms))
 
 
 @dataclass(frozen=True)
@@ -80,10 +120,12 @@ def link_rate(reports: list[tuple[int, int]], frames: int) -> LinkRate:
     the first one sent before the burst (0 frames taken), times unwrapped; ``frames`` the burst's.
 
     Two rates the link showed, the higher one: between the first and the last STATUS taken while the burst arrived
-    (exact on a line the burst keeps busy), and over the whole burst, from the last STATUS before any of it to the
-    first after all of it (a lower bound: it counts up to two STATUS periods more than the burst took; the only one
-    when it arrived between two STATUS frames, or in bursts of its own, as an amplifier reading a fast line may)."""
-    before_us = max(t_us for t_us, taken in reports if taken == 0)
+    (exact on a line the burst keeps busy), and over the whole burst, from the STATUS taken before it was written
+    (the first report) to the first after all of it (a lower bound: it counts the time from that STATUS to the
+    burst's start, and from the last read of it to the next STATUS; the only one when it arrived between two STATUS
+    frames, or in bursts of its own, as an amplifier reading a fast line may). A later STATUS that counts none of it
+    is no start: an amplifier that reads now and then may not have read the bytes already there."""
+    before_us = reports[0][0]
     t_us, taken = next(((t_us, taken) for t_us, taken in reports if taken >= frames), reports[-1])
     whole = LinkRate(taken * KEEPALIVE_LINE_BYTES / ((t_us - before_us) * 1e-6) if t_us > before_us else 0.0,
                      taken >= frames, frames, max(t_us - before_us, 0) * 1e-6)
