@@ -42,8 +42,10 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, 
     venv.create(root / "venv", with_pip=True)
     bin_dir = root / "venv" / "bin"
     # --no-compile: byte-compiling every dependency's modules took half of the install (24 of 42 s); Python
-    # compiles what it imports when it imports it.
-    done = _run([str(bin_dir / "python"), "-m", "pip", "install", "-q", "--no-compile", str(wheels[0])], root, env)
+    # compiles what it imports when it imports it. --only-binary=:all:: wheels only, as on a machine with no C
+    # compiler (python-evdev, which pynput pulls in on Linux, is source only: it is the extra tpad-rt[inputs]).
+    done = _run([str(bin_dir / "python"), "-m", "pip", "install", "-q", "--no-compile", "--only-binary=:all:",
+                 str(wheels[0])], root, env)
     require_system(done.returncode == 0, f"the wheel's dependencies (pip install: {done.stderr.strip()[-300:]})")
     env["NUMBA_CACHE_DIR"] = str(root / "numba-cache")
     elsewhere = root / "elsewhere"
@@ -119,3 +121,22 @@ def test_serve_finds_its_page_in_the_installed_package(installed: tuple[Path, di
                    "--duration", "0.5"], elsewhere, env)
     assert served.returncode == 0, served.stderr
     assert "serving http://127.0.0.1:" in served.stdout and "served until --duration" in served.stdout
+
+
+def test_without_the_inputs_extra_the_mouse_says_what_to_install(installed: tuple[Path, dict[str, str]]) -> None:
+    """The wheel installed from wheels alone (the fixture) holds neither pynput nor python-evdev: the mouse asks
+    for the extra in one line, and play's auto input takes the scripted swipe and says why."""
+    bin_dir, env = installed
+    elsewhere = bin_dir.parent.parent / "elsewhere"
+    absent = _run([str(bin_dir / "python"), "-c",
+                   "import importlib.util as u; print(u.find_spec('pynput'), u.find_spec('evdev'))"], elsewhere, env)
+    assert absent.stdout.split() == ["None", "None"], absent.stderr
+    play = [str(bin_dir / "tpad-rt"), "play", "grating", "--output", "sim://", "--duration", "0.2"]
+    mouse = _run([*play, "--input", "mouse://"], elsewhere, env)
+    assert mouse.returncode == 1 and "Traceback" not in mouse.stderr
+    assert mouse.stderr.strip().splitlines()[-1] == (
+        "tpad-rt play: input mouse://: needs pynput, which is not installed: pip install 'tpad-rt[inputs]' (on Linux "
+        "it needs a C compiler and the kernel headers, for python-evdev); or use --input scripted://swipe")
+    auto = _run(play, elsewhere, {**env, "DISPLAY": ":0"})
+    assert auto.returncode == 0, auto.stderr
+    assert "(no pynput for the mouse: pip install 'tpad-rt[inputs]'" in auto.stdout.splitlines()[0], auto.stdout

@@ -54,7 +54,7 @@ from tpad_rt.files import check_writable_target
 from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures, start_ramps, texture_at_finger
 from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
-from tpad_rt.inputs.mouse import screen_size_px
+from tpad_rt.inputs.mouse import INSTALL_HINT, pynput_installed, screen_size_px
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
 from tpad_rt.kernel.render import render_block
 from tpad_rt.kernel.texture_eval import eval_texture_points
@@ -125,9 +125,12 @@ def choose_output(requested: str, rate_hz: int) -> Choice:
 
 
 def choose_input(requested: str) -> Choice:
-    """``requested``, or for ``auto`` ``mouse://`` when an X display answers, else :data:`AUTO_SWIPE`."""
+    """``requested``, or for ``auto`` ``mouse://`` when pynput is installed and an X display answers, else
+    :data:`AUTO_SWIPE`."""
     if requested != "auto":
         return Choice(requested)
+    if not pynput_installed():
+        return Choice(AUTO_SWIPE, f"no pynput for the mouse: {INSTALL_HINT}")
     try:
         width, height = screen_size_px()
     except BackendError:

@@ -28,6 +28,7 @@ extension (pynput's xorg backend); BackendError otherwise, in one line.
 from __future__ import annotations
 
 import functools
+import importlib.util
 import math
 import os
 import threading
@@ -48,6 +49,20 @@ if TYPE_CHECKING:
 
 BUTTONS = ("left", "right", "middle", "any")
 _HINT = "set DISPLAY or use --input scripted://swipe"
+#: What to install for the mouse: pynput is an extra (on Linux it pulls in python-evdev, which builds from source).
+INSTALL_HINT = "pip install 'tpad-rt[inputs]' (on Linux it needs a C compiler and the kernel headers, for python-evdev)"
+
+
+def pynput_installed() -> bool:
+    """True when pynput (and the python-xlib it brings) can be imported: the extra ``tpad-rt[inputs]``."""
+    return importlib.util.find_spec("pynput") is not None and importlib.util.find_spec("Xlib") is not None
+
+
+def require_pynput() -> None:
+    """BackendError, in one line saying what to install, unless :func:`pynput_installed`."""
+    if not pynput_installed():
+        raise BackendError(f"input mouse://: needs pynput, which is not installed: {INSTALL_HINT}; "
+                           "or use --input scripted://swipe")
 
 
 @dataclass(frozen=True)
@@ -177,9 +192,10 @@ def _ignore_x_error(*error: object) -> None:
 def screen_size_px() -> tuple[int, int]:
     """``(width, height)`` (px) of the default screen of the X display ``DISPLAY`` names.
 
-    Raises BackendError (one line, with what to do) when DISPLAY is unset, no X server
-    answers there, or the server lacks the RECORD extension pynput listens with.
+    Raises BackendError (one line, with what to do) when pynput is not installed, DISPLAY is
+    unset, no X server answers there, or the server lacks the RECORD extension pynput listens with.
     """
+    require_pynput()
     import Xlib.display
     import Xlib.error
 
