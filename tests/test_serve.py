@@ -31,6 +31,7 @@ from websockets.exceptions import ConnectionClosedError, InvalidStatus
 
 from cli_run import REPO, tpad_rt
 from serve_process import REPLY_TIMEOUT_S, Client, Serve, ServeThread, osc_socket, stopped_by_signal_cleanly
+from tpad_rt.cli.serve import _count
 from tpad_rt.clock import VirtualClock
 from tpad_rt.recording import read_recording
 from tpad_rt.serve import protocol
@@ -454,3 +455,9 @@ def test_device_and_stats_requests_have_their_own_budget() -> None:
         clock.advance_by(1)
         assert client.request({"type": "stats"}, "stats")["type"] == "stats"
         assert serve.server.counters["rate_limited"] == 21
+
+
+def test_the_summary_counts_in_the_singular_for_one() -> None:
+    """``1 WebSocket connection``, not ``1 WebSocket connections``: the summary's counts agree with their nouns."""
+    assert [_count(number, "WebSocket connection") for number in (0, 1, 2)] == [
+        "0 WebSocket connections", "1 WebSocket connection", "2 WebSocket connections"]

@@ -232,6 +232,11 @@ def _stop_signals(loop: asyncio.AbstractEventLoop, stop: asyncio.Event, reasons:
             loop.remove_signal_handler(number_)
 
 
+def _count(number: int, noun: str) -> str:
+    """``1 message``, ``2 messages``: ``number`` and ``noun``, plural unless it is 1."""
+    return f"{number} {noun}" if number == 1 else f"{number} {noun}s"
+
+
 def _summary(server: Server, renderer: Renderer, stopped_by: str) -> list[str]:
     """The end-of-serve summary: what the clients did and what the drive did."""
     counts, stats = server.counters, renderer.stats()
@@ -239,10 +244,11 @@ def _summary(server: Server, renderer: Renderer, stopped_by: str) -> list[str]:
     refused = {key.removeprefix("refused_"): value for key, value in sorted(counts.items())
                if key.startswith("refused_") and value}
     lines = [
-        f"served until {stopped_by}: {counts['connections']} WebSocket connections, {counts['messages']} messages, "
-        f"{counts['osc_messages']} OSC messages; {counts['samples']} finger samples, {counts['textures_set']} "
-        f"textures set; {errors} refused with an error, {counts['rate_limited']} dropped by the rate limits",
-        f"HTTP: {counts['http_requests']} requests, {sum(refused.values())} refused"
+        f"served until {stopped_by}: {_count(counts['connections'], 'WebSocket connection')}, "
+        f"{_count(counts['messages'], 'message')}, {_count(counts['osc_messages'], 'OSC message')}; "
+        f"{_count(counts['samples'], 'finger sample')}, {_count(counts['textures_set'], 'texture')} set; "
+        f"{errors} refused with an error, {counts['rate_limited']} dropped by the rate limits",
+        f"HTTP: {_count(counts['http_requests'], 'request')}, {sum(refused.values())} refused"
         + (" (" + ", ".join(f"{count} {why}" for why, count in refused.items()) + ")" if refused else ""),
         f"played {stats['played_s']:.2f} s of drive: {stats['underflows']} underflows; push-to-output latency p50 "
         f"{stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms",
