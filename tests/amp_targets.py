@@ -24,7 +24,6 @@ import ctypes
 import os
 import select
 import signal
-import subprocess
 import time
 import tty
 from abc import ABC, abstractmethod
@@ -35,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from amp_process import start_amplifier
+from amp_process import COUNTERS, AmplifierProcess, parse_counters
 from tpad_rt.amp import wire
 from tpad_rt.amp.emulator import (
     Amplifier, Circuit, Plate, Recorder, amplifier_info, sim_rate_hz,
@@ -53,10 +52,6 @@ ORIGIN_US = 1_000_000_000
 STEP_US = 500
 #: Longest wait (s) for an answer from a process on a pty: it only turns a hang into a message.
 ANSWER_TIMEOUT_S = 10.0
-#: What a pty target prints at its end, as ``name=value`` pairs: STATUS's counters since the last HELLO.
-COUNTERS = ("frames_ok", "frames_bad", "frames_rejected", "sequence_gaps", "underruns", "watchdog_trips", "faults")
-#: Longest wait (s) for a process to start (its first line) or to end after SIGTERM.
-START_TIMEOUT_S = 30.0
 
 
 @dataclass(frozen=True)
@@ -241,7 +236,8 @@ class LineTarget(Target):
         super().__init__()
         self.name = name
         self.final_counters: dict[str, int] = {}
-        self.process, self.port = start_amplifier(command, "amplifier on ", name, cwd=REPO)
+        self.amplifier = AmplifierProcess(command, "amplifier on ", name, cwd=REPO)
+        self.port = self.amplifier.port
         self.fd = os.open(self.port, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         tty.setraw(self.fd)
 
@@ -268,18 +264,9 @@ class LineTarget(Target):
         if self.fd >= 0:
             os.close(self.fd)
             self.fd = -1
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-        try:
-            out, err = self.process.communicate(timeout=START_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.communicate()
-            raise AssertionError(f"{self.name} did not end on SIGTERM") from None
-        assert self.process.returncode == 0, (self.name, self.process.returncode, err)
+        out = self.amplifier.end(signal.SIGTERM)
         lines = out.strip().splitlines()
-        self.final_counters = {name: int(value) for name, _, value in
-                               (word.partition("=") for word in (lines[-1].split() if lines else [])) if value}
+        self.final_counters = parse_counters(lines[-1] if lines else "")
         assert set(self.final_counters) == set(COUNTERS), (self.name, out)
 
 

@@ -10,21 +10,15 @@ it is killed on the way out whatever happened.
 
 from __future__ import annotations
 
-import re
 import signal
 from pathlib import Path
-from types import TracebackType
 
 import numpy as np
 
-from amp_process import start_amplifier
+from amp_process import COUNTERS, AmplifierProcess, parse_counters
 from firmware_build import build
 from tpad_rt.shipped import DEVICES_DIR
 
-#: Seconds the firmware may take to start or to end (it starts in milliseconds; a safety net).
-START_TIMEOUT_S = 60.0
-#: The summary's counters, in order (as amp emulate's).
-COUNTERS = ("frames_ok", "frames_bad", "frames_rejected", "sequence_gaps", "underruns", "watchdog_trips", "faults")
 DEFAULT_DEVICE = DEVICES_DIR / "default.yaml"
 
 
@@ -39,43 +33,24 @@ def read_recording(path: Path) -> np.ndarray:
     return recording
 
 
-def parse_counters(summary: str) -> dict[str, int]:
-    """The ``name=value`` pairs of the summary line, which must hold every counter."""
-    pairs = dict(re.findall(r"(\w+)=(\d+)", summary))
-    assert tuple(pairs) == COUNTERS, summary
-    return {name: int(value) for name, value in pairs.items()}
-
-
-class HostAmp:
+class HostAmp(AmplifierProcess):
     """``tpad-amp --device DEFAULT --record FOLDER/amp.csv FLAGS``; ``.port`` is the pty to give the host."""
 
     def __init__(self, folder: Path, *flags: str):
         folder.mkdir(parents=True, exist_ok=True)
         self.record = folder / "amp.csv"
         device = () if "--device" in flags else ("--device", str(DEFAULT_DEVICE))
-        self.process, self.port = start_amplifier([str(tpad_amp()), *device, "--record", str(self.record), *flags],
-                                                  "amplifier on ", "tpad-amp")
+        super().__init__([str(tpad_amp()), *device, "--record", str(self.record), *flags], "amplifier on ",
+                         "tpad-amp")
         self.summary = ""
-        self.stderr = ""
         self.counters: dict[str, int] = {}
 
     def finish(self, sig: int | None = signal.SIGTERM) -> np.ndarray:
-        """End it with ``sig`` (None: wait for it to end by itself), check it exited 0 with one summary line; its
-        recording."""
-        if sig is not None and self.process.poll() is None:
-            self.process.send_signal(sig)
-        out, self.stderr = self.process.communicate(timeout=START_TIMEOUT_S)
-        assert self.process.returncode == 0, (self.process.returncode, self.stderr)
+        """End it with ``sig`` (None: wait for it to end by itself), check it exited 0 with one summary line, which
+        holds every counter; its recording."""
+        out = self.end(sig)
         assert out.count("\n") == 1, out
         self.summary = out
         self.counters = parse_counters(out)
+        assert tuple(self.counters) == COUNTERS, out
         return read_recording(self.record)
-
-    def __enter__(self) -> HostAmp:
-        return self
-
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.communicate(timeout=START_TIMEOUT_S)

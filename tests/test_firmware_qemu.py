@@ -17,10 +17,9 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
-from types import TracebackType
 
 import pytest
-from amp_process import start_amplifier
+from amp_process import AmplifierProcess, parse_counters
 from cli_run import Run, tpad_rt
 from conftest import require_program
 from firmware_build import build
@@ -37,34 +36,21 @@ PLAY_COUNTERS = re.compile(r"amplifier: tpad-amp [^;]*; frames (?P<ok>\d+) appli
 PLAY_FRAMES = re.compile(r"played [\d.]+ s of drive in [\d.]+ s: (?P<frames>\d+) frames")
 
 
-class RunQemu:
+class RunQemu(AmplifierProcess):
     """``firmware/run-qemu microbit`` in its own process; ``.port`` is the pty to give the host."""
 
     def __init__(self) -> None:
-        self.process, self.port = start_amplifier([str(RUN_QEMU), "microbit"], "amplifier on ", "run-qemu",
-                                                  cwd=REPO)
+        super().__init__([str(RUN_QEMU), "microbit"], "amplifier on ", "run-qemu", cwd=REPO)
 
     def stop(self, sig: int = signal.SIGTERM) -> str:
         """End it with ``sig`` (by PID), check it exited 0, and return its last line."""
-        self.process.send_signal(sig)
-        out, err = self.process.communicate(timeout=WAIT_S)
-        assert self.process.returncode == 0, (self.process.returncode, err)
-        return out.strip().splitlines()[-1]
+        return self.end(sig).strip().splitlines()[-1]
 
     def finish(self) -> dict[str, int]:
         """stop(), and the counters its last line gives."""
         last = self.stop()
         assert last.startswith("amplifier stopped by a signal: frames_ok="), last
-        return {name: int(value) for name, value in (pair.split("=") for pair in last.split(": ", 1)[1].split())}
-
-    def __enter__(self) -> RunQemu:
-        return self
-
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.communicate(timeout=WAIT_S)
+        return parse_counters(last)
 
 
 @pytest.mark.realtime

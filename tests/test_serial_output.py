@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from amp_emulator import REPO, START_TIMEOUT_S, Emulator
+from amp_emulator import REPO, Emulator
+from amp_process import START_TIMEOUT_S
 from cli_run import tpad_rt
 from slow_line import SlowLine
 
