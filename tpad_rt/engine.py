@@ -394,7 +394,8 @@ class Renderer:
         the plate held, as the kernel's model has it) and ``over_cap_blocks`` (blocks in which that was over the cap:
         a press);
         ``latency_ms_p50/p99``: from a push to the DAC time of the first block that
-        read it, over the recent blocks; ``dac_delay_ms``: the part of it the host
+        read it, over every block since the renderer was made (a running histogram: within 1.2 %,
+        tpad_rt.telemetry); ``dac_delay_ms``: the part of it the host
         reports from a callback to the DAC (median over the recent blocks, from the
         time stamps PortAudio passes each callback; 0 on paced outputs; PortAudio's
         stream-level ``outputLatency`` is not reported: JACK's dummy driver says 0 there
@@ -423,7 +424,7 @@ class Renderer:
         result["callback_load_p99"] = result["compute_us_p99"] * 1e-6 * self.rate_hz / self.block_frames
         dac_delay_ms = blocks[:, tab.BLOCK_DAC_DELAY_NS] * 1e-6
         result["dac_delay_ms"] = float(np.median(dac_delay_ms)) if len(dac_delay_ms) else math.nan
-        result.update(self._log.latency_ms(blocks))
+        result.update(self._log.latency_ms())
         totals = self._log.totals()
         cfg = self._pipeline.arrays.cfg
         result.update(blocks=totals["blocks"], voltage_saturated=totals["voltage_saturated"],

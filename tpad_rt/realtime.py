@@ -9,7 +9,7 @@ CallbackTable(arrays, texture, *, channels=1, channel=0, scratch_frames=4096, dr
     shared, not copied), two texture slots, the output scratch, the drive ring, the
     statistics (``.stats``) and the per-block records (``.blocks``)
     ``.user_data``: the address to pass as ``userData``; ``.set_texture(texture, t0_s, running)``;
-    ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.drive_end()``; ``.copy()``;
+    ``.recent_blocks()``, ``.blocks_since(first)``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.drive_end()``; ``.copy()``;
     ``.set_lead_bound_s(seconds)`` / ``.lead_bound_s`` (the most output lead the driver's output can have);
     ``.call(out, callback=None, dac_delay_s=0.0)``
 monotonic_ns() -> int
@@ -140,10 +140,16 @@ class CallbackTable:
 
     def recent_blocks(self) -> np.ndarray:
         """The block records still in the ring, oldest first (int64 ``[rows, BLOCK_COLS]``, a copy)."""
+        return self.blocks_since(0)[0]
+
+    def blocks_since(self, first: int) -> tuple[np.ndarray, int]:
+        """The records of block number ``first`` (0: the run's first block) and after that are still in the ring,
+        oldest first (int64 ``[rows, BLOCK_COLS]``, a copy), and the number of the first of them (above ``first``
+        when the ring lost some)."""
         callbacks = int(self.stats[tab.STAT_CALLBACKS])
         rows = self.blocks.shape[0]
-        first = max(0, callbacks - rows + 1)  # the oldest row may be rewritten by the running callback
-        return self.blocks[np.arange(first, callbacks) % rows]
+        start = max(first, callbacks - rows + 1, 0)  # the oldest row may be rewritten by the running callback
+        return self.blocks[np.arange(start, callbacks) % rows], start
 
     def dac_sample(self, now_ns: int) -> float:
         """The stream sample (fractional) at the DAC at CLOCK_MONOTONIC ``now_ns``, from the newest block.

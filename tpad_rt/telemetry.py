@@ -10,7 +10,7 @@ TelemetryLog(pipeline, rate_hz)
     ``write_recording(metadata)``;
     measurements: ``begin_measurements(names)``, ``add_measurements(t_s, columns)``,
     ``end_measurements()``, ``measured_names``;
-    latency: ``note_push(index, pushed_ns)``, ``latency_ms(blocks)``
+    latency: ``note_push(index, pushed_ns)``, ``latency_ms()`` (over every block drained)
 joined(chunks, names=TEL_NAMES) -> dict[str, ndarray]
     telemetry chunks concatenated column by column
 
@@ -20,6 +20,10 @@ time ``t``: :meth:`TelemetryLog.take` gives them as more columns of the same row
 holds a row back until its measurement came (or the measuring ended), so a reader sees
 every block once, measured. Everything kept between takes is bounded (MAX_PENDING_ROWS
 rows each), whoever reads or not.
+
+Push-to-DAC latency covers every block of every run: each drain folds the blocks since the
+last one into a :class:`~tpad_rt.log_histogram.LogHistogram` (fixed memory), so a run whose
+finger stopped long before its end still reports the latency of its pushes.
 
 One lock orders the drains: any thread may call any method (:meth:`TelemetryLog.note_push`
 takes none: one producer at a time, the Renderer's).
@@ -42,6 +46,7 @@ from tpad_rt.files import check_writable_target
 from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES
+from tpad_rt.log_histogram import LogHistogram
 from tpad_rt.pipeline import Pipeline
 from tpad_rt.realtime import CallbackTable
 from tpad_rt.recording import Recording, write_recording
@@ -49,6 +54,8 @@ from tpad_rt.recording import Recording, write_recording
 #: Telemetry rows kept for :meth:`TelemetryLog.take` between calls (the oldest go first); as many rows wait at
 #: most for their measurements, and as many measured blocks for their rows.
 MAX_PENDING_ROWS = 2**18
+#: The range (ms) of the latency histogram: a latency outside it counts at its end.
+LATENCY_RANGE_MS = (1e-3, 1e4)
 
 class TelemetryLog:
     """Telemetry of ``pipeline``'s runs at ``rate_hz`` (Hz: the drive's sample rate, for recordings)."""
@@ -61,6 +68,10 @@ class TelemetryLog:
         self._pending_rows = 0
         self._measured = _MeasuredBlocks()
         self._push_ns = np.zeros(len(pipeline.arrays.finger), dtype=np.int64)  # by finger ring row
+        self._latency_ms = LogHistogram(*LATENCY_RANGE_MS)
+        self._latency_table: CallbackTable | None = None  # the run whose blocks were folded in last
+        self._latency_next = 0  # that run's next block to fold in
+        self._latency_seen: int | None = None  # the finger count the block before it read (None: not known)
         self._totals: dict[str, Any] = {"blocks": 0, "voltage_saturated": 0, "power_saturated": 0,
                                         "fault_blocks": 0, "energy_w": 0.0, "peak_w": 0.0, "plate_peak_w": 0.0}
         self._record_path: Path | None = None
@@ -81,6 +92,7 @@ class TelemetryLog:
         """
         with self._lock:
             frames = table.drive_end()  # not the next index: a block's samples reach the ring after it is published
+            self._fold_latency(table)
             rows = self._pipeline.drain_telemetry()
             count = len(rows["t"])
             if count == 0:
@@ -175,21 +187,36 @@ class TelemetryLog:
         ``pushed_ns`` (ns). Takes no lock: one producer at a time."""
         self._push_ns[index % len(self._push_ns)] = pushed_ns
 
-    def latency_ms(self, blocks: np.ndarray) -> dict[str, float]:
+    def latency_ms(self) -> dict[str, float]:
         """``latency_ms_p50``, ``latency_ms_p99`` (ms; NaN without any): from the push of each finger sample to
-        the DAC time of the first of ``blocks`` (block records, oldest first: CallbackTable.recent_blocks) that
-        read it, over the samples whose push time is still kept (the newest ``finger_ring``)."""
-        latency = self._latencies_ms(blocks)
-        return {f"latency_ms_p{q}": float(np.percentile(latency, q)) if len(latency) else math.nan for q in (50, 99)}
+        the DAC time of the first block that read it, over every block drained (every run's), within 1.2 %
+        (:class:`~tpad_rt.log_histogram.LogHistogram`). A sample read by a run's first block (pushed before
+        the run) or whose push time was overwritten before its block was drained (more than ``finger_ring``
+        pushes since) is not counted."""
+        with self._lock:
+            return {f"latency_ms_p{q}": self._latency_ms.percentile(q) for q in (50, 99)}
 
-    def _latencies_ms(self, blocks: np.ndarray) -> np.ndarray:
-        """Push-to-DAC latency (ms) of each finger sample first read by one of ``blocks`` (oldest first)."""
+    def _fold_latency(self, table: CallbackTable) -> None:
+        """Add the latencies of ``table``'s blocks since the last fold to the histogram (under the lock)."""
+        if table is not self._latency_table:
+            self._latency_table, self._latency_next, self._latency_seen = table, 0, None
+        blocks, first = table.blocks_since(self._latency_next)
+        if not len(blocks):
+            return
         counts = blocks[:, tab.BLOCK_FINGER_COUNT]
-        if len(counts) < 2:
-            return np.zeros(0)
-        first_seen = np.flatnonzero(np.diff(counts) > 0) + 1
-        new = counts[first_seen] - counts[first_seen - 1]
-        samples = np.repeat(counts[first_seen], new) - (np.arange(new.sum()) - np.repeat(np.cumsum(new) - new, new)) - 1
+        lost = first != self._latency_next or self._latency_seen is None  # the block before them is not known
+        before = int(counts[0]) if lost else self._latency_seen
+        self._latency_ms.add(self._latencies_ms(before, blocks))
+        self._latency_next, self._latency_seen = first + len(blocks), int(counts[-1])
+
+    def _latencies_ms(self, before: int, blocks: np.ndarray) -> np.ndarray:
+        """Push-to-DAC latency (ms) of each finger sample first read by one of ``blocks`` (oldest first), the
+        block before them having read ``before`` samples."""
+        counts = np.r_[before, blocks[:, tab.BLOCK_FINGER_COUNT]]
+        new = np.diff(counts)
+        first_seen = np.flatnonzero(new > 0)  # the blocks that read new samples
+        new = new[first_seen]
+        samples = np.repeat(counts[first_seen + 1], new) - (np.arange(new.sum()) - np.repeat(np.cumsum(new) - new, new)) - 1
         out_ns = np.repeat(blocks[first_seen, tab.BLOCK_ENTRY_NS] + blocks[first_seen, tab.BLOCK_DAC_DELAY_NS], new)
         pushed = int(self._pipeline.arrays.finger_count[0])
         kept = samples >= pushed - len(self._push_ns)  # their push times are still in the ring
