@@ -14,7 +14,7 @@ import pytest
 import tpad_rt.telemetry
 from tpad_rt.device import Device
 from tpad_rt.kernel import table as tab
-from tpad_rt.kernel.layout import STATE_NEXT_INDEX, TEL_NAMES
+from tpad_rt.kernel.layout import FLAG_SHAPER_LIMIT, STATE_NEXT_INDEX, TEL_NAMES
 from tpad_rt.pipeline import Pipeline
 from tpad_rt.realtime import CallbackTable, monotonic_ns
 from tpad_rt.recording import read_recording, run_metadata
@@ -215,6 +215,29 @@ def test_blocks_the_ring_lost_before_a_drain_are_not_folded_in_as_if_next_to_the
     record = table.recent_blocks()[-1]
     expected_ms = (int(record[tab.BLOCK_ENTRY_NS] + record[tab.BLOCK_DAC_DELAY_NS]) - pushed_ns) * 1e-6
     assert log.latency_ms() == {f"latency_ms_p{q}": pytest.approx(expected_ms, rel=0.012) for q in (50, 99)}
+
+
+def test_totals_keep_the_drive_peak_and_tell_the_shaper_s_kicks_apart() -> None:
+    """A finger touching down: the shaper kicks the drive to its limit (flag SHAPER_LIMIT) for a few blocks; the
+    totals keep the peak, those blocks and the peak of the others, over every row drained."""
+    pipeline, table, log = _setup()
+    pipeline.start()
+    rows = []
+    for k in range(60):
+        pipeline.push_finger(table.next_sample / RATE_HZ, 30.0 + 0.1 * k, 20.0)
+        table.call(np.zeros(BLOCK, dtype=np.float32))
+        if k % 7 == 0:
+            log.drain(table)
+            rows.append(log.take())
+    log.drain(table)
+    rows.append(log.take())
+    flags = np.concatenate([chunk["saturated"] for chunk in rows])
+    volts = np.concatenate([chunk["voltage_v"] for chunk in rows])
+    kicks = (flags & FLAG_SHAPER_LIMIT) != 0
+    assert kicks.any() and not kicks.all()
+    totals = log.totals()
+    assert totals["kick_blocks"] == np.count_nonzero(kicks)
+    assert totals["peak_v"] == volts.max() and totals["peak_outside_kicks_v"] == volts[~kicks].max()
 
 
 def test_latency_without_pushes_is_nan() -> None:

@@ -389,7 +389,10 @@ class Renderer:
         ``compute_us_p50/p99/max``
         (time in the callback, over the recent blocks); ``callback_load_p99`` (that p99 as a
         fraction of a block's duration); ``blocks``,
-        ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (blocks), ``power_mean_w``,
+        ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (blocks), ``voltage_peak_v`` (the drive's
+        peak, V), ``kick_blocks`` (blocks in which the shaper held the drive at a limit to move the plate as fast as
+        it allows: telemetry flag SHAPER_LIMIT, by design, not saturation) and ``voltage_peak_outside_kicks_v``
+        (the peak in the other blocks, V), ``power_mean_w``,
         ``power_peak_w``, ``power_budget_w``, ``power_avg_w`` (from telemetry); ``plate_peak_w`` (the most power
         the plate held, as the kernel's model has it) and ``over_cap_blocks`` (blocks in which that was over the cap:
         a press);
@@ -432,6 +435,8 @@ class Renderer:
                       power_mean_w=totals["energy_w"] / totals["blocks"] if totals["blocks"] else math.nan,
                       power_peak_w=totals["peak_w"], power_budget_w=float(cfg[CFG_POWER_CAP_W]),
                       power_avg_w=float(cfg[CFG_POWER_AVG_W]), plate_peak_w=totals["plate_peak_w"],
+                      voltage_peak_v=totals["peak_v"], kick_blocks=totals["kick_blocks"],
+                      voltage_peak_outside_kicks_v=totals["peak_outside_kicks_v"],
                       over_cap_blocks=self._pipeline.over_cap_blocks)
         result.update(self._pipeline.faults())
         return result

@@ -44,7 +44,7 @@ import numpy.typing as npt
 from tpad_rt.errors import ConfigError, TpadError
 from tpad_rt.files import check_writable_target
 from tpad_rt.kernel import table as tab
-from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, TEL_NAMES
+from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES
 from tpad_rt.log_histogram import LogHistogram
 from tpad_rt.pipeline import Pipeline
@@ -73,7 +73,8 @@ class TelemetryLog:
         self._latency_next = 0  # that run's next block to fold in
         self._latency_seen: int | None = None  # the finger count the block before it read (None: not known)
         self._totals: dict[str, Any] = {"blocks": 0, "voltage_saturated": 0, "power_saturated": 0,
-                                        "fault_blocks": 0, "energy_w": 0.0, "peak_w": 0.0, "plate_peak_w": 0.0}
+                                        "fault_blocks": 0, "energy_w": 0.0, "peak_w": 0.0, "plate_peak_w": 0.0,
+                                        "peak_v": 0.0, "kick_blocks": 0, "peak_outside_kicks_v": 0.0}
         self._record_path: Path | None = None
         self._recorded: list[dict[str, np.ndarray]] = []
         self._drive_chunks: list[np.ndarray] = []
@@ -106,6 +107,11 @@ class TelemetryLog:
             totals["energy_w"] += float(rows["power_w"].sum())
             totals["peak_w"] = max(totals["peak_w"], float(rows["power_w"].max()))
             totals["plate_peak_w"] = max(totals["plate_peak_w"], float(rows["plate_w"].max()))
+            kicks = (flags & FLAG_SHAPER_LIMIT) != 0
+            totals["kick_blocks"] += int(np.count_nonzero(kicks))
+            totals["peak_v"] = max(totals["peak_v"], float(rows["voltage_v"].max()))
+            totals["peak_outside_kicks_v"] = max(totals["peak_outside_kicks_v"],
+                                                 float(rows["voltage_v"][~kicks].max(initial=0.0)))
             self._keep(self._measured.rows_in(rows))
             if self._record_path is not None:
                 self._record(rows, table, frames)
@@ -223,9 +229,11 @@ class TelemetryLog:
         return (out_ns[kept] - self._push_ns[samples[kept] % len(self._push_ns)]) * 1e-6
 
     def totals(self) -> dict[str, Any]:
-        """``blocks``, ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (counts), ``energy_w`` (the
-        sum of the blocks' drive power, W), ``peak_w`` (W), ``plate_peak_w`` (the most power the plate held as
-        the model has it, W), over every row drained."""
+        """``blocks``, ``voltage_saturated``, ``power_saturated``, ``fault_blocks``, ``kick_blocks`` (blocks in
+        which the shaper held the drive at a limit: FLAG_SHAPER_LIMIT) (counts), ``energy_w`` (the sum of the
+        blocks' drive power, W), ``peak_w`` (W), ``plate_peak_w`` (the most power the plate held as the model has
+        it, W), ``peak_v`` (the drive's peak, V) and ``peak_outside_kicks_v`` (its peak in the other blocks, V),
+        over every row drained."""
         with self._lock:
             return dict(self._totals)
 

@@ -46,7 +46,7 @@ from rich.live import Live
 from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number
-from tpad_rt.cli.render import add_session_arguments, over_cap_line, session_options
+from tpad_rt.cli.render import add_session_arguments, over_cap_line, peak_text, session_options
 from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
@@ -219,15 +219,13 @@ def _loop(session: Session, feed: LiveFeed, interrupted: threading.Event, durati
 
 @dataclass
 class Session:
-    """A running play (from when the renderer and the feed run): the renderer, the last telemetry row, the
-    peak volts, and where the telemetry holds it the simulated plate's friction, the texture under the finger,
+    """A running play (from when the renderer and the feed run): the renderer, the last telemetry row, and where the telemetry holds it the simulated plate's friction, the texture under the finger,
     and their differences."""
 
     renderer: Renderer
     console: Console
     started: float = field(default_factory=time.monotonic)
     latest: dict[str, float] = field(default_factory=dict)
-    peak_v: float = 0.0
     achieved: float | None = None
     felt: float | None = None
     judged_blocks: int = 0
@@ -243,11 +241,10 @@ class Session:
         return time.monotonic() - self.started
 
     def take_telemetry(self) -> dict[str, np.ndarray]:
-        """Drain the renderer's telemetry: keep the last row and the peak volts; the rows drained."""
+        """Drain the renderer's telemetry: keep the last row; the rows drained."""
         rows = self.renderer.telemetry()
         if len(rows["t"]):
             self.latest = {name: float(column[-1]) for name, column in rows.items()}
-            self.peak_v = max(self.peak_v, float(rows["voltage_v"].max()))
         return rows
 
     def tick(self) -> None:
@@ -334,7 +331,8 @@ class Session:
         """The end-of-play summary from the renderer's stats (and the judged friction, where measured)."""
         stats = self.renderer.stats()
         blocks = max(stats["blocks"], 1)
-        amplifier = self.renderer.drive.consumes is Consumes.ENVELOPE  # frames to an amplifier that makes the carrier
+        drive = self.renderer.drive
+        amplifier = drive.consumes is Consumes.ENVELOPE  # frames to an amplifier that makes the carrier
         block, output = ("frame", "amplifier") if amplifier else ("callback", "DAC")
         lines = [
             f"played {stats['played_s']:.2f} s of drive in {self.elapsed_s():.2f} s"
@@ -347,8 +345,9 @@ class Session:
             f"push-to-output latency: p50 {stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms"
             + (f" (of which the host reports {stats['dac_delay_ms']:.2f} ms from {block} to {output})"
                if stats["dac_delay_ms"] > 0 else ""),
-            f"drive: peak {self.peak_v:.2f} V of {self.renderer.drive.max_voltage_v:g} V max"
-            + ("" if self.renderer.drive.source == "device file" else f" ({self.renderer.drive.source}'s clamp)")
+            "drive: " + peak_text(stats["voltage_peak_v"], drive.max_voltage_v, stats["kick_blocks"],
+                                  stats["voltage_peak_outside_kicks_v"],
+                                  "" if drive.source == "device file" else drive.source)
             + "; saturated "
             f"{100 * stats['voltage_saturated'] / blocks:.1f} % of blocks (voltage), "
             f"{100 * stats['power_saturated'] / blocks:.1f} % (power)",

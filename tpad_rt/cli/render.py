@@ -38,7 +38,7 @@ from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures
 from tpad_rt.files import check_writable_target
 from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
-    FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION,
+    FLAG_FAULT, FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION,
 )
 from tpad_rt.kernel.batch import render_blocks
 from tpad_rt.kernel.render import render_block
@@ -251,6 +251,19 @@ def _departure_line(result: RenderResult, texture: CompiledTexture) -> str:
             f"finger ({worst_text}); `tpad-rt plot` shades them")
 
 
+def peak_text(peak_v: float, max_v: float, kick_blocks: int, outside_kicks_v: float, clamp: str = "") -> str:
+    """The drive's peak ``peak_v`` (V) against ``max_v`` (V; from ``clamp``, e.g. an amplifier, when not the
+    device file) for ``play``'s and ``render``'s summaries; when the
+    shaper held the drive at a limit in ``kick_blocks`` blocks (FLAG_SHAPER_LIMIT: the kick that moves the plate's
+    envelope as fast as the limits allow, at a touch-down or a steep step), says that the peak is there and what it
+    was outside them, ``outside_kicks_v`` (V): a kick is by design, not saturation."""
+    text = f"peak {peak_v:.2f} V of {max_v:g} V max" + (f" ({clamp}'s clamp)" if clamp else "")
+    if not kick_blocks:
+        return text
+    return (f"{text}, in the shaper's kicks ({kick_blocks} block{'s' if kick_blocks != 1 else ''} at the limit to "
+            f"move the plate as fast as it allows), {outside_kicks_v:.2f} V outside them")
+
+
 def over_cap_line(blocks: int, peak_w: float) -> str:
     """The summary line of ``play`` and ``render`` for ``blocks`` (> 0) blocks in which the plate held more than
     the power cap, ``peak_w`` (W) at most, as the kernel's model has it."""
@@ -272,12 +285,14 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
     flags = blocks["saturated"].astype(np.int64)
     touching = (flags & FLAG_WATCHDOG) == 0
     saturated = (flags & (FLAG_VOLTAGE | FLAG_POWER)) != 0
+    kicks = (flags & FLAG_SHAPER_LIMIT) != 0
     avg_budget = metadata["power_avg_w"]
     speed = result.seconds / max(wall_s, 1e-9)
     lines = [
         f"rendered {result.seconds:.3f} s of audio in {wall_s:.3g} s ({speed:.1f}x real time), "
         f"{len(flags)} blocks of {result.block_frames} at {result.fs_hz} Hz",
-        f"drive: peak {blocks['voltage_v'].max(initial=0.0):.2f} V of {metadata['max_voltage_v']:g} V max",
+        "drive: " + peak_text(blocks["voltage_v"].max(initial=0.0), metadata["max_voltage_v"], np.count_nonzero(kicks),
+                              blocks["voltage_v"][~kicks].max(initial=0.0)),
         f"power: mean {blocks['power_w'].mean():.3f} W, peak {blocks['power_w'].max(initial=0.0):.3f} W "
         f"(cap {metadata['power_budget_w']:g} W"
         + (f", average budget {avg_budget:g} W over {metadata['power_window_s']:g} s)" if avg_budget else ")"),
