@@ -21,6 +21,7 @@ from jack_server import jack_server, kill_server_under
 from xvfb import display, xvfb_server  # noqa: F401 - fixtures
 
 from tpad_rt.cli.play import AUTO_SWIPE
+from tpad_rt.kernel.layout import FLAG_WATCHDOG
 from tpad_rt.recording import read_recording
 
 REPO = Path(__file__).resolve().parents[1]
@@ -84,7 +85,15 @@ def test_a_finite_input_ends_the_play_and_the_recording_ends_in_silence(tmp_path
     assert done.stdout.splitlines()[0] == "output sim:// (no audio device runs 192000 Hz), " \
                                           "input scripted://swipe?to_mm=20; Ctrl-C stops"
     assert done.stdout.splitlines()[-1] == f"wrote {record}"
-    assert np.all(read_recording(record).drive[-64:] == 0)
+    recording = read_recording(record)
+    assert np.all(recording.drive[-64:] == 0)
+    # the simulated plate and the blocks judged against the texture, as render records them; the input by its URL
+    assert recording.has_sim and "departed" in recording.blocks
+    assert recording.metadata["input_url"] == "scripted://swipe?to_mm=20"
+    assert recording.metadata["departure_tolerance_mu"] == 0.1
+    touching = (recording.blocks["saturated"] & FLAG_WATCHDOG) == 0
+    assert touching.any() and np.isfinite(recording.blocks["achieved_mu"][touching]).all()
+    assert not recording.blocks["departed"][~touching].any()  # how they are judged: tests/test_telemetry.py
 
 
 @pytest.mark.system

@@ -13,6 +13,7 @@ import pytest
 
 import tpad_rt.telemetry
 from tpad_rt.device import Device
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks
 from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.layout import FLAG_SHAPER_LIMIT, STATE_NEXT_INDEX, TEL_NAMES
 from tpad_rt.pipeline import Pipeline
@@ -270,3 +271,58 @@ def test_a_recording_takes_the_drive_up_to_the_last_finished_block_not_the_publi
     drive = read_recording(tmp_path / "run.npz").drive
     assert len(drive) == 6 * BLOCK and not np.any(drive == 0.75)
     assert np.array_equal(drive, table.drive[:6 * BLOCK])
+
+
+def test_a_recording_on_a_measured_plate_has_its_columns_and_departures_as_render_judges_them(tmp_path: Path) -> None:
+    """An output that measures the plate (sim://): the recording has the measured columns of each block (NaN for
+    one not measured), and ``departed`` judged against the texture under the recorded finger, by the function
+    ``render`` judges with."""
+    pipeline, table, log = _setup()
+    texture = load_compiled(GRATING)
+    log.begin_measurements(NAMES)
+    log.record(tmp_path / "run.npz")
+    pipeline.start()
+    for k in range(40):  # a swipe, drained as the watcher would, every few blocks
+        pipeline.push_finger(table.next_sample / RATE_HZ, 30.0 + 0.1 * k, 20.0)
+        t_s = _render(table, 1)
+        if k != 17:  # one block the output did not measure
+            measured = _measured(t_s)
+            if k % 3 == 0:
+                measured["achieved_mu"] = np.zeros(1)  # far from any texture: a departure where judged
+            log.add_measurements(t_s, measured)
+        if k % 5 == 4:
+            log.drain(table)
+    log.end_measurements()
+    log.drain(table)
+    fingers = pipeline.recent_fingers()
+    log.write_recording(run_metadata(pipeline, texture, texture_path=None, block_frames=BLOCK, input_url="api",
+                                     output_url="sim://"), texture)
+    recording = read_recording(tmp_path / "run.npz")
+    blocks = recording.blocks
+    assert recording.has_sim and len(blocks["t"]) == 40
+    index = np.round(blocks["t"] * RATE_HZ / BLOCK).astype(int)
+    measured_now = ~np.isin(index, [17])
+    assert np.isnan(blocks["achieved_mu"][~measured_now]).all()
+    expected = _measured(blocks["t"])
+    assert np.array_equal(blocks["plate_amplitude_um"][measured_now], expected["plate_amplitude_um"][measured_now])
+    judged = judge_blocks(blocks, fingers, texture, block_s=BLOCK / RATE_HZ, mu_floor=pipeline.options.mu_floor)
+    assert judged.departed.any() and not judged.departed.all()
+    assert np.array_equal(blocks["departed"], judged.departed.astype(np.int8))
+    assert not blocks["departed"][~measured_now].any()
+    assert recording.metadata["departure_tolerance_mu"] == DEPARTURE_TOLERANCE_MU
+
+
+def test_a_recording_without_a_texture_to_judge_against_has_no_departures(tmp_path: Path) -> None:
+    """No texture given (the Renderer's was swapped while recording): the plate's columns, no ``departed``."""
+    pipeline, table, log = _setup()
+    log.begin_measurements(NAMES)
+    log.record(tmp_path / "run.npz")
+    pipeline.start()
+    pipeline.push_finger(0.0, 30.0, 20.0)
+    t_s = _render(table, 3)
+    log.add_measurements(t_s, _measured(t_s))
+    log.drain(table)
+    log.write_recording(run_metadata(pipeline, load_compiled(GRATING), texture_path=None, block_frames=BLOCK,
+                                     input_url="api", output_url="sim://"))
+    recording = read_recording(tmp_path / "run.npz")
+    assert recording.has_sim and "departed" not in recording.blocks

@@ -6,7 +6,8 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
          options=RenderOptions(), stall_timeout_s=0.5)
     context manager; ``start()``, ``stop()``, ``set_texture(texture_or_path)``,
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
-    ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``iter_telemetry(period_s)``, ``record(path)``,
+    ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``iter_telemetry(period_s)``,
+    ``record(path, input_url="api")``,
     ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``recent_fingers()``,
     ``texture_t0_s()``, ``.texture``, ``.drive``, ``.callback_table``, ``.rate_hz``,
     ``.block_frames``, ``.running``, ``.driver`` (what runs the output: :mod:`tpad_rt.drivers`)
@@ -149,6 +150,9 @@ class Renderer:
         self._reported: BaseException | None = None  # the driver's failure the watcher raised
         self._producer: threading.Lock = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
         self._texture: CompiledTexture = compiled
+        self._texture_sets = 0  # set_texture calls so far
+        self._record_from_sets = 0  # that count when record() was called
+        self._record_input_url = "api"  # what fed the fingers, as record() was told
 
     # --- lifecycle -----------------------------------------------------------------
 
@@ -243,7 +247,9 @@ class Renderer:
                 if failure is not None and failure is not self._reported:  # the watcher's is reported once
                     self._error = self._error or failure
             if self._log.recording:
-                self._log.write_recording(self._metadata())
+                one_texture = self._texture_sets == self._record_from_sets  # else no one texture to judge against
+                self._log.write_recording(self._metadata(), self._texture if one_texture else None,
+                                          float(table.slot_t0_s[table.active_slot]))
         except BaseException as error:  # noqa: BLE001 - re-raised by check() below
             self._error = self._error or error
         finally:
@@ -310,6 +316,7 @@ class Renderer:
         """
         compiled, path = _compiled(texture)
         self._texture, self._texture_path = compiled, path
+        self._texture_sets += 1
         if self._table is not None:
             self._table.set_texture(compiled, self.now_s(), running=True)
         else:
@@ -465,16 +472,21 @@ class Renderer:
             yield rows
         self.check()
 
-    def record(self, path: str | Path) -> None:
+    def record(self, path: str | Path, input_url: str = "api") -> None:
         """Record the drive and telemetry from now on; :meth:`stop` writes them to ``path`` (.npz, the
-        format of ``tpad-rt render``). Raises ConfigError unless ``path`` ends in ``.npz``, or when it is no
+        format of ``tpad-rt render``), its metadata naming ``input_url`` as what fed the fingers (``"api"``:
+        the caller's own pushes). On an output that measures the plate (``sim://``) the recording has the
+        simulated plate's columns, and, when one texture was rendered all along, ``departed``
+        (tpad_rt.telemetry). Raises ConfigError unless ``path`` ends in ``.npz``, or when it is no
         place to write (no folder, a FIFO, a directory). A recording
         keeps at most ``tpad_rt.limits.MAX_RECORDING_SAMPLES`` drive samples in memory: past that the
         run ends with a TpadError (re-raised once, by :meth:`check`, :meth:`join` or :meth:`stop`), and
         :meth:`stop` writes what came before it, its metadata's ``truncated`` saying why."""
         self._log.record(path)
+        self._record_from_sets, self._record_input_url = self._texture_sets, input_url
 
     def _metadata(self) -> dict[str, Any]:
         """The recording's metadata (:func:`tpad_rt.recording.run_metadata`)."""
         return run_metadata(self._pipeline, self._texture, texture_path=self._texture_path,
-                            block_frames=self.block_frames, input_url="api", output_url=self.output_url)
+                            block_frames=self.block_frames, input_url=self._record_input_url,
+                            output_url=self.output_url)

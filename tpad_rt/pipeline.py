@@ -13,7 +13,8 @@ Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
     ``.stream_time_s``, ``.last_time_s``, ``.position_range_mm``, ``.check_time(t_s, name)``, ``.faults() -> dict``
     ``.set_texture(texture, t_s=None)``, ``.start()``, ``.stop()``
     ``.drive``, ``.set_drive(drive)``, ``.device_drive``: the drive it renders for (:class:`tpad_rt.drive.DriveSpec`)
-    ``.recent_fingers()``: the newest samples of the finger ring, decoded
+    ``.recent_fingers()``: the newest samples of the finger ring, decoded; ``.fingers_since(first)``: those from
+    sample number ``first`` on
     ``.render(out)``: the next ``len(out)`` float32 samples (1.0 = ``volts_per_full_scale``)
     ``.drain_telemetry() -> dict[str, np.ndarray]``: rows since the last drain, keyed by TEL_NAMES
     ``.last_telemetry_row() -> dict[str, float]``: the newest row, not drained
@@ -581,15 +582,21 @@ class Pipeline:
 
         Read without a lock while a producer may push: the ring's oldest row is left out.
         """
+        return self.fingers_since(0)[0]
+
+    def fingers_since(self, first: int) -> tuple[np.ndarray, int]:
+        """The finger samples from number ``first`` (0: the first ever pushed) on that the ring still holds (at most
+        ``finger_ring - 2``, oldest first, as :data:`tpad_rt.inputs.base.FINGER_DTYPE`), and the number after the
+        last of them (the count they were read at). Read without a lock, as :meth:`recent_fingers`."""
         count = int(self._arrays.finger_count[0])
         ring = self._arrays.finger
-        rows = ring[np.arange(max(0, count - len(ring) + 2), count) % len(ring)]
+        rows = ring[np.arange(max(first, count - len(ring) + 2), count) % len(ring)]
         samples = np.zeros(len(rows), dtype=FINGER_DTYPE)
         for name, column in (("t_s", layout.FINGER_T_S), ("x_mm", layout.FINGER_X_MM), ("y_mm", layout.FINGER_Y_MM),
                              ("force_n", layout.FINGER_FORCE_N)):
             samples[name] = rows[:, column]
         samples["down"] = rows[:, layout.FINGER_DOWN] > 0.5
-        return samples
+        return samples, count
 
     @property
     def over_cap_blocks(self) -> int:

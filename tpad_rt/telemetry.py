@@ -7,7 +7,7 @@ TelemetryLog(pipeline, rate_hz)
     ``drain(table)`` (the watcher, and readers, call it), ``take()`` (the rows since the
     last take, by TEL_NAMES column, and the output's measured columns), ``totals()``,
     ``record(path)``, ``recording``, ``failure`` (a recording's limit error),
-    ``write_recording(metadata)``;
+    ``write_recording(metadata, texture=None, texture_t0_s=0.0)``;
     measurements: ``begin_measurements(names)``, ``add_measurements(t_s, columns)``,
     ``end_measurements()``, ``measured_names``;
     latency: ``note_push(index, pushed_ns)``, ``latency_ms()`` (over every block drained)
@@ -19,7 +19,10 @@ and friction) has its driver hand the measurements here, each block's with the b
 time ``t``: :meth:`TelemetryLog.take` gives them as more columns of the same rows, and
 holds a row back until its measurement came (or the measuring ended), so a reader sees
 every block once, measured. Everything kept between takes is bounded (MAX_PENDING_ROWS
-rows each), whoever reads or not.
+rows each), whoever reads or not. A recording keeps the measurements too, and the finger
+samples (at most MAX_RECORDED_FINGERS), and writes them as ``tpad-rt render`` does: the
+simulated plate's columns, and ``departed`` judged against the texture under the finger
+(:func:`tpad_rt.felt.judge_blocks`).
 
 Push-to-DAC latency covers every block of every run: each drain folds the blocks since the
 last one into a :class:`~tpad_rt.log_histogram.LogHistogram` (fixed memory), so a run whose
@@ -42,20 +45,25 @@ import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.errors import ConfigError, TpadError
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks
 from tpad_rt.files import check_writable_target
 from tpad_rt.kernel import table as tab
 from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, TEL_NAMES
-from tpad_rt.limits import MAX_RECORDING_SAMPLES
+from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_TRAJECTORY_ROWS
 from tpad_rt.log_histogram import LogHistogram
 from tpad_rt.pipeline import Pipeline
 from tpad_rt.realtime import CallbackTable
 from tpad_rt.recording import Recording, write_recording
+from tpad_rt.texture import CompiledTexture
 
 #: Telemetry rows kept for :meth:`TelemetryLog.take` between calls (the oldest go first); as many rows wait at
 #: most for their measurements, and as many measured blocks for their rows.
 MAX_PENDING_ROWS = 2**18
 #: The range (ms) of the latency histogram: a latency outside it counts at its end.
 LATENCY_RANGE_MS = (1e-3, 1e4)
+#: Finger samples a recording keeps to judge its blocks with (as many as a trajectory file may hold): past them
+#: it is written without ``departed``.
+MAX_RECORDED_FINGERS = MAX_TRAJECTORY_ROWS
 
 class TelemetryLog:
     """Telemetry of ``pipeline``'s runs at ``rate_hz`` (Hz: the drive's sample rate, for recordings)."""
@@ -77,6 +85,10 @@ class TelemetryLog:
                                         "peak_v": 0.0, "kick_blocks": 0, "peak_outside_kicks_v": 0.0}
         self._record_path: Path | None = None
         self._recorded: list[dict[str, np.ndarray]] = []
+        self._recorded_measured: list[dict[str, np.ndarray]] = []  # "t" and the measured names, oldest first
+        self._recorded_fingers: list[np.ndarray] = []  # FINGER_DTYPE chunks, oldest first (emptied past the limit)
+        self._fingers_kept: int | None = 0  # samples in _recorded_fingers; None once past MAX_RECORDED_FINGERS
+        self._finger_from = 0  # the next finger sample to copy out of the ring while recording
         self._drive_chunks: list[np.ndarray] = []
         self._drive_from = 0  # next drive sample to copy out of the ring while recording
         self._record_from = 0  # the recording's first drive sample
@@ -145,6 +157,12 @@ class TelemetryLog:
             self.failure = TpadError(f"record: {problem}; the recording ends before it (written on stop)")
             return
         self._recorded.append(rows)
+        fingers, self._finger_from = self._pipeline.fingers_since(self._finger_from)
+        if self._fingers_kept is not None and self._fingers_kept + len(fingers) <= MAX_RECORDED_FINGERS:
+            self._recorded_fingers.append(fingers)
+            self._fingers_kept += len(fingers)
+        else:
+            self._recorded_fingers, self._fingers_kept = [], None
         self._drive_chunks.append(table.drive[np.arange(self._drive_from, frames) % len(table.drive)])
         self._drive_from = max(self._drive_from, frames)
 
@@ -178,6 +196,10 @@ class TelemetryLog:
         with self._lock:
             self._measured.add(np.asarray(t_s, dtype=np.float64), columns)
             self._keep(self._measured.release())
+            if self._record_path is not None and self._truncated is None and len(t_s):
+                self._recorded_measured.append({"t": np.asarray(t_s, dtype=np.float64),
+                                                **{name: np.asarray(columns[name], dtype=np.float64)
+                                                   for name in self._measured.names}})
 
     def end_measurements(self) -> None:
         """The output measures no more blocks (it closed or failed): rows stop waiting (a row drained from now
@@ -248,6 +270,7 @@ class TelemetryLog:
         with self._lock:
             self._record_path = path
             self._recorded, self._drive_chunks, self._truncated = [], [], None
+            self._recorded_measured, self._recorded_fingers, self._fingers_kept, self._finger_from = [], [], 0, 0
             self.failure = None
 
     @property
@@ -255,17 +278,34 @@ class TelemetryLog:
         """True after :meth:`record` until :meth:`write_recording`."""
         return self._record_path is not None
 
-    def write_recording(self, metadata: dict[str, Any]) -> None:
+    def write_recording(self, metadata: dict[str, Any], texture: CompiledTexture | None = None,
+                        texture_t0_s: float = 0.0) -> None:
         """Write what was recorded, with ``metadata`` and ``truncated`` (None, or why the recording ended
         early), to the path :meth:`record` named (the format of ``tpad-rt render``,
-        :mod:`tpad_rt.recording`), and stop recording."""
+        :mod:`tpad_rt.recording`), and stop recording. The output's measurements are columns of their blocks
+        (NaN for a block not measured); with the simulated plate's friction (``achieved_mu``) and ``texture``
+        (the one rendered all along, started at stream time ``texture_t0_s``, s), ``departed`` judges each
+        block against it under the recorded finger, and ``metadata`` gets ``departure_tolerance_mu``."""
         with self._lock:
             path, self._record_path = self._record_path, None
             recorded, drive_chunks, truncated = self._recorded, self._drive_chunks, self._truncated
+            measured_chunks, finger_chunks = self._recorded_measured, self._recorded_fingers
+            fingers_kept, names = self._fingers_kept is not None, self._measured.names
             self._recorded, self._drive_chunks, self._truncated = [], [], None
+            self._recorded_measured, self._recorded_fingers = [], []
         assert path is not None, "record() first"
         drive = np.concatenate(drive_chunks) if drive_chunks else np.zeros(0, dtype=np.float32)
-        write_recording(path, Recording(self.rate_hz, drive, joined(recorded), {**metadata, "truncated": truncated}))
+        blocks = joined(recorded)
+        metadata = {**metadata, "truncated": truncated}
+        if names:
+            blocks.update(_at_times(blocks["t"], joined(measured_chunks, ("t", *names)), names))
+        if "achieved_mu" in blocks and texture is not None and fingers_kept and finger_chunks:
+            judged = judge_blocks(blocks, np.concatenate(finger_chunks), texture,
+                                  block_s=metadata["block_frames"] / self.rate_hz,
+                                  mu_floor=self._pipeline.options.mu_floor, texture_t0_s=texture_t0_s)
+            blocks["departed"] = judged.departed.astype(np.int8)
+            metadata["departure_tolerance_mu"] = DEPARTURE_TOLERANCE_MU
+        write_recording(path, Recording(self.rate_hz, drive, blocks, metadata))
 
 
 def joined(chunks: list[dict[str, np.ndarray]], names: Sequence[str] = TEL_NAMES) -> dict[str, np.ndarray]:
@@ -334,15 +374,23 @@ class _MeasuredBlocks:
         if ready == 0:
             return []
         out = {name: column[:ready] for name, column in rows.items()}
-        at = np.minimum(np.searchsorted(measured["t"], out["t"]), max(len(measured["t"]) - 1, 0))
-        hit = measured["t"][at] == out["t"] if len(measured["t"]) else np.zeros(ready, dtype=bool)
-        for name in self.names:
-            out[name] = np.full(ready, math.nan)
-            out[name][hit] = measured[name][at[hit]]
+        out.update(_at_times(out["t"], measured, self.names))
         left = measured["t"] > out["t"][-1]  # measurements of blocks not drained yet
         self._measured = deque([{name: column[left] for name, column in measured.items()}] if left.any() else [])
         self._measured_rows = int(np.count_nonzero(left))
         return [out]
+
+
+def _at_times(t_s: np.ndarray, measured: dict[str, np.ndarray], names: Sequence[str]) -> dict[str, np.ndarray]:
+    """The ``names`` columns of ``measured`` (blocks by their time ``"t"``, s, in order) at the block times ``t_s``
+    (s): NaN for a block not measured."""
+    at = np.minimum(np.searchsorted(measured["t"], t_s), max(len(measured["t"]) - 1, 0))
+    hit = measured["t"][at] == t_s if len(measured["t"]) else np.zeros(len(t_s), dtype=bool)
+    columns = {}
+    for name in names:
+        columns[name] = np.full(len(t_s), math.nan)
+        columns[name][hit] = measured[name][at[hit]]
+    return columns
 
 
 def _keep_newest(chunks: deque[dict[str, np.ndarray]], rows: int) -> int:

@@ -51,7 +51,7 @@ from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
-from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures, start_ramps, texture_at_finger
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks, start_ramps
 from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import INSTALL_HINT, pynput_installed, screen_size_px
@@ -160,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
             console.print(f"output {output}, input {finger}; "
                           + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
             if args.record is not None:
-                renderer.record(args.record)
+                renderer.record(args.record, input_url=finger.url)
             announce_if_uncached(render_block, eval_texture_points)  # every argument checked: say it at once
             renderer.texture.evaluate(np.zeros(1), np.zeros(1))  # the status line's texture under the finger
             renderer.start()
@@ -254,18 +254,17 @@ class Session:
     def judge(self, rows: dict[str, np.ndarray]) -> None:
         """When ``rows`` (telemetry, oldest first) hold the friction the simulated plate gave each block
         (:data:`PLATE_FRICTION`), judge each block against the texture under the finger at its middle
-        (felt.departures: touching, measured blocks, the texture clamped to the floor the kernel renders)."""
+        (felt.judge_blocks: touching, measured blocks, the texture clamped to the floor the kernel renders)."""
         if PLATE_FRICTION not in rows or not len(rows["t"]):
             return
         renderer = self.renderer
         achieved = rows[PLATE_FRICTION]
-        middle_s = rows["t"] + 0.5 * renderer.block_frames / renderer.rate_hz
-        felt, known = texture_at_finger(renderer.recent_fingers(), renderer.texture, middle_s, renderer.texture_t0_s())
-        felt = np.clip(felt, renderer.options.mu_floor, 1.0)
+        judgement = judge_blocks(rows, renderer.recent_fingers(), renderer.texture,
+                                 block_s=renderer.block_frames / renderer.rate_hz, mu_floor=renderer.options.mu_floor,
+                                 texture_t0_s=renderer.texture_t0_s())
+        felt, judged, departed = judgement.felt_mu, judgement.judged, judgement.departed
         touching = (rows["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0
-        judged = known & touching & np.isfinite(achieved)  # NaN: a block the output did not measure (it failed)
         errors = np.abs(felt - achieved)[judged]
-        departed = departures(felt, achieved, judged)
         ramping, self.touch_start_s = start_ramps(rows["t"], touching, self.ramp_window_s(), self.touch_start_s,
                                                   self.was_touching)
         self.was_touching = bool(touching[-1])
@@ -276,7 +275,7 @@ class Session:
             self.error_sum += float(errors.sum())
             self.error_max = max(self.error_max, float(errors.max()))
         self.achieved = float(achieved[-1]) if np.isfinite(achieved[-1]) else None
-        self.felt = float(felt[-1]) if known[-1] else None
+        self.felt = float(felt[-1]) if judgement.known[-1] else None
 
     def ramp_window_s(self) -> float:
         """How long (s) a touch's start ramp lasts: the drive's fade-in (ramp_ms) and the simulated plate's

@@ -34,7 +34,7 @@ from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
-from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks
 from tpad_rt.files import check_writable_target
 from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
@@ -227,10 +227,9 @@ def judge_departures(result: RenderResult, metadata: dict[str, Any], texture: Co
     blocks = result.blocks
     if "achieved_mu" not in blocks:
         return
-    felt_mu, known = texture_under_finger(result, texture)
-    touching = (blocks["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0
-    felt_mu = np.clip(felt_mu, metadata["render_options"]["mu_floor"], 1.0)
-    blocks["departed"] = departures(felt_mu, blocks["achieved_mu"], touching & known).astype(np.int8)
+    judged = judge_blocks(blocks, result.finger, texture, block_s=result.block_frames / result.fs_hz,
+                          mu_floor=metadata["render_options"]["mu_floor"])
+    blocks["departed"] = judged.departed.astype(np.int8)
     metadata["departure_tolerance_mu"] = DEPARTURE_TOLERANCE_MU
 
 
