@@ -150,9 +150,9 @@ class Renderer:
         self._reported: BaseException | None = None  # the driver's failure the watcher raised
         self._producer: threading.Lock = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
         self._texture: CompiledTexture = compiled
-        self._texture_sets = 0  # set_texture calls so far
-        self._record_from_sets = 0  # that count when record() was called
-        self._record_input_url = "api"  # what fed the fingers, as record() was told
+        self._texture_sets: int = 0  # set_texture calls so far
+        self._record_from_sets: int = 0  # that count when record() was called
+        self._record_input_url: str = "api"  # what fed the fingers, as record() was told
 
     # --- lifecycle -----------------------------------------------------------------
 
@@ -483,7 +483,8 @@ class Renderer:
         run ends with a TpadError (re-raised once, by :meth:`check`, :meth:`join` or :meth:`stop`), and
         :meth:`stop` writes what came before it, its metadata's ``truncated`` saying why."""
         self._log.record(path)
-        self._record_from_sets, self._record_input_url = self._texture_sets, input_url
+        self._record_from_sets = self._texture_sets
+        self._record_input_url = input_url
 
     def _metadata(self) -> dict[str, Any]:
         """The recording's metadata (:func:`tpad_rt.recording.run_metadata`)."""

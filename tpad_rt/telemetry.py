@@ -232,8 +232,8 @@ class TelemetryLog:
         if not len(blocks):
             return
         counts = blocks[:, tab.BLOCK_FINGER_COUNT]
-        lost = first != self._latency_next or self._latency_seen is None  # the block before them is not known
-        before = int(counts[0]) if lost else self._latency_seen
+        seen = self._latency_seen  # what the block before them read (None: not known, or lost from the ring)
+        before = int(counts[0]) if seen is None or first != self._latency_next else seen
         self._latency_ms.add(self._latencies_ms(before, blocks))
         self._latency_next, self._latency_seen = first + len(blocks), int(counts[-1])
 

@@ -290,7 +290,7 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
     lines = [
         f"rendered {result.seconds:.3f} s of audio in {wall_s:.3g} s ({speed:.1f}x real time), "
         f"{len(flags)} blocks of {result.block_frames} at {result.fs_hz} Hz",
-        "drive: " + peak_text(blocks["voltage_v"].max(initial=0.0), metadata["max_voltage_v"], np.count_nonzero(kicks),
+        "drive: " + peak_text(blocks["voltage_v"].max(initial=0.0), metadata["max_voltage_v"], int(np.count_nonzero(kicks)),
                               blocks["voltage_v"][~kicks].max(initial=0.0)),
         f"power: mean {blocks['power_w'].mean():.3f} W, peak {blocks['power_w'].max(initial=0.0):.3f} W "
         f"(cap {metadata['power_budget_w']:g} W"
