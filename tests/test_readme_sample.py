@@ -4,6 +4,7 @@ writes it; this re-runs the command and compares with the measured numbers maske
 from __future__ import annotations
 
 import importlib.util
+import re
 from types import ModuleType
 
 from conftest import REPO_ROOT
@@ -33,6 +34,10 @@ def test_a_shape_masks_measurements_and_keeps_settings_and_every_line() -> None:
     measured = [*readme]
     measured[power] = measured[power].replace("mean 0.", "mean 9.")  # another run's figure: the same shape
     assert SAMPLE.shape(measured) == SAMPLE.shape(readme)
+    drive = next(index for index, line in enumerate(readme) if line.startswith("drive: "))
+    one = [*readme]
+    one[drive] = re.sub(r"kicks \(\d+ blocks", "kicks (1 block", one[drive])  # a count of one, in the singular
+    assert "kicks (1 block at" in one[drive] and SAMPLE.shape(one) == SAMPLE.shape(readme)
     stale = [*readme]
     stale[power] = stale[power].replace("(cap 0.8 W", "(cap 0.55 W")  # a setting no run prints: another shape
     assert "(cap 0.8 W" in readme[power] and SAMPLE.shape(stale) != SAMPLE.shape(readme)

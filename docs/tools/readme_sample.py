@@ -14,7 +14,7 @@ measures masked (times, counts, latencies, volts, power) and the settings kept (
 block size, the power cap and budget, the volt limit, the departure judge's tolerance,
 everything in the first line). Segments only some runs print are left out of the shape
 (:data:`OPTIONAL`: departures in a touch's start ramp, a stalled output, a host-reported
-DAC delay); the first line's input reason reads the same whether pynput is missing or the
+DAC delay), a count of one block reads as any count; the first line's input reason reads the same whether pynput is missing or the
 display is (the README's text says both).
 """
 
@@ -42,6 +42,8 @@ SETTINGS = re.compile(r"\d+ Hz|of \d+ frames|cap [\d.]+ W|budget [\d.]+ W|of [\d
 OPTIONAL = (re.compile(r"; [\d,]+ of them in a touch's start ramp \(the drive fading in\)"),
             re.compile(r"; the output stalled for [\d.]+ s"),
             re.compile(r" \(of which the host reports [^)]*\)"))
+#: A count of one, in the singular ("1 block"): the same shape as any other count.
+ONE_BLOCK = re.compile(r"# block\b")
 #: The first line's input reason without pynput, which the README's text names beside "no display".
 NO_PYNPUT = re.compile(r"\(no pynput for the mouse: [^)]*\)")
 
@@ -89,7 +91,7 @@ def shape(lines: list[str]) -> list[str]:
             continue
         pieces, kept = SETTINGS.split(line), SETTINGS.findall(line)
         masked = [re.sub(r"(?<![\w.])\d+(?:[.,]\d+)*", "#", piece) for piece in pieces]  # not p50's
-        shaped.append("".join(part for pair in zip(masked, [*kept, ""]) for part in pair))
+        shaped.append(ONE_BLOCK.sub("# blocks", "".join(part for pair in zip(masked, [*kept, ""]) for part in pair)))
     return shaped
 
 
