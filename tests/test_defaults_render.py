@@ -6,22 +6,28 @@ rendered offline, as ``tpad-rt render`` does, on the simulated plate for the 2 s
 ``play NAME --duration 2``, on the default device and on the same device with its standing wave
 (``examples/devices/SLG_0.56_standing_wave.yaml``), and judged as play judges it (felt.departures,
 DEPARTURE_TOLERANCE_MU): at most 5 % of the touching blocks may depart from the texture under the
-finger. Deterministic (the offline loop waits for no clock); about 0.3 s a render once compiled.
+finger, and the drive may saturate in fewer than SATURATION_HINT_SHARE of them (else play's summary
+says why: the hints of :mod:`tpad_rt.cli.headroom`, whose advice is checked here too). Deterministic
+(the offline loop waits for no clock); about 0.15 s a render once compiled.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tpad_rt.cli.headroom import SATURATION_HINT_SHARE, FingerTally, hint_lines
 from tpad_rt.cli.play import auto_swipe
 from tpad_rt.cli.render import add_session_arguments, judge_departures, open_session
 from tpad_rt.config import load_texture
-from tpad_rt.kernel.layout import FLAG_WATCHDOG
+from tpad_rt.device import Device
+from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE
+from tpad_rt.offline import RenderResult
 from tpad_rt.shipped import texture_names
 
 REPO = Path(__file__).resolve().parents[1]
@@ -32,22 +38,51 @@ MAX_DEPARTED = 0.05
 PLAY_S = 2.0
 
 
-def departed_share(texture: str, input_url: str, device: Path | None) -> float:
-    """The share of touching blocks whose simulated friction departs from the texture under the finger, rendering
-    ``texture`` for ``input_url`` over PLAY_S seconds on ``device`` (the default device when None)."""
+@dataclass(frozen=True)
+class Run:
+    """An offline run of PLAY_S seconds: its blocks' finger tally and how many were judged and departed."""
+
+    tally: FingerTally
+    judged: int
+    departed: int
+    departed_saturated: int
+
+    @property
+    def departed_share(self) -> float:
+        """Departed blocks as a share of the touching ones."""
+        return self.departed / self.judged
+
+    @property
+    def saturated_share(self) -> float:
+        """Saturated blocks as a share of the touching ones."""
+        return self.tally.saturated / self.tally.touching
+
+    def hints(self, device: Device, power_cap_w: float = 0.8) -> list[str]:
+        """play's hint lines for this run on ``device`` (its 40 V limit, and ``power_cap_w``, W)."""
+        return hint_lines(self.tally, device, device.max_voltage_v, power_cap_w, self.judged, self.departed,
+                          self.departed_saturated)
+
+
+def render(texture: str, input_url: str, device: Path | None = None, *options: str) -> Run:
+    """Render ``texture`` for ``input_url`` over PLAY_S seconds on ``device`` (the default device when None) with
+    ``tpad-rt render``'s ``options``, and judge it as play does."""
     parser = argparse.ArgumentParser()
     add_session_arguments(parser)
     args = parser.parse_args([texture, "--input", input_url, "--duration", str(PLAY_S),
-                              *(["--device", str(device)] if device else [])])
+                              *(["--device", str(device)] if device else []), *options])
     with contextlib.ExitStack() as stack:
         session = open_session(args, stack, keep_drive=False)
         while not session.render.done:
             session.render.step()
-    result = session.render.result()
+    result: RenderResult = session.render.result()
     judge_departures(result, session.metadata, session.render.pipeline.texture)
-    touching = (result.blocks["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0
-    assert np.count_nonzero(touching) > 0.9 * PLAY_S * 192000 / 64  # the swipe touches all along
-    return float(np.count_nonzero(result.blocks["departed"]) / np.count_nonzero(touching))
+    blocks = result.blocks
+    tally = FingerTally()
+    tally.add(blocks)
+    assert tally.touching > 0.9 * PLAY_S * 192000 / 64  # the swipe touches all along
+    departed = blocks["departed"] != 0
+    saturated = (blocks["saturated"].astype(np.int64) & (FLAG_VOLTAGE | FLAG_POWER)) != 0
+    return Run(tally, tally.touching, int(np.count_nonzero(departed)), int(np.count_nonzero(departed & saturated)))
 
 
 @pytest.mark.parametrize("device", [None, STANDING_WAVE], ids=["plain", "standing_wave"])
@@ -55,11 +90,31 @@ def departed_share(texture: str, input_url: str, device: Path | None) -> float:
 def test_each_shipped_texture_renders_at_its_recommended_finger(name: str, device: Path | None) -> None:
     finger = load_texture(name).finger
     assert finger is not None, f"{name}: state the finger it is designed for (finger: {{speed_mm_s, force_n}})"
-    share = departed_share(name, auto_swipe(finger), device)
-    assert share <= MAX_DEPARTED, f"{name} at {finger.speed_mm_s:g} mm/s: {100 * share:.1f} % of blocks departed"
+    run = render(name, auto_swipe(finger), device)
+    at = f"{name} at {finger.speed_mm_s:g} mm/s"
+    assert run.departed_share <= MAX_DEPARTED, f"{at}: {100 * run.departed_share:.1f} % of blocks departed"
+    assert run.saturated_share < SATURATION_HINT_SHARE, f"{at}: {100 * run.saturated_share:.1f} % saturated"
 
 
-def test_the_judge_fails_a_texture_swiped_faster_than_the_device_renders() -> None:
-    """The guard can fail: bumps_grid at the 100 mm/s play took before textures stated a finger departs in
-    nearly every block (the drive saturates at 40 V short of the slippery ground's 0.5)."""
-    assert departed_share("bumps_grid", "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1", None) > 0.9
+def test_a_texture_swiped_too_fast_departs_and_the_hint_names_a_speed_that_renders_it() -> None:
+    """bumps_grid at the 100 mm/s play took before textures stated a finger: the drive saturates at 40 V short of
+    the slippery ground's 0.5 in nearly every block; the hint says so from the device model, and the swipe it
+    suggests renders the texture."""
+    run = render("bumps_grid", "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1")
+    assert run.departed_share > 0.9 and run.saturated_share > 0.9
+    why, departures = run.hints(Device.default())
+    assert why.startswith("why saturated (")
+    assert ("the texture asks for friction down to 0.50, and at 100 mm/s under 0.5 N the drive's 40 V limit lowers "
+            "it to 0.63 at best (at an antinode)") in why
+    assert departures.startswith("departures in ") and "of them saturated (above)" in departures
+    suggested = why.split("try --input '")[1].split("'")[0]
+    assert suggested == "scripted://swipe?speed_mm_s=50&force_n=0.5&repeat=0&back_and_forth=1"
+    followed = render("bumps_grid", suggested)
+    assert followed.departed_share <= MAX_DEPARTED and followed.hints(Device.default()) == []
+
+
+def test_a_power_cap_that_binds_is_named_with_its_volts() -> None:
+    run = render("grating", "scripted://swipe?speed_mm_s=60&repeat=0&back_and_forth=1", None, "--power-budget", "0.02")
+    why = run.hints(Device.default(), power_cap_w=0.02)[0]
+    assert "the drive's 0.02 W power cap (7.8 V at 0.5 N) lowers it to 0.95 at best" in why, why
+    assert "try --input 'scripted://swipe?speed_mm_s=20&force_n=0.5" in why

@@ -20,7 +20,8 @@ import pytest
 from jack_server import jack_server, kill_server_under
 from xvfb import display, xvfb_server  # noqa: F401 - fixtures
 
-from tpad_rt.cli.play import AUTO_SWIPE
+from tpad_rt.cli.play import auto_swipe
+from tpad_rt.config import load_texture
 from tpad_rt.recording import read_recording
 
 REPO = Path(__file__).resolve().parents[1]
@@ -38,7 +39,10 @@ def test_without_sound_card_or_display_it_plays_a_swipe_on_the_simulated_plate()
     done = _play("textures/grating.yaml", "--duration", "1")
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
-    assert lines[0] == (f"output sim:// (no audio device runs 192000 Hz), input {AUTO_SWIPE} (no display); "
+    finger = load_texture("textures/grating.yaml").finger
+    assert finger is not None
+    assert lines[0] == (f"output sim:// (no audio device runs 192000 Hz), input {auto_swipe(finger)} (no display; "
+                        f"the texture's recommended finger: {finger.speed_mm_s:g} mm/s under {finger.force_n:g} N); "
                         "1 s or Ctrl-C stops")
     assert lines[1].startswith("played ")
     friction = [line for line in lines if line.startswith("friction |texture under the finger - simulated plate|")]

@@ -48,6 +48,7 @@ from rich.live import Live
 from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number
+from tpad_rt.cli.headroom import FingerTally, hint_lines, swipe_url
 from tpad_rt.cli.render import add_session_arguments, over_cap_line, session_options
 from tpad_rt.compiling import announce_if_uncached, compile_notice
 from tpad_rt.config import load_texture
@@ -131,8 +132,7 @@ def choose_output(requested: str, rate_hz: int) -> Choice:
 
 def auto_swipe(finger: Finger) -> str:
     """Endless back-and-forth swipes along the plate at ``finger``'s speed (mm/s) and force (N)."""
-    return (f"scripted://swipe?speed_mm_s={finger.speed_mm_s:g}&force_n={finger.force_n:g}"
-            "&repeat=0&back_and_forth=1")
+    return swipe_url(finger.speed_mm_s, finger.force_n)
 
 
 def choose_input(requested: str, recommended: Finger | None, force_n: float | None = None) -> Choice:
@@ -257,6 +257,8 @@ class Session:
     was_touching: bool = False  # whether the last judged block was touching
     error_sum: float = 0.0
     error_max: float = 0.0
+    departed_saturated_blocks: int = 0  # of departed_blocks, those the drive saturated in
+    tally: FingerTally = field(default_factory=FingerTally)  # the touching blocks' finger, asks and saturation
 
     def elapsed_s(self) -> float:
         """Seconds since play started."""
@@ -268,6 +270,7 @@ class Session:
         if len(rows["t"]):
             self.latest = {name: float(column[-1]) for name, column in rows.items()}
             self.peak_v = max(self.peak_v, float(rows["voltage_v"].max()))
+            self.tally.add(rows)
         return rows
 
     def tick(self) -> None:
@@ -295,6 +298,8 @@ class Session:
         self.judged_blocks += len(errors)
         self.departed_blocks += int(np.count_nonzero(departed))
         self.ramp_departed_blocks += int(np.count_nonzero(departed & ramping))
+        saturated = (rows["saturated"].astype(np.int64) & (FLAG_VOLTAGE | FLAG_POWER)) != 0
+        self.departed_saturated_blocks += int(np.count_nonzero(departed & saturated))
         if len(errors):
             self.error_sum += float(errors.sum())
             self.error_max = max(self.error_max, float(errors.max()))
@@ -390,6 +395,9 @@ class Session:
                          f"departures: {self.departed_blocks} blocks "
                          f"({100 * self.departed_blocks / self.judged_blocks:.1f} %) further than "
                          f"{DEPARTURE_TOLERANCE_MU:g}{self.ramp_text()}")
+        lines += hint_lines(self.tally, self.renderer.device, self.renderer.drive.max_voltage_v,
+                            stats["power_budget_w"], self.judged_blocks, self.departed_blocks,
+                            self.departed_saturated_blocks)
         return [line.replace("nan", "n/a") for line in lines]
 
 
