@@ -22,12 +22,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tpad_rt.device import Device
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
-from tpad_rt.physics.friction import amplitude_for, relative_friction
+
+if TYPE_CHECKING:
+    from tpad_rt.device import Device
 
 #: Share of the touching blocks saturated (voltage or power) from which the summary says why.
 SATURATION_HINT_SHARE = 0.05
@@ -88,6 +90,7 @@ def _reach(device: Device, speed_mm_s: float, force_n: float, target_mu: float, 
            power_cap_w: float) -> _Reach:
     """What the drive reaches (at an antinode) for a finger at ``speed_mm_s`` (mm/s) pressing ``force_n`` (N),
     against the texture's lowest friction ``target_mu``."""
+    from tpad_rt.physics.friction import amplitude_for, relative_friction  # numba: only once a hint is due
     power_v = math.sqrt(power_cap_w / float(device.power_w_per_v2(force_n)))
     limit = f"{max_voltage_v:g} V limit" if max_voltage_v <= power_v else \
         f"{power_cap_w:g} W power cap ({power_v:.1f} V at {force_n:.2g} N)"

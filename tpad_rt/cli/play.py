@@ -99,8 +99,9 @@ def add_parser(subparsers: Subparsers) -> None:
     )
     add_session_arguments(
         parser, input_default="auto", max_duration_s=MAX_INPUT_S,
-        input_help="finger input URL, or auto: mouse:// with an X display, else endless back-and-forth swipes "
-        f"({auto_swipe(FALLBACK_FINGER)}), at the speed and force the texture's file recommends (its finger)",
+        input_help="finger input URL, or auto: mouse:// with an X display, else endless back-and-forth swipes at "
+        "the speed and force the texture's file recommends (its finger; without one "
+        f"{auto_swipe(FALLBACK_FINGER)})",
         output_default="auto", output_help="output URL (audio://[device]?..., sim://, null://), or auto: an audio "
         "device that accepts --rate (JACK first), else sim://")
     parser.add_argument("--record", metavar="FILE.npz",
