@@ -22,9 +22,10 @@ import numpy as np
 import pytest
 
 from tpad_rt.cli.headroom import SATURATION_HINT_SHARE, FingerTally, hint_lines
-from tpad_rt.cli.play import auto_swipe
+from tpad_rt.cli.play import auto_swipe, choose_input
 from tpad_rt.cli.render import add_session_arguments, judge_departures, open_session
 from tpad_rt.config import load_texture
+from tpad_rt.config.texture_schema import Finger
 from tpad_rt.device import Device
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE
 from tpad_rt.offline import RenderResult
@@ -118,3 +119,21 @@ def test_a_power_cap_that_binds_is_named_with_its_volts() -> None:
     why = run.hints(Device.default(), power_cap_w=0.02)[0]
     assert "the drive's 0.02 W power cap (7.8 V at 0.5 N) lowers it to 0.95 at best" in why, why
     assert "try --input 'scripted://swipe?speed_mm_s=20&force_n=0.5" in why
+
+
+@pytest.mark.parametrize(("recommended", "force_n", "url", "why"), [
+    (Finger(speed_mm_s=30, force_n=0.4), None, "scripted://swipe?speed_mm_s=30&force_n=0.4&repeat=0&back_and_forth=1",
+     "the texture's recommended finger: 30 mm/s under 0.4 N"),
+    (None, None, "scripted://swipe?speed_mm_s=100&force_n=0.5&repeat=0&back_and_forth=1",
+     "no finger in the texture's file: 100 mm/s under 0.5 N"),
+    (Finger(speed_mm_s=30, force_n=0.4), 1.5, "scripted://swipe?speed_mm_s=30&force_n=1.5&repeat=0&back_and_forth=1",
+     "the texture's recommended finger: 30 mm/s, under --force 1.5 N"),
+])
+def test_without_a_display_auto_swipes_at_the_recommended_finger(monkeypatch: pytest.MonkeyPatch,
+                                                                 recommended: Finger | None, force_n: float | None,
+                                                                 url: str, why: str) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    choice = choose_input("auto", recommended, force_n)
+    assert choice.url == url
+    assert choice.reason.endswith(f"; {why}") and choice.reason.startswith(("no display", "no pynput"))
+    assert choose_input("scripted://still", recommended, force_n).url == "scripted://still"  # an explicit one wins

@@ -114,7 +114,9 @@ def test_with_a_jack_server_auto_picks_the_jack_device_and_says_how_it_buffers(s
 def test_with_a_display_auto_picks_the_mouse(display: str) -> None:  # noqa: F811 - fixture
     done = _play("textures/grating.yaml", "--duration", "1", env={**BARE_ENV, "DISPLAY": display})
     assert done.returncode == 0, done.stderr
-    assert done.stdout.splitlines()[0].startswith("output sim:// (no audio device runs 192000 Hz), input mouse:// (")
+    first = done.stdout.splitlines()[0]
+    assert first.startswith("output sim:// (no audio device runs 192000 Hz), input mouse://?force_n=0.5 ("), first
+    assert "left button held touches; the texture's recommended finger: 60 mm/s under 0.5 N); 1 s" in first, first
 
 
 @pytest.mark.parametrize(("args", "message"), [
