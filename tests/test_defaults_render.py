@@ -137,3 +137,16 @@ def test_without_a_display_auto_swipes_at_the_recommended_finger(monkeypatch: py
     assert choice.url == url
     assert choice.reason.endswith(f"; {why}") and choice.reason.startswith(("no display", "no pynput"))
     assert choose_input("scripted://still", recommended, force_n).url == "scripted://still"  # an explicit one wins
+
+
+def test_departures_without_saturation_name_the_plates_lag_and_a_slower_finger() -> None:
+    device = Device.default()
+    tally = FingerTally(touching=1000, saturated=0, speed_sum_mm_s=30_000.0, force_sum_n=500.0, lowest_mu=0.6)
+    assert hint_lines(tally, device, 40.0, 0.8, judged=1000, departed=50, departed_saturated=0) == []  # 5 %: fine
+    (line,) = hint_lines(tally, device, 40.0, 0.8, judged=1000, departed=100, departed_saturated=3)
+    assert line.startswith("departures in 10.0 % of judged blocks, more than 5 %: 3 of them saturated; ")
+    (line,) = hint_lines(tally, device, 40.0, 0.8, judged=1000, departed=100, departed_saturated=0)
+    tau_ms = float(device.envelope_time_constant_s(0.5)) * 1e3
+    assert (f"none saturated: the plate lags the texture's changes at 30 mm/s under 0.5 N (its envelope's time "
+            f"constant is {tau_ms:.2f} ms at 0.5 N); a slower finger leaves more headroom (try --input "
+            "'scripted://swipe?speed_mm_s=15&force_n=0.5&repeat=0&back_and_forth=1')") in line, line

@@ -78,10 +78,9 @@ class FingerTally:
 
 @dataclass(frozen=True)
 class _Reach:
-    """The most the drive gives at a speed and force: the limit that binds, its volts, the lowest friction."""
+    """The most the drive gives at a speed and force: the limit that binds, the lowest friction."""
 
     limit: str
-    volts_v: float
     lowest_mu: float
     fastest_mm_s: float  # the fastest finger (mm/s) for which it reaches the texture's lowest friction
 
@@ -101,7 +100,7 @@ def _reach(device: Device, speed_mm_s: float, force_n: float, target_mu: float, 
     lowest = float(relative_friction(amplitude_m, device.carrier_hz, speed_m_s, *model))
     per_m_s = float(amplitude_for(min(max(target_mu, 1e-6), 1.0), device.carrier_hz, 1.0, *model))
     fastest_mm_s = math.inf if per_m_s == 0.0 else amplitude_m / per_m_s * 1e3
-    return _Reach(limit, volts_v, lowest, fastest_mm_s)
+    return _Reach(limit, lowest, fastest_mm_s)
 
 
 def _round_speed(speed_mm_s: float) -> float:
@@ -138,14 +137,15 @@ def hint_lines(tally: FingerTally, device: Device, max_voltage_v: float, power_c
         change = (f"a slower finger leaves more headroom (try --input '{swipe_url(slower, force_n)}'), as do gentler "
                   "changes in the texture")
     lines = []
-    if saturated_share >= SATURATION_HINT_SHARE:
+    said_why = saturated_share >= SATURATION_HINT_SHARE
+    if said_why:
         lines.append(f"why saturated ({100 * saturated_share:.1f} % of touching blocks): {why}; {change}")
     if departed_share > DEPARTURE_HINT_SHARE:
         tau_ms = float(device.envelope_time_constant_s(force_n)) * 1e3
-        cause = (f"{departed_saturated} of them saturated (above)" if departed_saturated else
-                 f"none saturated: the plate lags the texture's changes {finger} (its envelope's time constant is "
-                 f"{tau_ms:.2f} ms at {force_n:.2g} N)")
-        advice = "" if saturated_share >= SATURATION_HINT_SHARE else f"; {change}"
+        cause = (f"{departed_saturated} of them saturated" + (" (above)" if said_why else "") if departed_saturated
+                 else f"none saturated: the plate lags the texture's changes {finger} (its envelope's time constant "
+                 f"is {tau_ms:.2f} ms at {force_n:.2g} N)")
+        advice = "" if said_why else f"; {change}"
         lines.append(f"departures in {100 * departed_share:.1f} % of judged blocks, more than "
                      f"{100 * DEPARTURE_HINT_SHARE:g} %: {cause}{advice}; --record then `tpad-rt plot` shows where")
     return lines
