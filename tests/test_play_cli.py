@@ -20,7 +20,8 @@ import pytest
 from jack_server import jack_server, kill_server_under
 from xvfb import display, xvfb_server  # noqa: F401 - fixtures
 
-from tpad_rt.cli.play import AUTO_SWIPE
+from tpad_rt.cli.play import auto_swipe
+from tpad_rt.config import load_texture
 from tpad_rt.kernel.layout import FLAG_WATCHDOG
 from tpad_rt.recording import read_recording
 
@@ -39,7 +40,10 @@ def test_without_sound_card_or_display_it_plays_a_swipe_on_the_simulated_plate()
     done = _play("textures/grating.yaml", "--duration", "1")
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
-    assert lines[0] == (f"output sim:// (no audio device runs 192000 Hz), input {AUTO_SWIPE} (no display); "
+    finger = load_texture("textures/grating.yaml").finger
+    assert finger is not None
+    assert lines[0] == (f"output sim:// (no audio device runs 192000 Hz), input {auto_swipe(finger)} (no display; "
+                        f"the texture's recommended finger: {finger.speed_mm_s:g} mm/s under {finger.force_n:g} N); "
                         "1 s or Ctrl-C stops")
     assert lines[1].startswith("played ")
     friction = [line for line in lines if line.startswith("friction |texture under the finger - simulated plate|")]
@@ -119,7 +123,9 @@ def test_with_a_jack_server_auto_picks_the_jack_device_and_says_how_it_buffers(s
 def test_with_a_display_auto_picks_the_mouse(display: str) -> None:  # noqa: F811 - fixture
     done = _play("textures/grating.yaml", "--duration", "1", env={**BARE_ENV, "DISPLAY": display})
     assert done.returncode == 0, done.stderr
-    assert done.stdout.splitlines()[0].startswith("output sim:// (no audio device runs 192000 Hz), input mouse:// (")
+    first = done.stdout.splitlines()[0]
+    assert first.startswith("output sim:// (no audio device runs 192000 Hz), input mouse://?force_n=0.5 ("), first
+    assert "left button held touches; the texture's recommended finger: 60 mm/s under 0.5 N); 1 s" in first, first
 
 
 @pytest.mark.parametrize(("args", "message"), [

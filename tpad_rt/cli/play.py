@@ -3,7 +3,9 @@
 ``--output auto`` (default) picks an audio device that accepts ``--rate`` (a JACK
 device first, then the default output), else the simulated plate ``sim://``;
 ``--input auto`` picks ``mouse://`` when an X display answers, else endless
-back-and-forth swipes (:data:`AUTO_SWIPE`). The first line says both choices and why.
+back-and-forth swipes (:func:`auto_swipe`) at the speed and force the texture's file
+recommends (its ``finger``; :data:`FALLBACK_FINGER` for a file without one), the mouse
+pressing with that force. The first line says both choices and why.
 A :class:`~tpad_rt.inputs.live.LiveFeed` feeds the input into the renderer; a status
 panel (finger, target friction and, on an output that simulates the plate (``sim://``),
 the texture under the finger and the friction the simulated plate gave, volts, power,
@@ -46,8 +48,11 @@ from rich.live import Live
 from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number
+from tpad_rt.cli.headroom import FingerTally, hint_lines, swipe_url
 from tpad_rt.cli.render import add_session_arguments, over_cap_line, peak_text, session_options
 from tpad_rt.compiling import announce_if_uncached, compile_notice
+from tpad_rt.config import load_texture
+from tpad_rt.config.texture_schema import Finger
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
@@ -65,8 +70,8 @@ from tpad_rt.outputs import audio
 if TYPE_CHECKING:
     from tpad_rt.engine import Renderer
 
-#: The input ``--input auto`` uses without a display: endless back-and-forth swipes at 100 mm/s.
-AUTO_SWIPE = "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1"
+#: The finger ``--input auto`` follows for a texture whose file recommends none (its ``finger``): 100 mm/s, 0.5 N.
+FALLBACK_FINGER = Finger(speed_mm_s=100.0, force_n=0.5)
 #: Status refreshes per second.
 STATUS_HZ = 5
 #: The telemetry column of the friction a simulated plate gave each block (``sim://`` measures it).
@@ -94,7 +99,9 @@ def add_parser(subparsers: Subparsers) -> None:
     )
     add_session_arguments(
         parser, input_default="auto", max_duration_s=MAX_INPUT_S,
-        input_help=f"finger input URL, or auto: mouse:// with an X display, else {AUTO_SWIPE}",
+        input_help="finger input URL, or auto: mouse:// with an X display, else endless back-and-forth swipes at "
+        "the speed and force the texture's file recommends (its finger; without one "
+        f"{auto_swipe(FALLBACK_FINGER)})",
         output_default="auto", output_help="output URL (audio://[device]?..., sim://, null://), or auto: an audio "
         "device that accepts --rate (JACK first), else sim://")
     parser.add_argument("--record", metavar="FILE.npz",
@@ -124,18 +131,31 @@ def choose_output(requested: str, rate_hz: int) -> Choice:
     return Choice("sim://", f"no audio device runs {rate_hz} Hz")
 
 
-def choose_input(requested: str) -> Choice:
+def auto_swipe(finger: Finger) -> str:
+    """Endless back-and-forth swipes along the plate at ``finger``'s speed (mm/s) and force (N)."""
+    return swipe_url(finger.speed_mm_s, finger.force_n)
+
+
+def choose_input(requested: str, recommended: Finger | None, force_n: float | None = None) -> Choice:
     """``requested``, or for ``auto`` ``mouse://`` when pynput is installed and an X display answers, else
-    :data:`AUTO_SWIPE`."""
+    :func:`auto_swipe`: at the ``recommended`` finger's speed (mm/s) and force (N), :data:`FALLBACK_FINGER`'s
+    when None; ``force_n`` (N, ``--force``) replaces the force."""
     if requested != "auto":
         return Choice(requested)
+    finger = recommended or FALLBACK_FINGER
+    whose = "the texture's recommended finger" if recommended else "no finger in the texture's file"
+    why = f"{whose}: {finger.speed_mm_s:g} mm/s under {finger.force_n:g} N"
+    if force_n is not None:
+        finger = finger.model_copy(update={"force_n": force_n})
+        why = f"{whose}: {finger.speed_mm_s:g} mm/s, under --force {force_n:g} N"
     if not pynput_installed():
-        return Choice(AUTO_SWIPE, f"no pynput for the mouse: {INSTALL_HINT}")
+        return Choice(auto_swipe(finger), f"no pynput for the mouse: {INSTALL_HINT}; {why}")
     try:
         width, height = screen_size_px()
     except BackendError:
-        return Choice(AUTO_SWIPE, "no display")
-    return Choice("mouse://", f"{width}x{height} screen onto the plate, left button held touches")
+        return Choice(auto_swipe(finger), f"no display; {why}")
+    return Choice(f"mouse://?force_n={finger.force_n:g}",
+                  f"{width}x{height} screen onto the plate, left button held touches; {why}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -145,7 +165,8 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--record: must end in .npz, got '{args.record}'")
         check_writable_target(args.record, "recordings")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
-    output, finger = choose_output(args.output, args.rate), choose_input(args.input)
+    recommended = load_texture(args.texture).finger if args.input == "auto" else None
+    output, finger = choose_output(args.output, args.rate), choose_input(args.input, recommended, args.force)
     options = session_options(args)
     with contextlib.ExitStack() as compiling:
         # A first run compiles the kernels (about 10 s): say so at once, and compile everything
@@ -235,6 +256,8 @@ class Session:
     was_touching: bool = False  # whether the last judged block was touching
     error_sum: float = 0.0
     error_max: float = 0.0
+    departed_saturated_blocks: int = 0  # of departed_blocks, those the drive saturated in
+    tally: FingerTally = field(default_factory=FingerTally)  # the touching blocks' finger, asks and saturation
 
     def elapsed_s(self) -> float:
         """Seconds since play started."""
@@ -245,6 +268,7 @@ class Session:
         rows = self.renderer.telemetry()
         if len(rows["t"]):
             self.latest = {name: float(column[-1]) for name, column in rows.items()}
+            self.tally.add(rows)
         return rows
 
     def tick(self) -> None:
@@ -271,6 +295,8 @@ class Session:
         self.judged_blocks += len(errors)
         self.departed_blocks += int(np.count_nonzero(departed))
         self.ramp_departed_blocks += int(np.count_nonzero(departed & ramping))
+        saturated = (rows["saturated"].astype(np.int64) & (FLAG_VOLTAGE | FLAG_POWER)) != 0
+        self.departed_saturated_blocks += int(np.count_nonzero(departed & saturated))
         if len(errors):
             self.error_sum += float(errors.sum())
             self.error_max = max(self.error_max, float(errors.max()))
@@ -368,6 +394,9 @@ class Session:
                          f"departures: {self.departed_blocks} blocks "
                          f"({100 * self.departed_blocks / self.judged_blocks:.1f} %) further than "
                          f"{DEPARTURE_TOLERANCE_MU:g}{self.ramp_text()}")
+        lines += hint_lines(self.tally, self.renderer.device, self.renderer.drive.max_voltage_v,
+                            stats["power_budget_w"], self.judged_blocks, self.departed_blocks,
+                            self.departed_saturated_blocks)
         return [line.replace("nan", "n/a") for line in lines]
 
 
