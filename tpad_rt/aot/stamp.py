@@ -10,9 +10,10 @@ library_stamp() -> str
     generation settings (NUMBA_OPT, NUMBA_CPU_NAME, NUMBA_CPU_FEATURES), the platform and
     the CPU (its /proc/cpuinfo identity: model and instruction-set flags)
 library_dirs() -> list[Path]
-    the folders a library may live in, in the order they are searched (and tried for writing):
-    ``$NUMBA_CACHE_DIR/tpad_rt_aot`` when set, ``tpad_rt/kernel/__pycache__`` (numba's in-tree
-    cache), the user cache ``$XDG_CACHE_HOME/tpad-rt/aot`` (default ``~/.cache``)
+    the folders a library may live in, in the order they are searched (and tried for writing),
+    beside numba's cache: ``$NUMBA_CACHE_DIR/tpad_rt_aot`` alone when that is set (numba then
+    caches only there), else ``tpad_rt/kernel/__pycache__`` (numba's in-tree cache) and the user
+    cache ``$XDG_CACHE_HOME/tpad-rt/aot`` (default ``~/.cache``) when that is read-only
 library_name(stamp) -> str
     the library's file name for a stamp
 
@@ -73,14 +74,11 @@ def _cpu_identity() -> str:
 
 def library_dirs() -> list[Path]:
     """The folders an ahead-of-time library is looked for in, first match wins (module docstring)."""
-    dirs = []
     numba_cache = os.environ.get("NUMBA_CACHE_DIR")
     if numba_cache:
-        dirs.append(Path(numba_cache) / "tpad_rt_aot")
-    dirs.append(_PACKAGE / "kernel" / "__pycache__")
+        return [Path(numba_cache) / "tpad_rt_aot"]
     user_cache = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    dirs.append(Path(user_cache) / "tpad-rt" / "aot")
-    return dirs
+    return [_PACKAGE / "kernel" / "__pycache__", Path(user_cache) / "tpad-rt" / "aot"]
 
 
 def library_name(stamp: str) -> str:
