@@ -19,6 +19,7 @@ from conftest import REPO_ROOT, require_system
 from jack_server import server_process
 from tpad_rt.aot import library as aot_library
 from tpad_rt.aot import stamp as aot_stamp
+from tpad_rt.aot import build
 from tpad_rt.aot.build import build_library, find_compiler
 from tpad_rt.aot.library import AotLibrary, open_library
 from tpad_rt.device import Device
@@ -243,3 +244,16 @@ def test_a_renderer_on_audio_starts_without_numba_when_the_library_is_there(aot:
     seen = json.loads(result.stdout.strip().splitlines()[-1])
     assert seen["aot"] and seen["blocks"] > 0
     assert seen["kernels"] == [] and not seen["compiling"] and seen["numba_imported_by"] is None
+
+
+def test_the_build_command_says_in_one_line_when_there_is_no_compiler_or_it_fails(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setenv("CC", "no-such-compiler")
+    assert build.main() == 1
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "aot: no C compiler (set CC, or install cc, gcc or clang): the kernels stay on numba's JIT"]
+    false = shutil.which("false")
+    require_system(false is not None, "program 'false'")
+    monkeypatch.setenv("CC", str(false))
+    assert build.main() == 1
+    assert capsys.readouterr().err.strip().splitlines()[-1] == f"aot: linking with {false} failed (exit 1): no message"
