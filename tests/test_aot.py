@@ -134,7 +134,7 @@ def test_library_render_callback_is_bit_identical_to_the_jit(aot: AotLibrary, de
     pipelines = (_pipeline(device, texture, options), _pipeline(device, texture, options))
     _run(pipelines, (cb.render_callback, aot.render_callback), zlib.crc32(texture.encode()), scratch_frames, channels)
     faults = pipelines[1].faults()
-    assert faults["faults"] > 0  # the guard met the bad finger rows on both sides alike
+    assert faults["faults"] != 0  # the guard met the bad finger rows on both sides alike
 
 
 def test_library_silence_callback_matches_the_jit(aot: AotLibrary) -> None:
