@@ -23,8 +23,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
      "tpad_rt.drive_guard", "tpad_rt.figures", "tpad_rt.compiling", "tpad_rt.log_histogram"),
     # physics: the paper's equations, vectorised
     ("tpad_rt.physics",),
-    # kernels: numba, pure
-    ("tpad_rt.kernel",),
+    # kernels: numba, pure; and the same callbacks compiled ahead of time (loaded without numba)
+    ("tpad_rt.kernel", "tpad_rt.aot"),
     # files and models: the config schemas, textures, the device model
     ("tpad_rt.config", "tpad_rt.texture", "tpad_rt.device", "tpad_rt.felt"),
     # the rendering pipeline and what it describes: the drive, finger samples, recordings, maps

@@ -39,6 +39,7 @@ and a watcher thread that drains telemetry and polls the driver for failures.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import numbers
 import threading
@@ -49,12 +50,11 @@ from typing import Any
 
 import numpy as np
 
-from tpad_rt.compiling import compile_notice
 from tpad_rt.device import Device
 from tpad_rt.drive import DriveSpec
 from tpad_rt.drivers import Driver, open_driver
 from tpad_rt.errors import ConfigError
-from tpad_rt.kernel import table as tab
+from tpad_rt.kernel import table_layout as tab
 from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEX_PROG_COLS,
 )
@@ -199,7 +199,7 @@ class Renderer:
         table.slot_t0_s[0] = self.now_s()
         self._last_table = table
         try:
-            with compile_notice():  # the first run in a fresh numba cache compiles the kernels here
+            with _warm_notice(driver):  # the first run in a fresh numba cache compiles the kernels here
                 driver.warm(table.copy())
                 driver.open(self._pipeline)
             self._pipeline.start()
@@ -491,3 +491,13 @@ class Renderer:
         return run_metadata(self._pipeline, self._texture, texture_path=self._texture_path,
                             block_frames=self.block_frames, input_url=self._record_input_url,
                             output_url=self.output_url)
+
+
+def _warm_notice(driver: Driver) -> contextlib.AbstractContextManager[object]:
+    """The compile notice (:func:`tpad_rt.compiling.compile_notice`) around warming ``driver`` up and opening it,
+    unless it compiles nothing (its callback and output are ahead-of-time code): numba is then not imported."""
+    if not driver.warm_compiles():
+        return contextlib.nullcontext()
+    from tpad_rt.compiling import compile_notice
+
+    return compile_notice()

@@ -48,9 +48,7 @@ from tpad_rt.drive import Consumes, DriveSpec
 from tpad_rt.errors import ConfigError, SampleError, TpadError
 from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel import layout
-from tpad_rt.kernel.atomics import publish
-from tpad_rt.kernel.batch import render_blocks
-from tpad_rt.kernel.render import render_block
+from tpad_rt.aot.library import publish
 from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, position_range_mm
 from tpad_rt.texture import CompiledTexture
 
@@ -541,7 +539,7 @@ class Pipeline:
         or before the previous sample's, a position beyond :attr:`position_range_mm` (one plate
         length or width past each edge), a force outside ``[0, MAX_FORCE_N]``. Safe from several
         threads (a lock orders them); writes the ring row, then bumps the count the kernel reads
-        with a release store (:func:`tpad_rt.kernel.atomics.publish`).
+        with a release store (:func:`tpad_rt.aot.library.publish`).
         """
         row = (*self._checked_sample(t_s, x_mm, y_mm, force_n), 1.0 if down else 0.0)
         with self._producer:
@@ -650,6 +648,8 @@ class Pipeline:
             raise TypeError("out: must be a writable C-contiguous 1-D float32 NumPy array")
         if not 1 <= out.size <= MAX_BLOCK_FRAMES:
             raise ValueError(f"out: must hold 1 to {MAX_BLOCK_FRAMES} samples, got {out.size}")
+        from tpad_rt.kernel.render import render_block  # numba: imported by what renders here, not at import
+
         render_block(out, self.sample_index, *self._arrays)
         self.sample_index += out.size
 
@@ -702,6 +702,8 @@ class Pipeline:
             if not self.finger_rows_pass(rows, due, block_frames):
                 raise SampleError("render_blocks: a finger sample push_finger refuses; push them one by one to "
                                   "learn which")
+            from tpad_rt.kernel.batch import render_blocks  # numba: imported by what renders here
+
             render_blocks(out, block_frames, self.sample_index, rows, due, *self._arrays)
             if len(rows) and len(due) and due[-1] > 0:
                 self._last_t_s = float(rows[int(due[-1]) - 1, layout.FINGER_T_S])
@@ -740,6 +742,9 @@ class Pipeline:
 
         The pipeline's own state is untouched; the first real :meth:`render` is then fast.
         """
+        from tpad_rt.kernel.batch import render_blocks
+        from tpad_rt.kernel.render import render_block
+
         frames = self.options.control_interval + 1
         scratch = KernelArrays(*(array.copy() for array in self._arrays))
         render_block(np.zeros(frames, dtype=np.float32), self.sample_index, *scratch)

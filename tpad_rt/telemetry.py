@@ -47,7 +47,7 @@ import numpy.typing as npt
 from tpad_rt.errors import ConfigError, TpadError
 from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks
 from tpad_rt.files import check_writable_target
-from tpad_rt.kernel import table as tab
+from tpad_rt.kernel import table_layout as tab
 from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, TEL_NAMES
 from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_TRAJECTORY_ROWS
 from tpad_rt.log_histogram import LogHistogram
