@@ -46,14 +46,31 @@ def test_a_path_is_taken_as_given_even_when_missing(elsewhere: Path) -> None:
      "textures/grating.yaml: no such file; the package ships a texture of that name: give just 'grating'"),
     (shipped.any_file, "devices/SLG_0.4.yaml",
      "devices/SLG_0.4.yaml: no such file; the package ships a device of that name: give just 'SLG_0.4'"),
-    (shipped.texture_file, "gratin", "gratin: no such file, nor a shipped texture of that name (shipped: "),
-    (shipped.device_file, "SLG_9", "SLG_9: no such file, nor a shipped device of that name (shipped: "),
+    (shipped.texture_file, "gratin",
+     "gratin: no such file, nor a shipped texture of that name; did you mean 'grating'? (shipped: "),
+    (shipped.texture_file, "nosuch", "nosuch: no such file, nor a shipped texture of that name (shipped: "),
+    (shipped.device_file, "SLG_9", "SLG_9: no such file, nor a shipped device of that name; did you mean "),
     (shipped.any_file, "nosuch", "nosuch: no such file, nor a shipped texture or device of that name (textures: "),
+    (shipped.any_file, "bumps_gird",
+     "bumps_gird: no such file, nor a shipped texture or device of that name; did you mean 'bumps_grid'? "),
 ])
 def test_what_names_nothing_says_what_exists(elsewhere: Path, resolve, ref: str, message: str) -> None:
     with pytest.raises(ConfigError) as raised:
         resolve(ref)
     assert str(raised.value).startswith(message)
+
+
+def test_a_name_close_to_a_file_in_its_folder_says_which(elsewhere: Path) -> None:
+    """The working folder's YAML files are candidates for a bare name; a missing path's folder's for the path."""
+    (elsewhere / "my_texture.yaml").write_text("kind: grating\n")
+    (elsewhere / "mine").mkdir()
+    (elsewhere / "mine" / "stripes.yaml").write_text("kind: grating\n")
+    for ref, meant in (("my_texture", "my_texture.yaml"), ("my_textur.yaml", "my_texture.yaml"),
+                       ("mine/stripe.yaml", "mine/stripes.yaml")):
+        with pytest.raises(ConfigError) as raised:
+            shipped.texture_file(ref)
+        assert f"did you mean '{meant}'?" in str(raised.value)
+    assert shipped.texture_file("mine/other.yaml") == "mine/other.yaml"  # nothing close: the reader says it is missing
 
 
 @pytest.mark.parametrize("ref", ["a" * 5000, "a" * 5000 + ".yaml", "a\0b", "x/" + "y" * 300])
