@@ -84,3 +84,23 @@ def test_a_name_the_system_refuses_is_answered_not_raised(elsewhere: Path, ref: 
             assert "no such file" in str(error)
         else:
             assert resolved == ref  # a path: reading it says what is wrong
+
+
+def test_play_misspelt_says_did_you_mean_in_one_line(elsewhere: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tpad_rt.cli import main
+
+    assert main(["play", "gratin", "--output", "null://", "--duration", "0.1"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("tpad-rt play: gratin: no such file, nor a shipped texture of that name; did you mean "
+                          "'grating'? (shipped: ") and err.count("\n") == 1, err
+
+
+def test_play_help_names_the_shipped_textures_and_every_output(capsys: pytest.CaptureFixture[str]) -> None:
+    from tpad_rt.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["play", "--help"])
+    text = " ".join(capsys.readouterr().out.split())  # as one line: argparse wraps it
+    assert all(name in text for name in shipped.texture_names())
+    for url in ("audio://", "serial://PORT", "sim://", "wav://", "null://", "scripted://swipe", "mouse://"):
+        assert url in text
