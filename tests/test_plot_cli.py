@@ -55,3 +55,20 @@ def test_not_a_recording(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert main(["plot", str(tmp_path / "x.npz"), "--out", str(tmp_path / "x.png")]) == 1
     assert capsys.readouterr().err == f"tpad-rt plot: {tmp_path}/x.npz: not a tpad-rt recording (not an .npz archive)\n"
     assert not (tmp_path / "x.png").exists()
+
+
+def test_an_amplifier_emulators_recording_gets_a_pointer_to_the_doc_that_checks_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The emulator's recording (written by its own writer) is not a render's: one line says what it is, what plot
+    draws instead, and where docs/amplifiers.md checks it; no image is written."""
+    from tpad_rt.amp.emulator import RECORDED_COLUMNS, Recorder, write_recording
+
+    recorder = Recorder()
+    recorder.add(**{name: np.arange(4).astype(dtype) for name, dtype in RECORDED_COLUMNS.items()})
+    write_recording(str(tmp_path / "e.npz"), recorder, {"envelope_hz": 16000, "frames_ok": 4})
+    assert main(["plot", str(tmp_path / "e.npz"), "--out", str(tmp_path / "e.png")]) == 1
+    assert capsys.readouterr().err == (
+        f"tpad-rt plot: {tmp_path}/e.npz: an amplifier emulator's recording (tpad-rt amp emulate --record): plot draws "
+        "the recordings of render and of play --record (play --output serial://PORT --record FILE.npz records the "
+        "same run on the host's side); docs/amplifiers.md, 'Checking a recording', shows how to check this one\n")
+    assert not (tmp_path / "e.png").exists()

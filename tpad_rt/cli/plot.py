@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import zipfile
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,14 @@ from tpad_rt.figures import figure_target, pyplot, save
 from tpad_rt.files import ensure_regular
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION
 from tpad_rt.recording import Recording, read_recording
+
+#: What plot says of an amplifier emulator's recording (``tpad-rt amp emulate --record``).
+AMPLIFIER_RECORDING = (
+    "an amplifier emulator's recording (tpad-rt amp emulate --record): plot draws the recordings of render and of "
+    "play --record (play --output serial://PORT --record FILE.npz records the same run on the host's side); "
+    "docs/amplifiers.md, 'Checking a recording', shows how to check this one")
+#: Entries every amplifier emulator's recording holds (tpad_rt.amp.emulator.RECORDED_COLUMNS), as archive members.
+_AMPLIFIER_ENTRIES = {"t_s.npy", "envelope_v.npy", "index.npy", "plate_amplitude_um.npy"}
 
 _TARGET, _ACHIEVED, _LIMIT, _AVERAGE = "#1f5fa8", "#e07b00", "#c0392b", "#6a3d9a"
 _SATURATED, _LIFTED, _DEPARTED = "#e74c3c", "#7f8c8d", "#8e44ad"
@@ -51,10 +60,23 @@ def run(args: argparse.Namespace) -> int:
     image name that is not a figure or names an existing non-regular file."""
     out = figure_target("--out", args.out)
     ensure_regular(args.recording, "recordings")
+    if _amplifier_recording(args.recording):
+        raise ConfigError(f"{args.recording}: {AMPLIFIER_RECORDING}")
     figure = plot_recording(read_recording(args.recording), along=args.along, start_s=args.start, end_s=args.end)
     save(figure, out)
     print(f"wrote {out}")
     return 0
+
+
+def _amplifier_recording(path: str) -> bool:
+    """True when ``path`` is an archive holding an amplifier emulator's recording, not a tpad-rt recording; False
+    for anything else (read_recording then says what it is)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = set(archive.namelist())
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError):
+        return False
+    return _AMPLIFIER_ENTRIES <= names and "format.npy" not in names
 
 
 def plot_recording(recording: Recording, along: str = "time", start_s: float = -math.inf,
