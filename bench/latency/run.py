@@ -4,7 +4,7 @@ latency and start-up time, on a JACK dummy server at 192 kHz.
     python bench/latency/run.py                 # full run: 30 s per load and callback, in 6 runs
     python bench/latency/run.py --quick         # 6 s in 3 runs, fewer start-ups
     python bench/latency/run.py --seconds 60    # longer load runs
-    python bench/latency/run.py --smoke --out DIR  # every part once, in short windows: figures meaningless
+    python bench/latency/run.py --smoke --out DIR  # every part once, idle, in short windows: figures meaningless
 
 Writes bench/results/latency.json and latency.md and prints the tables. Every measured
 configuration runs in a fresh process (bench/latency/worker.py) against a dummy JACK
@@ -70,8 +70,8 @@ TARGET_S = 2 * LOAD_BLOCK / RATE_HZ
 
 @dataclass(frozen=True)
 class Plan:
-    """Seconds per compute-time run, at each of ``compute_blocks``; seconds per load and callback, split into
-    ``load_runs`` runs; start-up runs, warm and with an empty numba cache."""
+    """Seconds per compute-time run, at each of ``compute_blocks``; seconds per load (of ``loads``) and callback,
+    split into ``load_runs`` runs; start-up runs, warm and with an empty numba cache."""
 
     compute_s: float
     load_s: float
@@ -79,6 +79,7 @@ class Plan:
     load_runs: int = 6
     cold_startups: int = 3
     compute_blocks: tuple[int, ...] = COMPUTE_BLOCKS
+    loads: tuple[str, ...] = LOADS
 
     @property
     def run_s(self) -> float:
@@ -86,8 +87,9 @@ class Plan:
         return self.load_s / self.load_runs
 
 
-#: The test suite's smoke run (tests/test_bench_smoke.py): every part once, at 64 frames, in short windows.
-SMOKE = Plan(compute_s=0.2, load_s=0.2, startups=1, load_runs=1, cold_startups=0, compute_blocks=(LOAD_BLOCK,))
+#: The test suite's smoke run (tests/test_bench_smoke.py): every part once, at 64 frames, idle, in short windows.
+SMOKE = Plan(compute_s=0.2, load_s=0.2, startups=1, load_runs=1, cold_startups=0, compute_blocks=(LOAD_BLOCK,),
+             loads=("idle",))
 
 
 def _worker(args: list[str], env: dict[str, str], timeout_s: float) -> dict[str, Any]:
@@ -146,7 +148,7 @@ def measure_loads(plan: Plan, gil_threads: int, log: Callable[[str], None], logs
     with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-load.log") as env:
         report["server_playback_latency_frames"] = playback_latency_frames(env["JACK_DEFAULT_SERVER"])
         names = list(CALLBACKS)
-        for load in LOADS:
+        for load in plan.loads:
             for run in range(plan.load_runs):
                 for callback in names[run % len(names):] + names[:run % len(names)]:
                     load_average = os.getloadavg()[0]
@@ -414,7 +416,8 @@ def markdown(report: dict[str, Any]) -> str:
         "| per run | runs above / below / equal baseline | p (more than baseline) | compute p50 / p99 / max us |",
         "| --- | --- | ---: | ---: | ---: | --- | ---: | ---: | ---: |",
     ]
-    for load in LOADS:
+    loads = plan.get("loads", LOADS)  # a latency.json from before the plan named them: all three
+    for load in loads:
         for callback in CALLBACKS:
             group = groups.get((load, callback))
             if group is None:
@@ -447,7 +450,7 @@ def markdown(report: dict[str, Any]) -> str:
     latency_rows = [(f"idle (part 1, {format(plan['compute_s'], 'g')} s)", "sync (-S)", _latency_cells(row))
                     for row in report["compute"] if row["callback"] == "tpad"]
     latency_rows += [(f"{load} (part 2)", "sync (-S)", _group_latency_cells(groups.get((load, "tpad"), {})))
-                     for load in LOADS]
+                     for load in loads]
     if "async" in report:
         latency_rows.append((f"idle ({format(plan['compute_s'], 'g')} s)", "async (default)",
                              _latency_cells({**report["async"], "block": LOAD_BLOCK})))
@@ -598,8 +601,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true",
                         help="6 s per load and callback in 3 runs, 3 s compute runs, 5 start-ups")
     parser.add_argument("--smoke", action="store_true",
-                        help="the test suite's check that the bench runs: every part once at 64 frames, 0.2 s windows, "
-                             "no start-up with an empty cache (figures meaningless)")
+                        help="the test suite's check that the bench runs: every part once at 64 frames, part 2 idle "
+                             "only, 0.2 s windows, no start-up with an empty cache (figures meaningless)")
     parser.add_argument("--seconds", type=float, default=None,
                         help="seconds per load and callback, split into 6 runs (default 30; --quick 6, 3 runs)")
     parser.add_argument("--gil-threads", type=int, default=1, help="Python threads spinning for GIL load (default 1)")
