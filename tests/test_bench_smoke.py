@@ -63,7 +63,9 @@ def _results_state() -> dict[str, float]:
     return {path.name: path.stat().st_mtime for path in (BENCH / "results").iterdir()}
 
 
-@pytest.mark.parametrize("script", sorted(SMOKES))
+@pytest.mark.slow
+@pytest.mark.parametrize("script", [pytest.param(script, marks=[pytest.mark.system] if script in NEEDS_JACK else [])
+                                    for script in sorted(SMOKES)])
 def test_the_benchmark_runs_in_its_smoke_mode(script: str, tmp_path: Path) -> None:
     arguments, stem = SMOKES[script]
     if script in NEEDS_JACK:
