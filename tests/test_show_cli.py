@@ -40,12 +40,30 @@ def test_show_writes_a_png(texture: Path, extra: list[str], tmp_path: Path, caps
         assert image.format == "PNG" and image.size == FIGURE_PX
     stdout = capsys.readouterr().out
     assert stdout.startswith(f"wrote {out}: ") and "% of the plate saturated" in stdout
-    assert stdout.count("\n") == 1
+    assert stdout.count("\n") == (2 if "temporal" in texture.name else 1)  # a flat map in time: a second line
 
 
-def _maps(texture: str, speed_mm_s: float = 100.0, force_n: float = 0.5):  # type: ignore[no-untyped-def]
+def test_a_flat_map_of_a_texture_that_changes_in_time_says_which_t_s_draws_another_level(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """temporal_pulse is 1.0 (vibration off) everywhere at t = 0: show says it changes in time and names a --t-s
+    that draws another level; at that time the map is that level. A texture that varies over the plate says
+    nothing more."""
+    out = tmp_path / "pulse.png"
+    assert main(["show", str(TEXTURES / "temporal_pulse.yaml"), "--resolution-mm", "5", "--out", str(out)]) == 0
+    hint = capsys.readouterr().out.splitlines()[1]
+    assert hint.startswith("the map is flat at t = 0 s (1 everywhere): this texture changes in time, not over the "
+                           "plate (friction 0.5 to 1 over 2 s from there); --t-s "), hint
+    t_s, level = hint.split("--t-s ")[1].split(" draws it at ")
+    assert level == "0.5"
+    _, maps = _maps("temporal_pulse.yaml", t_s=float(t_s))
+    assert np.all(maps.friction == 0.5)
+    assert main(["show", str(TEXTURES / "grating.yaml"), "--resolution-mm", "5", "--out", str(out)]) == 0
+    assert capsys.readouterr().out.count("\n") == 1
+
+
+def _maps(texture: str, speed_mm_s: float = 100.0, force_n: float = 0.5, t_s: float = 0.0):  # type: ignore[no-untyped-def]
     device = Device.default()
-    return device, plate_maps(load_compiled(TEXTURES / texture), device, Finger(speed_mm_s, 0.0, force_n), 0.0, 1.0)
+    return device, plate_maps(load_compiled(TEXTURES / texture), device, Finger(speed_mm_s, 0.0, force_n), t_s, 1.0)
 
 
 def test_maps_cover_the_plate_and_invert_the_friction_model() -> None:

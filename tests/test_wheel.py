@@ -1,5 +1,8 @@
 """The package as a user installs it: a wheel built from the repository, installed (not editable)
-into a fresh virtual environment, run from a folder that is not the repository.
+into a fresh virtual environment, run from a folder that is not the repository; then, in the same
+environment, the README's ``pip install -e .``. Everything runs on a PATH with no C compiler (the
+venv's bin folder and an empty one; ``CC`` and ``CXX`` are ``/bin/false``), as on a machine with
+Python alone: a dependency that only builds from source fails the install.
 
 The shipped textures and device files must come with it as package data. Building and
 installing needs the build backend and the dependencies from a package index (or pip's
@@ -9,6 +12,7 @@ cache): without one the test skips, and fails under TPAD_RT_REQUIRE_SYSTEM=1.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import venv
@@ -21,10 +25,20 @@ from conftest import REPO_ROOT, require_system
 from tpad_rt.compiling import NOTICE
 
 pytestmark = [pytest.mark.slow, pytest.mark.system]
+#: What builds C extensions: none of them may be on the PATH the installs run on.
+COMPILERS = ("cc", "gcc", "clang", "c++", "g++", "clang++", "x86_64-linux-gnu-gcc")
 
 
 def _run(command: list[str], cwd: Path, env: dict[str, str], timeout_s: float = 600) -> subprocess.CompletedProcess[str]:
     return subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout_s, check=False)
+
+
+def _without_compilers(env: dict[str, str], bin_dir: Path, empty: Path) -> dict[str, str]:
+    """``env`` on a PATH of ``bin_dir`` (the venv's) and ``empty``, with ``CC`` and ``CXX`` failing: no compiler
+    of COMPILERS can be found (asserted)."""
+    path = os.pathsep.join([str(bin_dir), str(empty)])
+    assert [name for name in COMPILERS if shutil.which(name, path=path)] == []
+    return {**env, "PATH": path, "CC": "/bin/false", "CXX": "/bin/false"}
 
 
 @pytest.fixture(scope="module")
@@ -34,13 +48,15 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, 
     env = {key: value for key, value in os.environ.items()
            if key not in ("PYTHONPATH", "VIRTUAL_ENV", "DISPLAY", "PYTHONHOME")}
     env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
+    bin_dir = root / "venv" / "bin"
+    (root / "empty").mkdir()
+    env = _without_compilers(env, bin_dir, root / "empty")
     built = _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(root / "dist"), str(REPO_ROOT)],
                  root, env)
     require_system(built.returncode == 0, f"a wheel build (pip wheel: {built.stderr.strip()[-300:]})")
     wheels = sorted((root / "dist").glob("tpad_rt-*.whl"))
     assert len(wheels) == 1, wheels
     venv.create(root / "venv", with_pip=True)
-    bin_dir = root / "venv" / "bin"
     # --no-compile: byte-compiling every dependency's modules took half of the install (24 of 42 s); Python
     # compiles what it imports when it imports it. --only-binary=:all:: wheels only, as on a machine with no C
     # compiler (python-evdev, which pynput pulls in on Linux, is source only: it is the extra tpad-rt[inputs]).
@@ -140,3 +156,23 @@ def test_without_the_inputs_extra_the_mouse_says_what_to_install(installed: tupl
     auto = _run(play, elsewhere, {**env, "DISPLAY": ":0"})
     assert auto.returncode == 0, auto.stderr
     assert "(no pynput for the mouse: pip install 'tpad-rt[inputs]'" in auto.stdout.splitlines()[0], auto.stdout
+
+
+
+def test_the_readme_editable_install_needs_no_compiler_either(installed: tuple[Path, dict[str, str]]) -> None:
+    """``pip install -e .`` (the README's set-up) in the same environment on the PATH without a compiler, every
+    dependency upgraded to what pip picks for a fresh environment (no ``--only-binary``: a newest release that is
+    source only, cobs 1.2.2 today, is built here) and nothing taken from pip's cache (it may hold wheels built
+    with a compiler): it installs, ``tpad_rt`` then comes from the repository, and no distribution in the
+    environment is a platform wheel built on some machine (a ``linux_*`` tag, not ``manylinux``). It replaces
+    the wheel in the venv: the last test of this file."""
+    bin_dir, env = installed
+    elsewhere = bin_dir.parent.parent / "elsewhere"
+    done = _run([str(bin_dir / "python"), "-m", "pip", "install", "-q", "--no-compile", "--no-cache-dir", "--upgrade",
+                 "--upgrade-strategy", "eager", "-e", str(REPO_ROOT)], elsewhere, env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    where = _run([str(bin_dir / "python"), "-c", "import tpad_rt; print(tpad_rt.__file__)"], elsewhere, env)
+    assert where.returncode == 0 and Path(where.stdout.strip()).is_relative_to(REPO_ROOT), where.stderr
+    built_somewhere = [wheel.parent.name for wheel in bin_dir.parent.glob("lib/python*/site-packages/*.dist-info/WHEEL")
+                       if any(line.startswith("Tag:") and "-linux_" in line for line in wheel.read_text().splitlines())]
+    assert built_somewhere == []

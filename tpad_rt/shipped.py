@@ -14,7 +14,9 @@ texture_file(ref) -> ref or Path, device_file(ref) -> ref or Path
     ``ref`` itself when it names a file or looks like a path (it has a folder or a
     ``.yaml``/``.yml`` suffix), else the shipped file of that name; ConfigError naming
     the shipped ones when there is none, or naming the shipped file when a missing path
-    ends in a shipped file's name (``textures/grating.yaml`` run outside the repository)
+    ends in a shipped file's name (``textures/grating.yaml`` run outside the repository);
+    a name or missing path close to a shipped name or a YAML file in its folder gets
+    "did you mean" (difflib)
 any_file(ref) -> ref or Path
     the same for a ref that may name either (``tpad-rt check``): a shipped texture first
 DEFAULT_DEVICE
@@ -23,6 +25,7 @@ DEFAULT_DEVICE
 
 from __future__ import annotations
 
+import difflib
 import importlib.resources
 import os
 from pathlib import Path
@@ -63,6 +66,29 @@ def device_names() -> list[str]:
     return _names(DEVICES_DIR)
 
 
+def _yaml_files(folder: str) -> list[str]:
+    """Names of the YAML files in ``folder`` (``""``: the working folder); empty when it cannot be listed."""
+    try:
+        with os.scandir(folder or ".") as entries:
+            return [entry.name for entry in entries if os.path.splitext(entry.name)[1].lower() in _SUFFIXES]
+    except (OSError, ValueError):
+        return []
+
+
+def _did_you_mean(text: str, candidates: list[str], folder: str = "") -> str:
+    """``"; did you mean 'FOLDER/X'?"`` for the candidate X closest to ``text`` (difflib, on the names without a
+    ``.yaml`` suffix: the suffix alone would make two names alike), or ``""`` when none is close."""
+    by_stem = {_stem(candidate): candidate for candidate in reversed(candidates)}  # the first of a stem wins
+    close = difflib.get_close_matches(_stem(text), list(by_stem), n=1)
+    return f"; did you mean '{os.path.join(folder, by_stem[close[0]])}'?" if close else ""
+
+
+def _stem(name: str) -> str:
+    """``name`` without a ``.yaml``/``.yml`` suffix."""
+    root, suffix = os.path.splitext(name)
+    return root if suffix.lower() in _SUFFIXES else name
+
+
 def _resolve(ref: PathLike, folder: Path, what: str) -> PathLike:
     """``ref`` itself, or the shipped ``folder / (ref + ".yaml")`` for a bare name (module docstring)."""
     path = Path(ref)
@@ -75,12 +101,17 @@ def _resolve(ref: PathLike, folder: Path, what: str) -> PathLike:
             # textures/grating.yaml outside a clone of the repository: the name reaches the shipped file
             raise ConfigError(f"{text}: no such file; the package ships a {what} of that name: give just "
                               f"'{path.stem}'")
+        parent, name = os.path.split(text)
+        hint = _did_you_mean(name, _yaml_files(parent), parent) if name else ""
+        if hint:  # textures/gratin.yaml: a file next to it is what was meant
+            raise ConfigError(f"{text}: no such file{hint}")
         return ref
     shipped = folder / f"{text}.yaml"
     if os.path.isfile(shipped):
         return shipped
     names = _names(folder)
-    raise ConfigError(f"{text}: no such file, nor a shipped {what} of that name "
+    hint = _did_you_mean(text, names + _yaml_files(""))
+    raise ConfigError(f"{text}: no such file, nor a shipped {what} of that name{hint} "
                       f"(shipped: {', '.join(names) if names else 'none found in ' + str(folder)})")
 
 
@@ -112,6 +143,8 @@ def any_file(ref: PathLike) -> PathLike:
         if resolved is not ref:
             return resolved  # a shipped name
     if refused == 2:
-        raise ConfigError(f"{os.fspath(ref)}: no such file, nor a shipped texture or device of that name "
+        text = os.fspath(ref)
+        hint = _did_you_mean(text, texture_names() + device_names() + _yaml_files(""))
+        raise ConfigError(f"{text}: no such file, nor a shipped texture or device of that name{hint} "
                           f"(textures: {', '.join(texture_names())}; devices: {', '.join(device_names())})")
     return ref  # a path naming nothing shipped: reading it says it is missing

@@ -2,6 +2,7 @@
 
     python bench/kernel/run.py            # full run: writes bench/results/kernel.{json,md}
     python bench/kernel/run.py --quick    # a short run (same outputs, rougher figures)
+    python bench/kernel/run.py --smoke --out DIR  # seconds: every section once at one block (figures meaningless)
 
 Three implementations render the same finger path (a sweep across the plate, 1 kHz
 samples, 40-115 mm/s, force 0.3-1.3 N) with the same texture, in the same run:
@@ -76,7 +77,9 @@ Run = Callable[[], int]
 
 @dataclass(frozen=True)
 class Plan:
-    """Seconds of audio per run and runs per figure, for each implementation."""
+    """Seconds of audio per run and runs per figure, for each implementation; the block sizes measured
+    (``blocks``; ``offline_blocks`` for the offline section) and the control intervals swept (at
+    ``sweep_blocks``)."""
 
     kernel_s: float
     kernel_runs: int
@@ -86,12 +89,19 @@ class Plan:
     numpy_runs: int
     agreement_s: float
     offline_runs: int
+    blocks: tuple[int, ...] = BLOCKS
+    offline_blocks: tuple[int, ...] = OFFLINE_BLOCKS
+    intervals: tuple[int, ...] = INTERVALS
+    sweep_blocks: tuple[int, ...] = (64, 4096)
 
 
 FULL = Plan(kernel_s=10.0, kernel_runs=31, pipeline_s=2.0, pipeline_runs=11, numpy_s=0.25, numpy_runs=5, agreement_s=1.0,
             offline_runs=21)
 QUICK = Plan(kernel_s=0.25, kernel_runs=5, pipeline_s=0.1, pipeline_runs=3, numpy_s=0.03, numpy_runs=2,
              agreement_s=0.1, offline_runs=3)
+#: The test suite's smoke run (tests/test_bench_smoke.py): every section once, at one block size.
+SMOKE = Plan(kernel_s=0.01, kernel_runs=1, pipeline_s=0.01, pipeline_runs=1, numpy_s=0.005, numpy_runs=1,
+             agreement_s=0.01, offline_runs=1, blocks=(64,), offline_blocks=(64,), intervals=(32,), sweep_blocks=(64,))
 
 
 def finger_path(duration_s: float) -> np.ndarray:
@@ -198,7 +208,7 @@ class Case:
         samples = {name: np.zeros(total, dtype=np.float32) for name in ("kernel", "pipeline", "numpy")}
         for name, make in (("kernel", self.kernel), ("pipeline", self.python_calls), ("numpy", self.numpy)):
             make(block, seconds, samples[name])()
-        scale = max(float(np.abs(samples["pipeline"]).max()), np.finfo(np.float32).tiny)
+        scale = max(float(np.abs(samples["pipeline"]).max()), float(np.finfo(np.float32).tiny))  # JSON: a float
         return {
             "driver_equals_pipeline": bool(np.array_equal(samples["kernel"], samples["pipeline"])),
             "numpy_max_difference_over_max_sample": float(np.abs(samples["numpy"] - samples["pipeline"]).max()) / scale,
@@ -214,7 +224,7 @@ def measure(plan: Plan, log: Callable[[str], None]) -> dict[str, object]:
         case = Case(device, ROOT / "textures" / file_name, RenderOptions())
         assert case.model.kind == kind, f"{file_name} is a {case.model.kind} texture"
         checks = case.agreement(plan.agreement_s)
-        for block in BLOCKS:
+        for block in plan.blocks:
             kernel = ns_per_sample(lambda: case.kernel(block, plan.kernel_s), plan.kernel_runs)
             pipeline = ns_per_sample(lambda: case.python_calls(block, plan.pipeline_s), plan.pipeline_runs)
             numpy = ns_per_sample(lambda: case.numpy(block, plan.numpy_s), plan.numpy_runs)
@@ -228,9 +238,9 @@ def measure(plan: Plan, log: Callable[[str], None]) -> dict[str, object]:
                 f"Pipeline.render {pipeline['median']:7.1f}, numpy {numpy['median']:8.0f}")
     offline = measure_offline(plan, log)
     sweep = []
-    for interval in INTERVALS:
+    for interval in plan.intervals:
         case = Case(device, ROOT / "textures" / TEXTURES["grating"], RenderOptions(control_interval=interval))
-        for block in (64, 4096):
+        for block in plan.sweep_blocks:
             kernel = ns_per_sample(lambda: case.kernel(block, plan.kernel_s), plan.kernel_runs)
             sweep.append({"control_interval": interval, "block": block, "kernel_ns_per_sample": kernel})
             log(f"grating, control_interval {interval:3d}, block {block:4d}: kernel {kernel['median']:6.2f} ns/sample")
@@ -242,7 +252,7 @@ def measure_offline(plan: Plan, log: Callable[[str], None]) -> list[dict[str, ob
     device = Device.default()
     offline: list[dict[str, object]] = []
     grating = Case(device, ROOT / "textures" / TEXTURES["grating"], RenderOptions())
-    for block in OFFLINE_BLOCKS:
+    for block in plan.offline_blocks:
         kernel = ns_per_sample(lambda: grating.kernel(block, plan.kernel_s), plan.kernel_runs)
         whole = ns_per_sample(lambda: grating.offline(block), plan.offline_runs)
         offline.append({"block": block, "kernel_ns_per_sample": kernel, "offline_ns_per_sample": whole,
@@ -268,13 +278,15 @@ def machine() -> dict[str, object]:
 
 def markdown(report: dict[str, object]) -> str:
     """The report as Markdown tables."""
+    flag = " --smoke" if report.get("smoke") else " --quick" if report["quick"] else ""
+
     def band(figure: dict[str, float], digits: int) -> str:
         return f"{figure['median']:.{digits}f} ({figure['p10']:.{digits}f}-{figure['p90']:.{digits}f})"
 
     lines = [
         "# Render pipeline throughput",
         "",
-        f"Generated by `python bench/kernel/run.py{' --quick' if report['quick'] else ''}`; "
+        f"Generated by `python bench/kernel/run.py{flag}`; "
         f"fs = {FS_HZ} Hz, default RenderOptions (control_interval 32); "
         f"{report['machine']['cpu']}, {report['machine']['cores']} cores, numba {report['machine']['numba']}.",
         "ns per output sample: median (p10-p90) over fresh runs. kernel: `render_block` from a `@cfunc` "
@@ -314,18 +326,21 @@ def markdown(report: dict[str, object]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="short runs (rougher figures)")
+    parser.add_argument("--smoke", action="store_true",
+                        help="the test suite's check that the bench runs: every section once at one block (seconds; "
+                             "figures meaningless)")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for kernel.json/.md")
     parser.add_argument("--offline-only", action="store_true",
                         help="measure the offline section only; keep the rest of kernel.json as it is")
     args = parser.parse_args(argv)
-    plan = QUICK if args.quick else FULL
+    plan = SMOKE if args.smoke else QUICK if args.quick else FULL
     log = lambda line: print(line, flush=True)  # noqa: E731
     if args.offline_only:
         report = json.loads((args.out / "kernel.json").read_text())
         report["offline"] = measure_offline(plan, log)
         report["offline_machine"] = machine()
     else:
-        report = {"quick": args.quick, "fs_hz": FS_HZ, "plan": asdict(plan), "machine": machine(),
+        report = {"quick": args.quick, "smoke": args.smoke, "fs_hz": FS_HZ, "plan": asdict(plan), "machine": machine(),
                   **measure(plan, log)}
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "kernel.json").write_text(json.dumps(report, indent=1) + "\n")

@@ -2,6 +2,7 @@
 
     python bench/latency/emulator_pty.py            # 4 rounds per load
     python bench/latency/emulator_pty.py --quick    # 2 rounds, fewer commands and trips
+    python bench/latency/emulator_pty.py --smoke --out DIR  # 1 round idle, 20 commands, 1 trip: figures meaningless
 
 Writes bench/results/emulator_pty.json and emulator_pty.md and prints the tables. These
 are the timings the emulator's tests once judged on the wall clock (and retried when a
@@ -202,16 +203,16 @@ def markdown(report: dict[str, Any]) -> str:
              f"{report['machine']['cpus']} CPUs, Python {report['machine']['python']}, load average before "
              f"{report['machine']['loadavg_before']}; the host at {report['machine']['host_priority']}, the writers "
              f"one above).", "",
-             "Loads: " + "; ".join(f"{name}: {text}" for name, text in LOADS.items()) + ".", "",
+             "Loads: " + "; ".join(f"{name}: {LOADS[name]}" for name in p["loads"]) + ".", "",
              "| figure | load | emulator p50 / p99 / max | echo p50 / p99 / max | p50 ratio |", "|---|---|---|---|---:|"]
     for figure, title in (("round_trip_ms", "command round trip"), ("jitter_ms", "STATUS arrival jitter")):
-        for load in LOADS:
+        for load in p["loads"]:
             mine, base = s[f"emulator/{load}"][figure], s[f"echo/{load}"][figure]
             lines.append(f"| {title} | {load} | {mine['p50']:.3f} / {mine['p99']:.3f} / {mine['max']:.3f} ms | "
                          f"{base['p50']:.3f} / {base['p99']:.3f} / {base['max']:.3f} ms | "
                          f"{mine['p50'] / base['p50']:.2f} |")
     lines += ["", "| load | silence to the watchdog's trip seen, p50 / p99 / max | nominal |", "|---|---|---|"]
-    for load in LOADS:
+    for load in p["loads"]:
         row = s[f"emulator/{load}"]["watchdog_ms"]
         lines.append(f"| {load} | {row['p50']:.1f} / {row['p99']:.1f} / {row['max']:.1f} ms | 38-43 ms, plus the "
                      "pty's delivery (the echo's round trip) |")
@@ -232,15 +233,19 @@ def host_priority() -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="2 rounds, 100 commands and 5 trips a round")
+    parser.add_argument("--smoke", action="store_true",
+                        help="the test suite's check that the bench runs: 1 round idle, 20 commands, 1 trip "
+                             "(figures meaningless)")
     parser.add_argument("--rounds", type=int, default=4, help="rounds per load (default 4)")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for the results")
     args = parser.parse_args(argv)
-    rounds, commands, trips = (2, 100, 5) if args.quick else (args.rounds, 300, 10)
+    rounds, commands, trips = (1, 20, 1) if args.smoke else (2, 100, 5) if args.quick else (args.rounds, 300, 10)
+    loads = ["idle"] if args.smoke else list(LOADS)
     loadavg_before = " ".join(Path("/proc/loadavg").read_text().split()[:3])
     priority = host_priority()
-    runs: dict[str, dict[str, list[dict[str, list[float]]]]] = {w: {load: [] for load in LOADS} for w in WRITERS}
+    runs: dict[str, dict[str, list[dict[str, list[float]]]]] = {w: {load: [] for load in loads} for w in WRITERS}
     for round_number in range(rounds):
-        for load in LOADS:
+        for load in loads:
             with contextlib.ExitStack() as load_on:
                 if load == "cpu":
                     load_on.enter_context(cpu_hogs(os.cpu_count() or 2))
@@ -251,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
                                     if any(result[figure] for result in results) else {}
                                     for figure in ("round_trip_ms", "jitter_ms", "watchdog_ms")}
                for writer, by_load in runs.items() for load, results in by_load.items()}
-    report = {"parameters": {"rounds": rounds, "commands": commands, "trips": trips},
+    report = {"parameters": {"rounds": rounds, "commands": commands, "trips": trips, "loads": loads},
               "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform(),
                           "loadavg_before": loadavg_before, "host_priority": priority},
               "summary": summary}

@@ -4,6 +4,7 @@ latency and start-up time, on a JACK dummy server at 192 kHz.
     python bench/latency/run.py                 # full run: 30 s per load and callback, in 6 runs
     python bench/latency/run.py --quick         # 6 s in 3 runs, fewer start-ups
     python bench/latency/run.py --seconds 60    # longer load runs
+    python bench/latency/run.py --smoke --out DIR  # every part once, idle, in short windows: figures meaningless
 
 Writes bench/results/latency.json and latency.md and prints the tables. Every measured
 configuration runs in a fresh process (bench/latency/worker.py) against a dummy JACK
@@ -45,7 +46,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -69,18 +70,26 @@ TARGET_S = 2 * LOAD_BLOCK / RATE_HZ
 
 @dataclass(frozen=True)
 class Plan:
-    """Seconds per compute-time run; seconds per load and callback, split into ``load_runs`` runs; start-up runs."""
+    """Seconds per compute-time run, at each of ``compute_blocks``; seconds per load (of ``loads``) and callback,
+    split into ``load_runs`` runs; start-up runs, warm and with an empty numba cache."""
 
     compute_s: float
     load_s: float
     startups: int
     load_runs: int = 6
     cold_startups: int = 3
+    compute_blocks: tuple[int, ...] = COMPUTE_BLOCKS
+    loads: tuple[str, ...] = LOADS
 
     @property
     def run_s(self) -> float:
         """Seconds of one load run."""
         return self.load_s / self.load_runs
+
+
+#: The test suite's smoke run (tests/test_bench_smoke.py): every part once, at 64 frames, idle, in short windows.
+SMOKE = Plan(compute_s=0.2, load_s=0.2, startups=1, load_runs=1, cold_startups=0, compute_blocks=(LOAD_BLOCK,),
+             loads=("idle",))
 
 
 def _worker(args: list[str], env: dict[str, str], timeout_s: float) -> dict[str, Any]:
@@ -96,11 +105,28 @@ def _worker(args: list[str], env: dict[str, str], timeout_s: float) -> dict[str,
     return {"error": f"exit {done.returncode}: {done.stderr.strip()[-500:]}"}
 
 
+#: Seconds a worker may take to fill an empty numba cache (the kernels compile: minutes on a loaded machine).
+WARM_TIMEOUT_S = 900
+
+
+def warm_up(env: dict[str, str], modes: list[str]) -> str | None:
+    """Run the worker once in each of ``modes``, unmeasured, to fill the numba cache if it is cold (a
+    measured worker's timeout leaves no room for the compile); the first error, or None."""
+    for mode in modes:
+        result = _worker([mode], env, WARM_TIMEOUT_S)
+        if "error" in result:
+            return f"{mode}: {result['error']}"
+    return None
+
+
 def measure_compute(plan: Plan, log: Callable[[str], None], logs: Path) -> list[dict[str, Any]]:
-    """Part 1: compute time per block, empty vs tpad-rt callback, one server per block size."""
+    """Part 1: compute time per block, empty vs tpad-rt callback, one server per block size (the numba cache
+    filled first)."""
     rows = []
-    for block in COMPUTE_BLOCKS:
+    for block in plan.compute_blocks:
         with jack_server(RATE_HZ, block, logs / f"jackd-{block}.log") as env:
+            if not rows and (error := warm_up(env, ["startup"])) is not None:
+                log(f"warm-up: {error}")
             for callback in ("silence", "tpad"):
                 result = _worker(["stream", callback, "--block", str(block), "--seconds", str(plan.compute_s)],
                                  env, plan.compute_s + 120)
@@ -122,7 +148,7 @@ def measure_loads(plan: Plan, gil_threads: int, log: Callable[[str], None], logs
     with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-load.log") as env:
         report["server_playback_latency_frames"] = playback_latency_frames(env["JACK_DEFAULT_SERVER"])
         names = list(CALLBACKS)
-        for load in LOADS:
+        for load in plan.loads:
             for run in range(plan.load_runs):
                 for callback in names[run % len(names):] + names[:run % len(names)]:
                     load_average = os.getloadavg()[0]
@@ -198,10 +224,8 @@ def measure_startup(plan: Plan, log: Callable[[str], None], logs: Path) -> dict[
         env = {key: value for key, value in env.items() if key != "DISPLAY"}  # play: scripted input, no mouse
         floor_env = {**env, "PYTHONPATH": str(logs)}
         _run_s([sys.executable, "-c", "import numba_floor"], floor_env)  # compiles its cache; not counted
-        for mode in modes:
-            warm = _worker([mode], env, 300)  # fills the numba cache if it is cold; not counted
-            if "error" in warm:
-                return {"error": f"{mode}: {warm['error']}"}
+        if (error := warm_up(env, modes)) is not None:
+            return {"error": error}
         for _ in range(plan.startups):
             baseline.append(_run_s([sys.executable, "-c", "import tpad_rt"], env))
             engine_import.append(_run_s([sys.executable, "-c", "import tpad_rt.engine"], env))
@@ -337,12 +361,15 @@ SIGNIFICANCE = 0.05
 def markdown(report: dict[str, Any]) -> str:
     """The report as Markdown tables."""
     plan, machine, verdict = report["plan"], report["machine"], report["summary"]["verdict"]
+    smoke = report.get("smoke", False)
+    short = report["quick"] or smoke
     lines = [
         "# Real-time latency",
         "",
-        f"Generated by `python bench/latency/run.py{' --quick' if report['quick'] else ''}"
-        f"{'' if report['quick'] else ' --seconds ' + format(plan['load_s'], 'g')}`"
-        f"{' (a QUICK run: short windows, rough figures)' if report['quick'] else ''}; "
+        f"Generated by `python bench/latency/run.py{' --smoke' if smoke else ' --quick' if report['quick'] else ''}"
+        f"{'' if short else ' --seconds ' + format(plan['load_s'], 'g')}`"
+        f"{' (a SMOKE run: it checks the bench runs; its figures mean nothing)' if smoke else ''}"
+        f"{' (a QUICK run: short windows, rough figures)' if report['quick'] and not smoke else ''}; "
         f"JACK dummy server at {RATE_HZ} Hz in synchronous mode (`jackd -S -p 16 -d dummy -r {RATE_HZ} -p BLOCK`; "
         "part 3 also measures JACK's default asynchronous mode), "
         f"jackd SCHED_FIFO as root: {machine['root']}); {machine['cpu']}, {machine['cores']} cores, "
@@ -389,7 +416,8 @@ def markdown(report: dict[str, Any]) -> str:
         "| per run | runs above / below / equal baseline | p (more than baseline) | compute p50 / p99 / max us |",
         "| --- | --- | ---: | ---: | ---: | --- | ---: | ---: | ---: |",
     ]
-    for load in LOADS:
+    loads = plan.get("loads", LOADS)  # a latency.json from before the plan named them: all three
+    for load in loads:
         for callback in CALLBACKS:
             group = groups.get((load, callback))
             if group is None:
@@ -422,7 +450,7 @@ def markdown(report: dict[str, Any]) -> str:
     latency_rows = [(f"idle (part 1, {format(plan['compute_s'], 'g')} s)", "sync (-S)", _latency_cells(row))
                     for row in report["compute"] if row["callback"] == "tpad"]
     latency_rows += [(f"{load} (part 2)", "sync (-S)", _group_latency_cells(groups.get((load, "tpad"), {})))
-                     for load in LOADS]
+                     for load in loads]
     if "async" in report:
         latency_rows.append((f"idle ({format(plan['compute_s'], 'g')} s)", "async (default)",
                              _latency_cells({**report["async"], "block": LOAD_BLOCK})))
@@ -572,6 +600,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true",
                         help="6 s per load and callback in 3 runs, 3 s compute runs, 5 start-ups")
+    parser.add_argument("--smoke", action="store_true",
+                        help="the test suite's check that the bench runs: every part once at 64 frames, part 2 idle "
+                             "only, 0.2 s windows, no start-up with an empty cache (figures meaningless)")
     parser.add_argument("--seconds", type=float, default=None,
                         help="seconds per load and callback, split into 6 runs (default 30; --quick 6, 3 runs)")
     parser.add_argument("--gil-threads", type=int, default=1, help="Python threads spinning for GIL load (default 1)")
@@ -588,10 +619,10 @@ def main(argv: list[str] | None = None) -> int:
         (args.out / "latency.md").write_text(markdown(report))
         print(markdown(report))
         return 0
-    plan = Plan(compute_s=3.0, load_s=6.0, startups=5, load_runs=3, cold_startups=1) if args.quick else Plan(
-        compute_s=10.0, load_s=30.0, startups=15, load_runs=6)
+    plan = SMOKE if args.smoke else Plan(compute_s=3.0, load_s=6.0, startups=5, load_runs=3, cold_startups=1) \
+        if args.quick else Plan(compute_s=10.0, load_s=30.0, startups=15, load_runs=6)
     if args.seconds is not None:
-        plan = Plan(plan.compute_s, args.seconds, plan.startups, plan.load_runs, plan.cold_startups)
+        plan = replace(plan, load_s=args.seconds)
     if args.startup_only:
         report = json.loads((args.out / "latency.json").read_text())
         with tempfile.TemporaryDirectory(prefix="tpadrt-latency-") as logs:
@@ -603,7 +634,7 @@ def main(argv: list[str] | None = None) -> int:
         print(markdown(report))
         return 0
     log = lambda line: print(line, flush=True)  # noqa: E731
-    report: dict[str, Any] = {"quick": args.quick, "rate_hz": RATE_HZ, "plan": asdict(plan),
+    report: dict[str, Any] = {"quick": args.quick, "smoke": args.smoke, "rate_hz": RATE_HZ, "plan": asdict(plan),
                               "gil_threads": args.gil_threads, "machine": machine()}
     with tempfile.TemporaryDirectory(prefix="tpadrt-latency-") as logs:
         report["compute"] = measure_compute(plan, log, Path(logs))

@@ -3,6 +3,7 @@
     python bench/memory/play_rss.py                  # 60 s each (the issue's figure)
     python bench/memory/play_rss.py --seconds 20     # shorter
     python bench/memory/play_rss.py --repo /path/to/another/checkout --label before
+    python bench/memory/play_rss.py --seconds 3 --out DIR    # the test suite's smoke run (figures meaningless)
 
 Runs ``python -m tpad_rt play textures/grating.yaml --output URL --duration S`` (no display:
 the endless back-and-forth swipe; no JACK) with the tree of ``--repo`` on PYTHONPATH, reads
@@ -12,7 +13,7 @@ the growth in between (MB, and MB/s), and the peak. ``null://`` is the baseline 
 in the same run: the same renderer, input and telemetry with no plate simulated. The
 issue's target: ``sim://`` grows by at most 5 MB after its first second over 60 s.
 
-Writes bench/results/memory_play.json and memory_play.md (with ``--label``: memory_play_LABEL.*)
+Writes bench/results/memory_play.json and memory_play.md (with ``--label``: memory_play_LABEL.*; ``--out``: elsewhere)
 and prints the table. Not a test (docs/testing.md "Benchmarks are not tests").
 """
 
@@ -30,6 +31,8 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
 RESULTS = ROOT / "bench" / "results"
+#: The shortest run measured: RSS is read from one second in until one second before the end.
+MIN_SECONDS = 3.0
 #: Seconds between two reads of the child's VmRSS.
 SAMPLE_PERIOD_S = 0.1
 
@@ -67,7 +70,7 @@ def measure(repo: Path, output: str, seconds: float) -> dict[str, Any]:
         raise RuntimeError(f"play {output} failed ({child.returncode}): {errors}")
     during = [(t_s, rss) for t_s, rss in samples if 1.0 <= t_s <= seconds - 1.0]  # not the stop and summary
     one_s = during[0][1]
-    ten_s = next(rss for t_s, rss in during if t_s >= min(10.0, seconds - 1.0))
+    ten_s = next((rss for t_s, rss in during if t_s >= min(10.0, seconds - 1.0)), during[-1][1])
     end = during[-1][1]
     after_first = [rss for _, rss in during]
     summary = (first_line + rest).splitlines()
@@ -79,18 +82,22 @@ def measure(repo: Path, output: str, seconds: float) -> dict[str, Any]:
             "played": next((line for line in summary if line.startswith("played ")), "")}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--seconds", type=float, default=60.0, help="play duration (s, default 60)")
+    parser.add_argument("--seconds", type=float, default=60.0,
+                        help=f"play duration (s, default 60, at least {MIN_SECONDS:g})")
     parser.add_argument("--repo", type=Path, default=ROOT, help="the checkout to run (default: this one)")
     parser.add_argument("--label", default="", help="suffix of the result files")
-    args = parser.parse_args()
+    parser.add_argument("--out", type=Path, default=RESULTS, help="folder for the results (default bench/results)")
+    args = parser.parse_args(argv)
+    if not args.seconds >= MIN_SECONDS:
+        parser.error(f"--seconds: at least {MIN_SECONDS:g} (RSS is read from 1 s in to 1 s before the end)")
     rows = [measure(args.repo.resolve(), output, args.seconds) for output in ("sim://", "null://")]
     result = {"repo": str(args.repo.resolve()), "python": platform.python_version(), "machine": platform.machine(),
               "cpus": os.cpu_count(), "load_average": os.getloadavg(), "rows": rows}
     stem = "memory_play" + (f"_{args.label}" if args.label else "")
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / f"{stem}.json").write_text(json.dumps(result, indent=2) + "\n")
     lines = [f"# tpad-rt play: resident memory over {args.seconds:g} s (`python bench/memory/play_rss.py`)", "",
              f"Checkout `{result['repo']}`; {result['cpus']} CPUs, load average "
              + " / ".join(f"{value:.1f}" for value in result["load_average"]) + " at the end.", "",
@@ -102,7 +109,7 @@ def main() -> None:
               f"| {row['peak_growth_mb']:+.2f} | {row['peak_mb']:.1f} |" for row in rows]
     lines += ["", "`null://` is the same run's baseline (no plate simulated). What each run printed:", ""]
     lines += [f"- `{row['output']}`: {row['played']}" for row in rows]
-    (RESULTS / f"{stem}.md").write_text("\n".join(lines) + "\n")
+    (args.out / f"{stem}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

@@ -3,13 +3,17 @@
 One line per audio output device: its index (for ``audio://INDEX``), name, host API,
 output channels and the rates among ``tpad_rt.outputs.audio.CANDIDATE_RATES`` it
 accepts for float32 output; then one line per serial port (device path and
-description). A missing PortAudio is said in one line (the serial ports are still
-listed) and ends with status 1.
+description). A port the system describes no further (pyserial's "n/a": a built-in
+UART's slot, not a USB adapter) is listed, in words, only when it opens; the slots
+that do not (no hardware there) are named in one line as left out. A missing PortAudio
+is said in one line (the serial ports are still listed) and ends with status 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
+import os
 
 from serial.tools import list_ports
 
@@ -40,10 +44,43 @@ def audio_lines() -> list[str]:
     return lines or ["  none"]
 
 
-def serial_lines() -> list[str]:
-    """One line per serial port."""
-    ports = sorted(list_ports.comports(), key=lambda port: port.device)
-    return [f"  {port.device}: {port.description}" for port in ports] or ["  none"]
+#: pyserial's description of a port it knows nothing about (a built-in UART's slot).
+UNDESCRIBED = "n/a"
+
+
+def serial_lines(ports: list[tuple[str, str]] | None = None) -> list[str]:
+    """One line per serial port ``(device, description)`` (default: pyserial's, sorted); an UNDESCRIBED one only
+    when it opens (module docstring), then one line naming those left out."""
+    if ports is None:
+        ports = sorted((port.device, port.description) for port in list_ports.comports())
+    lines, left_out = [], []
+    for device, description in ports:
+        if description != UNDESCRIBED:
+            lines.append(f"  {device}: {description}")
+            continue
+        problem = _open_problem(device)
+        if problem is None:
+            lines.append(f"  {device}: a built-in serial port (not a USB adapter; the system describes it no further)")
+        elif problem.errno in (errno.EACCES, errno.EPERM):
+            lines.append(f"  {device}: a built-in serial port you may not open ({problem.strerror}; the dialout "
+                         "group may)")
+        else:
+            left_out.append(device)
+    lines = lines or ["  none"]
+    if left_out:
+        lines.append(f"  (left out: {', '.join(left_out)}: built-in serial port slots with no hardware answering)")
+    return lines
+
+
+def _open_problem(device: str) -> OSError | None:
+    """Why ``device`` does not open for reading and writing (without becoming the controlling terminal or
+    waiting for a carrier), or None when it does (it is closed again at once)."""
+    try:
+        descriptor = os.open(device, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+    except OSError as error:
+        return error
+    os.close(descriptor)
+    return None
 
 
 def run(args: argparse.Namespace) -> int:

@@ -89,6 +89,18 @@ class Choice:
         return f"{self.url} ({self.reason})" if self.reason else self.url
 
 
+def help_epilog() -> str:
+    """What ``play --help`` ends with: the shipped textures by name, and every output and input URL's form."""
+    from tpad_rt.shipped import texture_names  # a folder listing: nothing heavy at parser building
+
+    return (f"TEXTURE is a YAML file or a shipped texture's name: {', '.join(texture_names())}. "
+            "Outputs: audio://[DEVICE]?rate=192000&block=64 (an audio device; 'tpad-rt devices' lists them), "
+            "serial://PORT?envelope_hz=16000 (a serial amplifier; 'tpad-rt amp emulate' makes one on a pty: "
+            "docs/amplifiers.md), sim:// (the simulated plate), wav:///path/out.wav (the drive as a WAV file, "
+            "paced in real time), null://. Inputs: scripted://swipe?speed_mm_s=30, scripted://circle, "
+            "scripted://tap, scripted://still, file:///path/trajectory.csv, mouse:// (the README's URL table).")
+
+
 def add_parser(subparsers: Subparsers) -> None:
     """Register ``play``."""
     parser = subparsers.add_parser(
@@ -96,14 +108,15 @@ def add_parser(subparsers: Subparsers) -> None:
         help="render a texture in real time (audio device or simulated plate) with a live status",
         description="Render TEXTURE in real time for the finger of --input on --output, with a live status "
         "panel; Ctrl-C stops with a ramp and prints a summary.",
+        epilog=help_epilog(),
     )
     add_session_arguments(
         parser, input_default="auto", max_duration_s=MAX_INPUT_S,
         input_help="finger input URL, or auto: mouse:// with an X display, else endless back-and-forth swipes at "
         "the speed and force the texture's file recommends (its finger; without one "
         f"{auto_swipe(FALLBACK_FINGER)})",
-        output_default="auto", output_help="output URL (audio://[device]?..., sim://, null://), or auto: an audio "
-        "device that accepts --rate (JACK first), else sim://")
+        output_default="auto", output_help="output URL (audio://[device]?..., serial://PORT?..., sim://, "
+        "wav://FILE.wav, null://), or auto: an audio device that accepts --rate (JACK first), else sim://")
     parser.add_argument("--record", metavar="FILE.npz",
                         help="also write a recording (the format of render); it keeps at most "
                         f"{MAX_RECORDING_SAMPLES:,} drive samples ({MAX_RECORDING_SAMPLES // 192000} s at 192 kHz), "

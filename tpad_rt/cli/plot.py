@@ -1,6 +1,8 @@
 """``tpad-rt plot FILE.npz --out FILE.png``: a recording as a figure.
 
-Four panels against time (or, with ``--along x``, the finger's x): relative friction
+Four panels against time (or, with ``--along x``, the finger's x; when x turns back, as on a
+circle or a back-and-forth swipe, the distance along the finger's path instead, with a note,
+since x would fold the path onto itself): relative friction
 (target, and achieved when the plate was simulated), plate amplitude (commanded, and
 simulated), drive volts against the device maximum, and power against the cap and the
 average budget (the drive's per block, and averaged over the budget's window; the
@@ -8,13 +10,14 @@ plate's, as the kernel's model has it, where a press took it over the cap). Bloc
 the drive saturated are shaded red, blocks without a touching finger grey; on the
 friction panel, blocks whose achieved friction departed from the texture under the
 finger by more than the recording's tolerance (``departed``, from ``tpad-rt render``
-on the simulated plate) are marked in purple.
+on the simulated plate) are shaded in purple in a strip along the panel's foot, below the curves.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import zipfile
 from typing import Any
 
 import numpy as np
@@ -26,8 +29,18 @@ from tpad_rt.files import ensure_regular
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION
 from tpad_rt.recording import Recording, read_recording
 
+#: What plot says of an amplifier emulator's recording (``tpad-rt amp emulate --record``).
+AMPLIFIER_RECORDING = (
+    "an amplifier emulator's recording (tpad-rt amp emulate --record): plot draws the recordings of render and of "
+    "play --record (play --output serial://PORT --record FILE.npz records the same run on the host's side); "
+    "docs/amplifiers.md, 'Checking a recording', shows how to check this one")
+#: Entries every amplifier emulator's recording holds (tpad_rt.amp.emulator.RECORDED_COLUMNS), as archive members.
+_AMPLIFIER_ENTRIES = {"t_s.npy", "envelope_v.npy", "index.npy", "plate_amplitude_um.npy"}
+
 _TARGET, _ACHIEVED, _LIMIT, _AVERAGE = "#1f5fa8", "#e07b00", "#c0392b", "#6a3d9a"
 _SATURATED, _LIFTED, _DEPARTED = "#e74c3c", "#7f8c8d", "#8e44ad"
+#: Height of the departures' strip, a fraction of the friction panel's (the y limits keep the curves above it).
+DEPARTED_STRIP = 0.06
 
 
 def add_parser(subparsers: Subparsers) -> None:
@@ -51,15 +64,30 @@ def run(args: argparse.Namespace) -> int:
     image name that is not a figure or names an existing non-regular file."""
     out = figure_target("--out", args.out)
     ensure_regular(args.recording, "recordings")
-    figure = plot_recording(read_recording(args.recording), along=args.along, start_s=args.start, end_s=args.end)
+    if _amplifier_recording(args.recording):
+        raise ConfigError(f"{args.recording}: {AMPLIFIER_RECORDING}")
+    figure, note = plot_recording(read_recording(args.recording), along=args.along, start_s=args.start,
+                                  end_s=args.end)
     save(figure, out)
-    print(f"wrote {out}")
+    print(f"wrote {out}" + (f" ({note})" if note else ""))
     return 0
 
 
+def _amplifier_recording(path: str) -> bool:
+    """True when ``path`` is an archive holding an amplifier emulator's recording, not a tpad-rt recording; False
+    for anything else (read_recording then says what it is)."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = set(archive.namelist())
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError):
+        return False
+    return _AMPLIFIER_ENTRIES <= names and "format.npy" not in names
+
+
 def plot_recording(recording: Recording, along: str = "time", start_s: float = -math.inf,
-                   end_s: float = math.inf) -> Any:
-    """A matplotlib Figure of ``recording``'s blocks from ``start_s`` to ``end_s`` (s) (module docstring).
+                   end_s: float = math.inf) -> tuple[Any, str | None]:
+    """A matplotlib Figure of ``recording``'s blocks from ``start_s`` to ``end_s`` (s) (module docstring), and a
+    note when the horizontal axis is not the one asked for.
 
     ``along`` is ``time`` or ``x``. Raises ConfigError when no block lies in the span.
     """
@@ -82,9 +110,13 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
     flags = blocks["saturated"].astype(np.int64)
     touching = (flags & FLAG_WATCHDOG) == 0
     saturated = (flags & (FLAG_VOLTAGE | FLAG_POWER)) != 0
-    if along == "x":
-        position = np.where(touching, blocks["x_mm"], np.nan)  # no lines to where a lifted finger was
-        axis, label = position, "finger x (mm)"
+    note = None
+    if along == "x" and _turns_back(blocks["x_mm"][touching]):
+        note = "x turns back, which would fold the path onto itself: plotted along the finger's path instead"
+        axis = np.where(touching, _path_mm(blocks["x_mm"], blocks["y_mm"], touching), np.nan)
+        label = "distance along the finger's path (mm); not x, which turns back"
+    elif along == "x":
+        axis, label = np.where(touching, blocks["x_mm"], np.nan), "finger x (mm)"  # no lines to a lifted finger
     else:
         axis, label = blocks["t"], "time (s)"
 
@@ -100,11 +132,13 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
     lowest = min(np.nanmin(values, initial=1.0) for name, values in felt.items() if name != "amplitude_um")
     friction.set(ylabel="relative friction μ'", ylim=(max(0.0, math.floor(10 * lowest - 1) / 10), 1.04))
     departed = blocks["departed"] != 0 if "departed" in blocks else np.zeros(len(axis), dtype=bool)
-    if departed.any():
+    if departed.any():  # a strip along the panel's foot: marks on the curve hid it where it departs
         tolerance = meta.get("departure_tolerance_mu", math.nan)
-        friction.plot(axis[departed], felt["achieved_mu"][departed], ls="none", marker="|", ms=9, color=_DEPARTED,
-                      label=f"departed > {tolerance:g} from the texture under the finger "
-                            f"({np.count_nonzero(departed)} blocks)")
+        _shade(friction, axis, departed, _DEPARTED, 0.55, top=DEPARTED_STRIP)
+        departures = [Patch(color=_DEPARTED, alpha=0.55, label=f"departed > {tolerance:g} from the texture under the "
+                            f"finger ({np.count_nonzero(departed)} blocks; the strip at the foot)")]
+    else:
+        departures = []
     amplitude.set(ylabel="amplitude (µm)")
 
     volts.plot(axis, blocks["voltage_v"], color=_TARGET, lw=1.2, label="drive (peak per block)")
@@ -136,12 +170,25 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
         panel.grid(True, color="#dddddd", lw=0.6)
         panel.spines[["top", "right"]].set_visible(False)
         handles, _ = panel.get_legend_handles_labels()
-        panel.legend(handles=handles + (shading if panel is friction else []),
+        panel.legend(handles=handles + (departures + shading if panel is friction else []),
                      loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     # printable: a control character (a NUL in a description) has no glyph, and matplotlib warns about it
     figure.suptitle(printable(f"{meta['texture_description']}  ·  {meta['device_label']}  ·  "
                               f"{meta.get('input_url', '')}"), fontsize=11)
-    return figure
+    return figure, note
+
+
+def _turns_back(x_mm: np.ndarray) -> bool:
+    """True when ``x_mm`` both rises and falls by more than a micrometre from one block to the next."""
+    steps = np.diff(x_mm)
+    return bool((steps > 1e-3).any() and (steps < -1e-3).any())
+
+
+def _path_mm(x_mm: np.ndarray, y_mm: np.ndarray, touching: np.ndarray) -> np.ndarray:
+    """Distance (mm) along the finger's path at each block, counted between consecutive touching blocks only (a
+    lift and a touch elsewhere is no path)."""
+    steps = np.hypot(np.diff(x_mm), np.diff(y_mm)) * (touching[1:] & touching[:-1])
+    return np.concatenate([[0.0], np.cumsum(steps)])
 
 
 def _trailing_mean(values: np.ndarray, window_blocks: float) -> np.ndarray:
@@ -153,8 +200,8 @@ def _trailing_mean(values: np.ndarray, window_blocks: float) -> np.ndarray:
     return (sums[index] - sums[start]) / (index - start)
 
 
-def _shade(panel: Any, axis: np.ndarray, mask: np.ndarray, color: str, alpha: float) -> None:
-    """Shade the panel's full height where ``mask`` holds."""
+def _shade(panel: Any, axis: np.ndarray, mask: np.ndarray, color: str, alpha: float, top: float = 1.0) -> None:
+    """Shade the panel where ``mask`` holds, from its foot up to ``top`` (a fraction of its height)."""
     if mask.any():
-        panel.fill_between(axis, 0, 1, where=mask, color=color, alpha=alpha, lw=0,
+        panel.fill_between(axis, 0, top, where=mask, color=color, alpha=alpha, lw=0,
                            transform=panel.get_xaxis_transform(), step="post")

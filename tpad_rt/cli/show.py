@@ -16,7 +16,10 @@ at ``--t-s`` seconds after the texture was set:
    the plate, its nodal lines, and the share of the antinode amplitude the contact
    patch feels at each x (what the drive above is divided by).
 
-Prints one line: the file written and the share of the plate that saturates.
+Prints one line: the file written and the share of the plate that saturates; and when the
+friction map is flat but the texture changes in time (a temporal texture: the same
+everywhere at one time), a second line saying so, with a ``--t-s`` that draws another
+level (the friction panel's title says it too).
 """
 
 from __future__ import annotations
@@ -37,6 +40,8 @@ from tpad_rt.plate_maps import Finger, PlateMaps, plate_maps
 from tpad_rt.texture import CompiledTexture, load_compiled
 
 _BUDGET_COLOUR = "#00c8ff"
+#: Seconds of the texture's time sampled, 1 ms apart from ``--t-s``, to tell whether a flat map changes in time.
+TIME_SPAN_S = 2.0
 
 
 def add_parser(subparsers: Subparsers) -> None:
@@ -78,10 +83,33 @@ def run(args: argparse.Namespace) -> int:
     device = Device.default() if args.device is None else Device.from_file(args.device)
     texture = load_compiled(args.texture)
     maps = plate_maps(texture, device, finger, t_s, resolution_mm)
-    figure = draw(maps, texture, device, finger, t_s, source=Path(args.texture).name)
+    hint = time_hint(maps, texture, finger, t_s)
+    figure = draw(maps, texture, device, finger, t_s, source=Path(args.texture).name, in_time=hint is not None)
     save(figure, out)
     _summary(out, maps, device)
+    if hint is not None:
+        print(hint)
     return 0
+
+
+def time_hint(maps: PlateMaps, texture: CompiledTexture, finger: Finger, t_s: float) -> str | None:
+    """When the friction map is flat but the texture changes in time at the plate's centre (over TIME_SPAN_S
+    from ``t_s``): one line saying so, with the range and a ``--t-s`` that draws another level; else None."""
+    level = float(maps.friction.flat[0])
+    if not np.all(maps.friction == level):
+        return None
+    times_s = t_s + np.arange(0.0, TIME_SPAN_S, 1e-3)
+    ux, uy = finger.unit_direction
+    values = texture.evaluate(maps.x_mm[len(maps.x_mm) // 2], maps.y_mm[len(maps.y_mm) // 2], ux, uy, times_s)
+    other = np.abs(values - level) > 1e-9
+    if not other.any():
+        return None
+    first = int(np.argmax(other))
+    stretch = other[first:]
+    middle = first + (len(stretch) if stretch.all() else int(np.argmin(stretch))) // 2  # of the first other stretch
+    return (f"the map is flat at t = {t_s:g} s ({level:.3g} everywhere): this texture changes in time, not over the "
+            f"plate (friction {values.min():.3g} to {values.max():.3g} over {TIME_SPAN_S:g} s from there); "
+            f"--t-s {times_s[middle]:.4g} draws it at {values[middle]:.3g}")
 
 
 def _checked(option: str, value: float, minimum: float | None = None, inclusive: bool = True) -> float:
@@ -93,8 +121,10 @@ def _checked(option: str, value: float, minimum: float | None = None, inclusive:
     return value
 
 
-def draw(maps: PlateMaps, texture: CompiledTexture, device: Device, finger: Finger, t_s: float, source: str) -> Any:
-    """A matplotlib Figure of the three maps (module docstring), titled with the texture's description."""
+def draw(maps: PlateMaps, texture: CompiledTexture, device: Device, finger: Finger, t_s: float, source: str,
+         in_time: bool = False) -> Any:
+    """A matplotlib Figure of the three maps (module docstring), titled with the texture's description;
+    ``in_time``: the friction map is flat at ``t_s`` but the texture changes in time (its title says so)."""
     plt = pyplot()
 
     shaped = device.contact_width_m is not None
@@ -106,7 +136,7 @@ def draw(maps: PlateMaps, texture: CompiledTexture, device: Device, finger: Fing
     figure.supxlabel(f"{printable(source)} ({texture.kind}) on {printable(device.label)}: finger {finger.speed_mm_s:g} mm/s {moving}, "
                      f"{finger.force_n:g} N, t = {t_s:g} s", fontsize=9, color="0.3")
     extent = (0.0, device.plate.length_m * 1e3, device.plate.width_m * 1e3, 0.0)
-    _friction_panel(figure, panels[0], maps, extent)
+    _friction_panel(figure, panels[0], maps, extent, t_s if in_time else None)
     if finger.speed_mm_s > 0:
         _direction_arrow(panels[0], finger.direction_deg)
     _volts_panel(figure, panels[1], maps, device, extent)
@@ -126,10 +156,14 @@ def _map(figure: Any, axes: Any, values: np.ndarray, extent: tuple[float, ...], 
     return figure.colorbar(image, ax=axes, label=label, shrink=0.9, pad=0.02)
 
 
-def _friction_panel(figure: Any, axes: Any, maps: PlateMaps, extent: tuple[float, ...]) -> None:
+def _friction_panel(figure: Any, axes: Any, maps: PlateMaps, extent: tuple[float, ...],
+                    changes_at_s: float | None) -> None:
+    """The friction map; ``changes_at_s``: the time (s) of a flat map of a texture that changes in time."""
     _map(figure, axes, maps.friction, extent, "viridis", 1.0, "relative friction μ'")
     low, high = maps.friction.min(), maps.friction.max()
     levels = f"{low:.3g} everywhere" if low == high else f"{low:.3g} to {high:.3g}"
+    if changes_at_s is not None:
+        levels += f" at t = {changes_at_s:g} s; it changes in time (--t-s draws another)"
     axes.set_title(f"target friction (1: vibration off): {levels}", fontsize=10, loc="left")
 
 
