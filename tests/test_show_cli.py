@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import yaml
 import pytest
 from PIL import Image
 
@@ -51,12 +52,13 @@ def test_a_flat_map_of_a_texture_that_changes_in_time_says_which_t_s_draws_anoth
     out = tmp_path / "pulse.png"
     assert main(["show", str(TEXTURES / "temporal_pulse.yaml"), "--resolution-mm", "5", "--out", str(out)]) == 0
     hint = capsys.readouterr().out.splitlines()[1]
+    low = yaml.safe_load((TEXTURES / "temporal_pulse.yaml").read_text())["friction"]["low"]
     assert hint.startswith("the map is flat at t = 0 s (1 everywhere): this texture changes in time, not over the "
-                           "plate (friction 0.5 to 1 over 2 s from there); --t-s "), hint
+                           f"plate (friction {low:g} to 1 over 2 s from there); --t-s "), hint
     t_s, level = hint.split("--t-s ")[1].split(" draws it at ")
-    assert level == "0.5"
+    assert float(level) == low
     _, maps = _maps("temporal_pulse.yaml", t_s=float(t_s))
-    assert np.all(maps.friction == 0.5)
+    assert np.all(maps.friction == low)
     assert main(["show", str(TEXTURES / "grating.yaml"), "--resolution-mm", "5", "--out", str(out)]) == 0
     assert capsys.readouterr().out.count("\n") == 1
 
