@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from tpad_rt.compiling import compile_notice
+from tpad_rt.compiling import compile_notice, ensure_compiled
 from tpad_rt.device import Device
 from tpad_rt.drive import DriveSpec
 from tpad_rt.drivers import Driver, open_driver
@@ -196,6 +196,7 @@ class Renderer:
         self._last_table = table
         try:
             with compile_notice():  # the first run in a fresh numba cache compiles the kernels here
+                ensure_compiled()  # all of them, for every path, in worker processes
                 driver.warm(table.copy())
                 driver.open(self._pipeline)
             self._pipeline.start()

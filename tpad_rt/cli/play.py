@@ -47,7 +47,7 @@ from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number
 from tpad_rt.cli.render import add_session_arguments, over_cap_line, session_options
-from tpad_rt.compiling import announce_if_uncached, compile_notice
+from tpad_rt.compiling import compile_notice, ensure_compiled
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
@@ -56,8 +56,6 @@ from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import INSTALL_HINT, pynput_installed, screen_size_px
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
-from tpad_rt.kernel.render import render_block
-from tpad_rt.kernel.texture_eval import eval_texture_points
 from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
 from tpad_rt.drive import Consumes
 from tpad_rt.outputs import audio
@@ -161,7 +159,7 @@ def run(args: argparse.Namespace) -> int:
                           + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
             if args.record is not None:
                 renderer.record(args.record)
-            announce_if_uncached(render_block, eval_texture_points)  # every argument checked: say it at once
+            ensure_compiled()  # every argument checked: compile the whole plan if the cache lacks it
             renderer.texture.evaluate(np.zeros(1), np.zeros(1))  # the status line's texture under the finger
             renderer.start()
             compiling.close()
