@@ -136,33 +136,38 @@ def _counted(args: list[str], env: dict[str, str]) -> subprocess.Popen[str]:
                             text=True)
 
 
+def _assert_compiled_nothing(name: str, process: subprocess.Popen[str], err: str) -> None:
+    assert process.returncode == 0, (name, err)
+    last = err.splitlines()[-1]
+    assert last.startswith(COMPILED), (name, err)
+    assert json.loads(last[len(COMPILED):]) == [], (name, err)
+    assert NOTICE not in err, (name, err)
+
+
 def test_after_warm_no_path_compiles_anything(warmed: Warmed, tmp_path: Path) -> None:
-    """Every path, each in its own process, at once: play on sim://, wav://, null:// and serial:// (the emulator
-    on a pty), render, serve, the README's Pipeline and Renderer snippets. None compiles a function of tpad-rt
-    nor starts a compile of the plan."""
+    """Every path, each in its own process: play on sim://, wav://, null:// (at once with the rest) and
+    serial:// (the emulator on a pty; alone, so that the link's measured rate is not the machine's load),
+    render, serve, the README's Pipeline and Renderer snippets. None compiles a function of tpad-rt nor starts a
+    compile of the plan."""
     for index, code in enumerate(README_PYTHON[1:]):
         (tmp_path / f"readme_{index}.py").write_text(code)
     play = ["play", "textures/grating.yaml", "--input", SCRIPTED, "--duration", "0.3", "--output"]
+    paths = {
+        "play sim": [*play, "sim://"],
+        "play wav": [*play, f"wav://{tmp_path / 'drive.wav'}"],
+        "play null": [*play, "null://"],
+        "render": ["render", "textures/grating.yaml", "--input", SCRIPTED, "--duration", "0.3",
+                   "--out", str(tmp_path / "render.npz")],
+        "serve": ["serve", "grating", "--output", "sim://", "--port", "0", "--no-osc", "--duration", "0.3"],
+        "Pipeline snippet": [str(tmp_path / "readme_0.py")],
+        "Renderer snippet": [str(tmp_path / "readme_1.py")],
+    }
+    running = {name: _counted(args, warmed.env) for name, args in paths.items()}
+    for name, process in running.items():
+        _assert_compiled_nothing(name, process, process.communicate(timeout=300)[1])
     with Emulator(tmp_path / "amp") as emulator:
-        paths = {
-            "play sim": [*play, "sim://"],
-            "play wav": [*play, f"wav://{tmp_path / 'drive.wav'}"],
-            "play null": [*play, "null://"],
-            "play serial": [*play, f"serial://{emulator.port}"],
-            "render": ["render", "textures/grating.yaml", "--input", SCRIPTED, "--duration", "0.3",
-                       "--out", str(tmp_path / "render.npz")],
-            "serve": ["serve", "grating", "--output", "sim://", "--port", "0", "--no-osc", "--duration", "0.3"],
-            "Pipeline snippet": [str(tmp_path / "readme_0.py")],
-            "Renderer snippet": [str(tmp_path / "readme_1.py")],
-        }
-        running = {name: _counted(args, warmed.env) for name, args in paths.items()}
-        ended = {name: process.communicate(timeout=300) for name, process in running.items()}
-    for name, (out, err) in ended.items():
-        assert running[name].returncode == 0, (name, err)
-        last = err.splitlines()[-1]
-        assert last.startswith(COMPILED), (name, err)
-        assert json.loads(last[len(COMPILED):]) == [], (name, err)
-        assert NOTICE not in err, (name, err)
+        serial = _counted([*play, f"serial://{emulator.port}"], warmed.env)
+        _assert_compiled_nothing("play serial", serial, serial.communicate(timeout=300)[1])
 
 
 def test_the_mark_is_where_numba_caches_the_kernels(warmed: Warmed, monkeypatch: pytest.MonkeyPatch) -> None:

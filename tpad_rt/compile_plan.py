@@ -63,7 +63,7 @@ def _pipeline() -> Any:
 
 
 def _table() -> Any:
-    """A callback table over copies of the pipeline's arrays (building one publishes the texture slot)."""
+    """A callback table over copies of the pipeline's arrays."""
     from tpad_rt.pipeline import KernelArrays
     from tpad_rt.realtime import CallbackTable
 
@@ -90,11 +90,22 @@ def _sim_output(batch: bool) -> None:
 
 
 def _callback_table() -> None:
-    _table()
+    """A texture change's release store (``set_texture``; ``Pipeline.push_finger`` makes the same)."""
+    _table().set_texture(_pipeline().texture, 0.0, False)
 
 
 def _audio_callback() -> None:
     _table().call(np.zeros(CALL_FRAMES, dtype=np.float32))
+
+
+def _physics_ufuncs() -> None:
+    """Every physics model's ufunc on floats (``serve`` computes the friction a page asks about with them)."""
+    from tpad_rt.physics import friction, plate
+
+    for module in (friction, plate):
+        for name, function in vars(module).items():
+            if name.endswith("_ufunc") and hasattr(function, "nin"):
+                function(*[1.0] * function.nin)
 
 
 def _serial_checks() -> None:
@@ -111,7 +122,8 @@ def _serial_streamer() -> None:
 
 #: The plan (module docstring). The render kernel inlines the texture evaluator's functions and shares the
 #: device lookups with the streamer; the offline batch and the audio callback call the render kernel; the
-#: streamer calls the codec the checks compile and needs a callback table.
+#: streamer calls the codec the checks compile and needs a callback table; the physics models' ufuncs call
+#: the friction cores the render kernel and the simulated plate compile.
 STEPS: tuple[Step, ...] = (
     Step("texture evaluation", (), _texture_evaluation),
     Step("render kernel", ("texture evaluation",), _render_kernel),
@@ -122,6 +134,7 @@ STEPS: tuple[Step, ...] = (
     Step("simulated plate, offline", ("simulated plate",), lambda: _sim_output(batch=True)),
     Step("offline render", ("render kernel",), _offline_render),
     Step("audio callback", ("render kernel", "callback table"), _audio_callback),
+    Step("physics models", ("render kernel", "simulated plate"), _physics_ufuncs),
 )
 
 

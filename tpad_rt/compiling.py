@@ -146,9 +146,8 @@ def ensure_compiled(jobs: int | None = None, console: Console | None = None) -> 
     if kernel_cache.plan_complete():
         return None
     console = console or _stderr_console()
-    with kernel_cache.compile_lock() as free:
-        if not free:
-            console.print("tpad-rt: waiting for another tpad-rt that is compiling the kernels")
+    waiting = "tpad-rt: waiting for another tpad-rt that is compiling the kernels"
+    with kernel_cache.compile_lock(lambda: console.print(waiting)):
         if kernel_cache.plan_complete():
             return None
         return _compile_plan(jobs or default_jobs(), console)

@@ -17,7 +17,7 @@ marked_before() -> bool
     whether a plan finished before for other sources (its mark is still there)
 mark_plan_complete()
     write that mark (atomically), after the whole plan finished
-compile_lock() -> context manager
+compile_lock(on_wait) -> context manager
     an exclusive lock on the kernels' cache folder, across processes, held while a plan compiles
 discard_unfinished(since_ns) -> int
     after compile workers were killed: remove what a later run could trust though it was half written since
@@ -42,7 +42,7 @@ import os
 import platform
 import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -114,21 +114,19 @@ def mark_plan_complete() -> None:
 
 
 @contextlib.contextmanager
-def compile_lock() -> Iterator[bool]:
-    """Hold the kernels' compile lock (exclusive, across processes) in the block; yields False when another
-    process held it and this one waited for it, True when it was free."""
+def compile_lock(on_wait: Callable[[], None]) -> Iterator[None]:
+    """Hold the kernels' compile lock (exclusive, across processes) in the block; ``on_wait()`` first when
+    another process holds it (this one then waits for it)."""
     folder = cache_dir(COMPILED_PACKAGES[0])
     folder.mkdir(parents=True, exist_ok=True)
     with open(folder / _LOCK, "a") as lock:
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            free = True
         except BlockingIOError:
-            free = False
+            on_wait()
+            fcntl.flock(lock, fcntl.LOCK_EX)
         try:
-            if not free:
-                fcntl.flock(lock, fcntl.LOCK_EX)
-            yield free
+            yield
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
 
