@@ -8,7 +8,8 @@ ensure_compiled(jobs=None, console=None) -> PlanReport | None
     why and about how long (:data:`NOTICE`), then progress as steps done of the plan's total (a bar on a
     terminal, else a line at each tenth), then what it compiled. Ctrl-C stops it within a second
     (KeyboardInterrupt; the workers are killed, nothing half written is left to trust). Returns the plan's
-    report, None when everything was compiled already. Waits while another process compiles it.
+    report, None when everything was compiled already (or numba's JIT is off). Waits while another process
+    compiles it.
 compile_notice(console=None)
     a context manager; inside it, a compile of a kernel (``tpad_rt.kernel``) in this process, which the plan
     should have made unnecessary, prints one line to stderr (:data:`MISSING`), then, on a terminal, a spinner
@@ -32,6 +33,7 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
+import numba
 from numba.core import event
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -143,8 +145,8 @@ def _stderr_console() -> Console:
 def ensure_compiled(jobs: int | None = None, console: Console | None = None) -> PlanReport | None:
     """Compile the whole plan unless numba's cache has it (module docstring); raises CompileError (a worker
     failed) and KeyboardInterrupt (Ctrl-C)."""
-    if kernel_cache.plan_complete():
-        return None
+    if numba.config.DISABLE_JIT or kernel_cache.plan_complete():  # type: ignore[attr-defined]  # not in its stubs
+        return None  # with numba's JIT off (the kernel coverage run) nothing compiles
     console = console or _stderr_console()
     waiting = "tpad-rt: waiting for another tpad-rt that is compiling the kernels"
     with kernel_cache.compile_lock(lambda: console.print(waiting)):

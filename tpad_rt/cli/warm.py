@@ -35,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from tpad_rt import compiling, kernel_cache
 
     report = compiling.ensure_compiled(args.jobs)
+    # The ahead-of-time kernels' build (issue 23, helper `aot`) is called here, once, when a C compiler is present.
     if report is None:
         where = kernel_cache.cache_dir(kernel_cache.COMPILED_PACKAGES[0])
         print(f"tpad-rt warm: every kernel is compiled already, cached in {where}")
