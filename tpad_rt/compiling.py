@@ -48,9 +48,9 @@ NOTICE = "tpad-rt: compiling the kernels of every command, once"
 MISSING = "tpad-rt: compiling kernels missing from numba's cache"
 #: The most workers ensure_compiled starts by default (the plan's steps allow about three at once).
 MAX_DEFAULT_JOBS = 2
-#: Wall time (s) of a compile of the whole plan with 1 and 2 workers on a 2-core machine (tpad-rt warm,
-#: docs/kernel.md "Compilation"): the notice's estimate.
-PLAN_WALL_S = {1: 60, 2: 40}
+#: Wall time (s) of a compile of the whole plan with 1 and 2 workers on a quiet 2-core machine (the notice's
+#: estimate): the plan takes about 40 s of CPU (docs/kernel.md "Compiling once").
+PLAN_WALL_S = {1: 45, 2: 35}
 #: Progress lines off a terminal: one each time another tenth of the steps is done.
 PLAIN_PROGRESS_STEP = 0.1
 
@@ -175,7 +175,7 @@ def _compile_plan(jobs: int, console: Console) -> PlanReport:
     why = ("the kernels or numba changed since they were last compiled" if kernel_cache.marked_before()
            else f"no complete compile in numba's cache in {where} yet")
     estimate_s = PLAN_WALL_S[min(jobs, max(PLAN_WALL_S))]
-    console.print(f"{NOTICE} ({why}); about {estimate_s} s on 2 cores with {jobs} "
+    console.print(f"{NOTICE} ({why}); about {estimate_s} s on a quiet 2-core machine with {jobs} "
                   f"job{'s' if jobs > 1 else ''}; Ctrl-C stops")
     started_s = time.perf_counter()
     with _interruptible(), _progress(console, started_s) as on_progress:
