@@ -38,8 +38,6 @@ from tpad_rt.kernel_cache import PACKAGE_DIR, discard_functions, discard_unfinis
 
 #: How much of a failed worker's stderr its error quotes (characters, the end).
 STDERR_TAIL_CHARS = 2000
-#: How long a worker given no more steps may take to end (s) before it is killed.
-FINISH_TIMEOUT_S = 10.0
 
 
 class CompileError(TpadError):
@@ -97,23 +95,12 @@ class _Worker:
         tail = self.stderr.read().decode(errors="replace")[-STDERR_TAIL_CHARS:].strip()
         return CompileError(f"compiling the kernels: {what}" + (f"\n{tail}" if tail else ""))
 
-    def finish(self) -> None:
-        """End it by closing its input (its loop ends; every step it ran has saved its cache), killed if it has
-        not ended within FINISH_TIMEOUT_S."""
-        assert self.process.stdin is not None
-        self.process.stdin.close()
-        try:
-            self.process.wait(timeout=FINISH_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            pass
-        self.kill()
-
     def kill(self) -> None:
         if self.process.poll() is None:
             self.process.kill()
         self.process.wait()
         for pipe in (self.process.stdin, self.process.stdout):
-            if pipe is not None and not pipe.closed:
+            if pipe is not None:
                 pipe.close()
         self.stderr.close()
 
@@ -136,7 +123,9 @@ def run_plan(jobs: int, on_progress: Callable[[int, int, str], None] | None = No
         discard_unfinished(started_ns)
         raise
     for worker in workers:
-        worker.finish()
+        assert worker.process.stdin is not None
+        worker.process.stdin.close()  # the worker's loop ends
+        worker.kill()
     shared = report.shared()
     if shared:
         discard_functions(shared)
