@@ -124,8 +124,8 @@ def run_plan(jobs: int, on_progress: Callable[[int, int, str], None] | None = No
         raise
     for worker in workers:
         assert worker.process.stdin is not None
-        worker.process.stdin.close()  # the worker's loop ends
-        worker.kill()
+        worker.process.stdin.close()
+        worker.kill()  # at once: each step saved its cache before it said it was done, and an exit takes seconds
     shared = report.shared()
     if shared:
         discard_functions(shared)
