@@ -88,3 +88,11 @@ def test_a_second_process_waits_for_the_compile_in_progress(cache: Path) -> None
     out, err = warm.communicate(timeout=120)
     assert warm.returncode == 0 and err == ""
     assert out == f"tpad-rt warm: every kernel is compiled already, cached in {cache}\n"
+
+
+def test_warm_refuses_a_job_count_out_of_range_in_one_line() -> None:
+    done = subprocess.run([sys.executable, "-m", "tpad_rt", "warm", "--jobs", "0"], cwd=REPO_ROOT, capture_output=True,
+                          text=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(REPO_ROOT)))
+    assert done.returncode == 1 and done.stdout == ""
+    assert done.stderr == ("tpad-rt warm: error: argument --jobs: must be a whole number in [1, 64] (workers), got '0' "
+                           "(see 'tpad-rt warm --help')\n")
