@@ -9,9 +9,11 @@ the stream. The finger sweeps back and forth across the plate at 50 mm/s for 3 s
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError
@@ -43,8 +45,16 @@ def main(url: str = "audio://") -> None:
             renderer.push_finger(x_mm, 20.0, force_n=0.5)
             time.sleep(0.002)
         renderer.lift()
-    for name, value in renderer.stats().items():
-        print(f"{name:>20}: {value}")
+    print_stats(renderer.stats())
+
+
+def print_stats(stats: dict[str, Any]) -> None:
+    """One line per statistic (its unit in its name): numbers to 4 significant digits, "n/a" where nothing
+    was measured (NaN)."""
+    for name, value in stats.items():
+        if isinstance(value, float):
+            value = "n/a" if math.isnan(value) else f"{value:.4g}"
+        print(f"{name:>28}: {value}")
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from minimal_app import open_renderer
+from minimal_app import open_renderer, print_stats
 
 TEXTURES = [Path(__file__).resolve().parents[1] / "textures" / name
             for name in ("grating.yaml", "square_grating.yaml", "bumps_grid.yaml", "edges_buttons.yaml")]
@@ -48,7 +48,7 @@ def main(url: str = "audio://") -> None:
                   f"{stats['underflows']} underflows)")
         done.set()
         finger.join()
-    print(renderer.stats())
+    print_stats(renderer.stats())
 
 
 if __name__ == "__main__":

@@ -41,13 +41,13 @@ def test_outside_the_samples_or_lifted_is_not_known() -> None:
 
 
 def test_a_temporal_texture_is_read_at_its_own_time() -> None:
-    texture = load_compiled(TEXTURES / "temporal_pulse.yaml")  # 30 Hz: 1.0 for the first 30 % of a cycle, then 0.5
+    texture = load_compiled(TEXTURES / "temporal_pulse.yaml")  # 30 Hz: 1.0 for the first 30 % of a cycle, then 0.6
     fingers = _fingers((10.0, 30.0, 20.0, True), (11.0, 40.0, 20.0, True))
     times = np.array([10.0 + 1e-4, 10.0 + 0.6 / 30])
     mu, valid = texture_at_finger(fingers, texture, times, texture_t0_s=10.0 - 0.5 / 30)  # half a cycle in at 10 s
     assert valid.all()
-    assert mu.tolist() == [0.5, 1.0]
-    assert texture_at_finger(fingers, texture, times)[0].tolist() == [1.0, 0.5]  # from t0 = 0: 300 cycles in
+    assert mu.tolist() == [0.6, 1.0]
+    assert texture_at_finger(fingers, texture, times)[0].tolist() == [1.0, 0.6]  # from t0 = 0: 300 cycles in
 
 
 def _naive_start_ramps(t_s: np.ndarray, touching: np.ndarray, window_s: float) -> np.ndarray:

@@ -20,7 +20,9 @@ import pytest
 from jack_server import jack_server, kill_server_under
 from xvfb import display, xvfb_server  # noqa: F401 - fixtures
 
-from tpad_rt.cli.play import AUTO_SWIPE
+from tpad_rt.cli.play import auto_swipe
+from tpad_rt.config import load_texture
+from tpad_rt.kernel.layout import FLAG_WATCHDOG
 from tpad_rt.recording import read_recording
 
 REPO = Path(__file__).resolve().parents[1]
@@ -38,7 +40,10 @@ def test_without_sound_card_or_display_it_plays_a_swipe_on_the_simulated_plate()
     done = _play("textures/grating.yaml", "--duration", "1")
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
-    assert lines[0] == (f"output sim:// (no audio device runs 192000 Hz), input {AUTO_SWIPE} (no display); "
+    finger = load_texture("textures/grating.yaml").finger
+    assert finger is not None
+    assert lines[0] == (f"output sim:// (no audio device runs 192000 Hz), input {auto_swipe(finger)} (no display; "
+                        f"the texture's recommended finger: {finger.speed_mm_s:g} mm/s under {finger.force_n:g} N); "
                         "1 s or Ctrl-C stops")
     assert lines[1].startswith("played ")
     friction = [line for line in lines if line.startswith("friction |texture under the finger - simulated plate|")]
@@ -84,7 +89,15 @@ def test_a_finite_input_ends_the_play_and_the_recording_ends_in_silence(tmp_path
     assert done.stdout.splitlines()[0] == "output sim:// (no audio device runs 192000 Hz), " \
                                           "input scripted://swipe?to_mm=20; Ctrl-C stops"
     assert done.stdout.splitlines()[-1] == f"wrote {record}"
-    assert np.all(read_recording(record).drive[-64:] == 0)
+    recording = read_recording(record)
+    assert np.all(recording.drive[-64:] == 0)
+    # the simulated plate and the blocks judged against the texture, as render records them; the input by its URL
+    assert recording.has_sim and "departed" in recording.blocks
+    assert recording.metadata["input_url"] == "scripted://swipe?to_mm=20"
+    assert recording.metadata["departure_tolerance_mu"] == 0.1
+    touching = (recording.blocks["saturated"] & FLAG_WATCHDOG) == 0
+    assert touching.any() and np.isfinite(recording.blocks["achieved_mu"][touching]).all()
+    assert not recording.blocks["departed"][~touching].any()  # how they are judged: tests/test_telemetry.py
 
 
 @pytest.mark.system
@@ -110,7 +123,9 @@ def test_with_a_jack_server_auto_picks_the_jack_device_and_says_how_it_buffers(s
 def test_with_a_display_auto_picks_the_mouse(display: str) -> None:  # noqa: F811 - fixture
     done = _play("textures/grating.yaml", "--duration", "1", env={**BARE_ENV, "DISPLAY": display})
     assert done.returncode == 0, done.stderr
-    assert done.stdout.splitlines()[0].startswith("output sim:// (no audio device runs 192000 Hz), input mouse:// (")
+    first = done.stdout.splitlines()[0]
+    assert first.startswith("output sim:// (no audio device runs 192000 Hz), input mouse://?force_n=0.5 ("), first
+    assert "left button held touches; the texture's recommended finger: 60 mm/s under 0.5 N); 1 s" in first, first
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -10,7 +10,6 @@ the drive is not saturated.
 from __future__ import annotations
 
 import math
-import re
 import subprocess
 import sys
 from collections.abc import Callable
@@ -23,7 +22,7 @@ from scipy.io import wavfile
 from tpad_rt.cli import main
 from tpad_rt.config import load_texture
 from tpad_rt.device import Device
-from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
+from tpad_rt.kernel.layout import FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, FLAG_WATCHDOG
 from tpad_rt.physics.friction import relative_friction
 from tpad_rt.recording import Recording, read_recording
 from tpad_rt.texture import load_compiled
@@ -218,7 +217,13 @@ def test_recording_and_summary(grating: tuple[Recording, str]) -> None:
     assert np.all(recording.drive[-64:] == 0)  # ramped down to silence
     lines = stdout.splitlines()
     assert lines[0].startswith("rendered 1.106 s of audio in ")
-    assert re.fullmatch(r"drive: peak \d+\.\d\d V of 40 V max", lines[1])
+    # The peak is the shaper's kick at touch-down (drive held at the limit: flag SHAPER_LIMIT), and says so, with
+    # the peak of the other blocks.
+    kicks = (recording.blocks["saturated"] & FLAG_SHAPER_LIMIT) != 0
+    volts = recording.blocks["voltage_v"]
+    assert kicks.any() and volts[kicks].max() == volts.max() > volts[~kicks].max()
+    assert lines[1] == (f"drive: peak {volts.max():.2f} V of 40 V max, in the shaper's kicks ({kicks.sum()} blocks at "
+                        f"the limit to move the plate as fast as it allows), {volts[~kicks].max():.2f} V outside them")
     assert lines[2].startswith("power: mean ") and "(cap 0.8 W, average budget 0.8 W over 1 s)" in lines[2]
     assert lines[3].startswith("saturated: ") and "finger touching in" in lines[3]
     assert lines[4].startswith("friction |texture under the finger - achieved| (simulated plate")

@@ -28,7 +28,8 @@ from cli_run import tpad_rt
 from slow_line import SlowLine
 
 from tpad_rt.amp.emulator import RECORDED_COLUMNS
-from tpad_rt.cli.play import AUTO_SWIPE
+from tpad_rt.cli.play import auto_swipe
+from tpad_rt.config import load_texture
 from tpad_rt.device import Device
 from tpad_rt.engine import Renderer
 from tpad_rt.errors import BackendError
@@ -80,8 +81,10 @@ def test_play_through_serial_renders_the_grating_on_the_emulated_plate(tmp_path:
         done = tpad_rt("play", "textures/grating.yaml", "--output", f"serial://{amp.port}", "--duration", "3")
         recording = amp.finish()
     assert done.returncode == 0, done.stderr
-    assert f"input {AUTO_SWIPE} (no display)" in done.stdout, done.stdout  # the finger the levels are checked at
-    swipe = open_input(AUTO_SWIPE)
+    finger = load_texture(GRATING).finger
+    assert finger is not None
+    assert f"input {auto_swipe(finger)} (no display" in done.stdout, done.stdout  # the finger the levels are checked at
+    swipe = open_input(auto_swipe(finger))
     assert recording["carrier_hz"].min() == recording["carrier_hz"].max() == pytest.approx(DEVICE.carrier_hz,
                                                                                              abs=0.01)
     assert recording["frames_bad"] == 0 and recording["sequence_gaps"] == 0
@@ -92,10 +95,11 @@ def test_play_through_serial_renders_the_grating_on_the_emulated_plate(tmp_path:
     span = index.max() - index.min() + 1
     assert span > 0.9 * 3 * recording["envelope_hz"]
     assert len(index) > 0.5 * span, f"fed {len(index)} of {span} samples ({recording['underruns']} underruns)"
-    # The default input swipes back and forth at 100 mm/s under 0.5 N; the middle 80 % of the run.
+    # The default input swipes back and forth at the grating's recommended finger; the middle 80 % of the run.
     playing = np.flatnonzero(recording["index"] >= 0)
     middle = playing[len(playing) // 10: -len(playing) // 10]
-    friction = achieved_friction({name: recording[name][middle] for name in RECORDED_COLUMNS}, 100.0, 0.5)
+    friction = achieved_friction({name: recording[name][middle] for name in RECORDED_COLUMNS}, swipe.speed_mm_s,
+                                 swipe.force_n)
     assert np.percentile(friction, 1) == pytest.approx(levels["low"], rel=0.02)
     assert np.percentile(friction, 99) == pytest.approx(levels["high"], rel=0.02)
     # The envelope the amplifier applied, mapped back through the calibration (the whole recording: the model

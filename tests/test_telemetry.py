@@ -4,6 +4,7 @@ first), bounded; push-to-DAC latency from the block records. Real pipeline, real
 from __future__ import annotations
 
 import gc
+import math
 import weakref
 from pathlib import Path
 
@@ -12,10 +13,11 @@ import pytest
 
 import tpad_rt.telemetry
 from tpad_rt.device import Device
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks
 from tpad_rt.kernel import table as tab
-from tpad_rt.kernel.layout import STATE_NEXT_INDEX, TEL_NAMES
+from tpad_rt.kernel.layout import FLAG_SHAPER_LIMIT, STATE_NEXT_INDEX, TEL_NAMES
 from tpad_rt.pipeline import Pipeline
-from tpad_rt.realtime import CallbackTable
+from tpad_rt.realtime import CallbackTable, monotonic_ns
 from tpad_rt.recording import read_recording, run_metadata
 from tpad_rt.telemetry import TelemetryLog
 from tpad_rt.texture import load_compiled
@@ -144,32 +146,106 @@ def test_measurements_must_match_the_names_and_blocks() -> None:
         log.begin_measurements(("other",))
 
 
+def _push_and_render(pipeline: Pipeline, table: CallbackTable, log: TelemetryLog, blocks: int) -> list[float]:
+    """Render ``blocks`` blocks with 0, 1 or 2 samples pushed before each (push times made up), draining after each; each sample's expected latency (ms): the DAC time of the next block minus its
+    push time."""
+    pushed_ns: dict[int, int] = {}
+    expected_ms: list[float] = []
+    for k in range(blocks):
+        for j in range(k % 3):
+            index = int(pipeline.arrays.finger_count[0])
+            pipeline.push_finger(table.next_sample / RATE_HZ, 30.0, 20.0)
+            pushed_ns[index] = monotonic_ns() - 1_000 * (10 * k + j)  # any time before the block: the log takes it
+            log.note_push(index, pushed_ns[index])
+        table.call(np.zeros(BLOCK, dtype=np.float32))
+        log.drain(table)
+        record = table.recent_blocks()[-1]
+        out_ns = int(record[tab.BLOCK_ENTRY_NS] + record[tab.BLOCK_DAC_DELAY_NS])
+        expected_ms += [(out_ns - pushed_ns[index]) * 1e-6 for index in sorted(pushed_ns)[len(expected_ms):]]
+    return expected_ms
+
+
+def _nearest_rank(values: list[float], q: float) -> float:
+    return sorted(values)[max(math.ceil(q / 100 * len(values)), 1) - 1]
+
+
 def test_latency_is_from_each_push_to_the_dac_time_of_the_first_block_that_read_it() -> None:
     """Samples pushed between blocks: each one's latency is the next block's DAC time minus its push time (the
     Renderer notes pushes; the block records are the callback's own)."""
     pipeline, table, log = _setup()
-    pushed_ns = {}
-    expected_ms = []
-    for k in range(6):
-        for j in range(k % 3):  # 0, 1 or 2 samples before each block
-            index = int(pipeline.arrays.finger_count[0])
-            pipeline.push_finger((k + 0.5 * j) * BLOCK / RATE_HZ, 30.0, 20.0)
-            pushed_ns[index] = 1_000 * (10 * k + j)  # any push time: the log takes what it is told
-            log.note_push(index, pushed_ns[index])
-        table.call(np.zeros(BLOCK, dtype=np.float32))
-        record = table.recent_blocks()[-1]
-        out_ns = int(record[tab.BLOCK_ENTRY_NS] + record[tab.BLOCK_DAC_DELAY_NS])
-        expected_ms += [(out_ns - pushed_ns[index]) * 1e-6 for index in sorted(pushed_ns)[len(expected_ms):]]
-    latency = log.latency_ms(table.recent_blocks())
-    assert latency == {"latency_ms_p50": pytest.approx(float(np.percentile(expected_ms, 50)), abs=1e-9),
-                       "latency_ms_p99": pytest.approx(float(np.percentile(expected_ms, 99)), abs=1e-9)}
+    table.call(np.zeros(BLOCK, dtype=np.float32))  # the run's first block: what it reads was pushed before the run
+    expected_ms = _push_and_render(pipeline, table, log, 6)
     assert len(expected_ms) == 6
+    latency = log.latency_ms()
+    assert latency == {f"latency_ms_p{q}": pytest.approx(_nearest_rank(expected_ms, q), rel=0.012) for q in (50, 99)}
+
+
+def test_latency_covers_the_whole_run_not_the_blocks_the_ring_still_holds() -> None:
+    """Pushes in a run's first blocks, then many more blocks than the block ring holds without any (a finger
+    that rested: a live input's run): the latency is still that of the pushes."""
+    pipeline = Pipeline(Device.default(), load_compiled(GRATING), fs_hz=RATE_HZ)
+    table = CallbackTable(pipeline.arrays, load_compiled(GRATING), block_rows=8)
+    log = TelemetryLog(pipeline, RATE_HZ)
+    table.call(np.zeros(BLOCK, dtype=np.float32))
+    expected_ms = _push_and_render(pipeline, table, log, 9)
+    for _ in range(5):
+        _render(table, 6)
+        log.drain(table)
+    assert len(table.recent_blocks()) < 30 and not np.diff(table.recent_blocks()[:, tab.BLOCK_FINGER_COUNT]).any()
+    assert log.latency_ms()["latency_ms_p50"] == pytest.approx(_nearest_rank(expected_ms, 50), rel=0.012)
+
+
+def test_blocks_the_ring_lost_before_a_drain_are_not_folded_in_as_if_next_to_the_ones_kept() -> None:
+    """More blocks than the ring holds between two drains: the samples read by the lost blocks are not counted
+    (their block is not known), and the kept blocks' are."""
+    pipeline = Pipeline(Device.default(), load_compiled(GRATING), fs_hz=RATE_HZ)
+    table = CallbackTable(pipeline.arrays, load_compiled(GRATING), block_rows=4)
+    log = TelemetryLog(pipeline, RATE_HZ)
+    table.call(np.zeros(BLOCK, dtype=np.float32))
+    log.drain(table)
+    index = int(pipeline.arrays.finger_count[0])
+    pipeline.push_finger(table.next_sample / RATE_HZ, 30.0, 20.0)
+    log.note_push(index, 0)  # read by a block the ring loses: its latency would be that block's DAC time
+    _render(table, 10)
+    index = int(pipeline.arrays.finger_count[0])
+    pipeline.push_finger(table.next_sample / RATE_HZ, 30.0, 20.0)
+    pushed_ns = int(table.recent_blocks()[-1][tab.BLOCK_ENTRY_NS])
+    log.note_push(index, pushed_ns)
+    _render(table, 1)
+    log.drain(table)
+    record = table.recent_blocks()[-1]
+    expected_ms = (int(record[tab.BLOCK_ENTRY_NS] + record[tab.BLOCK_DAC_DELAY_NS]) - pushed_ns) * 1e-6
+    assert log.latency_ms() == {f"latency_ms_p{q}": pytest.approx(expected_ms, rel=0.012) for q in (50, 99)}
+
+
+def test_totals_keep_the_drive_peak_and_tell_the_shaper_s_kicks_apart() -> None:
+    """A finger touching down: the shaper kicks the drive to its limit (flag SHAPER_LIMIT) for a few blocks; the
+    totals keep the peak, those blocks and the peak of the others, over every row drained."""
+    pipeline, table, log = _setup()
+    pipeline.start()
+    rows = []
+    for k in range(60):
+        pipeline.push_finger(table.next_sample / RATE_HZ, 30.0 + 0.1 * k, 20.0)
+        table.call(np.zeros(BLOCK, dtype=np.float32))
+        if k % 7 == 0:
+            log.drain(table)
+            rows.append(log.take())
+    log.drain(table)
+    rows.append(log.take())
+    flags = np.concatenate([chunk["saturated"] for chunk in rows])
+    volts = np.concatenate([chunk["voltage_v"] for chunk in rows])
+    kicks = (flags & FLAG_SHAPER_LIMIT) != 0
+    assert kicks.any() and not kicks.all()
+    totals = log.totals()
+    assert totals["kick_blocks"] == np.count_nonzero(kicks)
+    assert totals["peak_v"] == volts.max() and totals["peak_outside_kicks_v"] == volts[~kicks].max()
 
 
 def test_latency_without_pushes_is_nan() -> None:
     _, table, log = _setup()
     _render(table, 3)
-    latency = log.latency_ms(table.recent_blocks())
+    log.drain(table)
+    latency = log.latency_ms()
     assert np.isnan(latency["latency_ms_p50"]) and np.isnan(latency["latency_ms_p99"])
 
 
@@ -195,3 +271,58 @@ def test_a_recording_takes_the_drive_up_to_the_last_finished_block_not_the_publi
     drive = read_recording(tmp_path / "run.npz").drive
     assert len(drive) == 6 * BLOCK and not np.any(drive == 0.75)
     assert np.array_equal(drive, table.drive[:6 * BLOCK])
+
+
+def test_a_recording_on_a_measured_plate_has_its_columns_and_departures_as_render_judges_them(tmp_path: Path) -> None:
+    """An output that measures the plate (sim://): the recording has the measured columns of each block (NaN for
+    one not measured), and ``departed`` judged against the texture under the recorded finger, by the function
+    ``render`` judges with."""
+    pipeline, table, log = _setup()
+    texture = load_compiled(GRATING)
+    log.begin_measurements(NAMES)
+    log.record(tmp_path / "run.npz")
+    pipeline.start()
+    for k in range(40):  # a swipe, drained as the watcher would, every few blocks
+        pipeline.push_finger(table.next_sample / RATE_HZ, 30.0 + 0.1 * k, 20.0)
+        t_s = _render(table, 1)
+        if k != 17:  # one block the output did not measure
+            measured = _measured(t_s)
+            if k % 3 == 0:
+                measured["achieved_mu"] = np.zeros(1)  # far from any texture: a departure where judged
+            log.add_measurements(t_s, measured)
+        if k % 5 == 4:
+            log.drain(table)
+    log.end_measurements()
+    log.drain(table)
+    fingers = pipeline.recent_fingers()
+    log.write_recording(run_metadata(pipeline, texture, texture_path=None, block_frames=BLOCK, input_url="api",
+                                     output_url="sim://"), texture)
+    recording = read_recording(tmp_path / "run.npz")
+    blocks = recording.blocks
+    assert recording.has_sim and len(blocks["t"]) == 40
+    index = np.round(blocks["t"] * RATE_HZ / BLOCK).astype(int)
+    measured_now = ~np.isin(index, [17])
+    assert np.isnan(blocks["achieved_mu"][~measured_now]).all()
+    expected = _measured(blocks["t"])
+    assert np.array_equal(blocks["plate_amplitude_um"][measured_now], expected["plate_amplitude_um"][measured_now])
+    judged = judge_blocks(blocks, fingers, texture, block_s=BLOCK / RATE_HZ, mu_floor=pipeline.options.mu_floor)
+    assert judged.departed.any() and not judged.departed.all()
+    assert np.array_equal(blocks["departed"], judged.departed.astype(np.int8))
+    assert not blocks["departed"][~measured_now].any()
+    assert recording.metadata["departure_tolerance_mu"] == DEPARTURE_TOLERANCE_MU
+
+
+def test_a_recording_without_a_texture_to_judge_against_has_no_departures(tmp_path: Path) -> None:
+    """No texture given (the Renderer's was swapped while recording): the plate's columns, no ``departed``."""
+    pipeline, table, log = _setup()
+    log.begin_measurements(NAMES)
+    log.record(tmp_path / "run.npz")
+    pipeline.start()
+    pipeline.push_finger(0.0, 30.0, 20.0)
+    t_s = _render(table, 3)
+    log.add_measurements(t_s, _measured(t_s))
+    log.drain(table)
+    log.write_recording(run_metadata(pipeline, load_compiled(GRATING), texture_path=None, block_frames=BLOCK,
+                                     input_url="api", output_url="sim://"))
+    recording = read_recording(tmp_path / "run.npz")
+    assert recording.has_sim and "departed" not in recording.blocks

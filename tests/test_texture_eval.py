@@ -305,7 +305,7 @@ def _every_kind() -> Any:
     """One layers texture holding every kind, so one call runs every opcode."""
     paths = [p for p in GOOD_TEXTURES if p.name != "layers.yaml"]
     paths += [REPO / "textures" / "gradient_ridge.yaml", REPO / "textures" / "gradient_ridges.yaml"]
-    layers = [{**load_texture(p).model_dump(exclude={"description"}, exclude_defaults=True), "op": "min"}
+    layers = [{**load_texture(p).model_dump(exclude={"description", "finger"}, exclude_defaults=True), "op": "min"}
               for p in paths]
     layers.append({"kind": "layers", "op": "max", "layers": [layers[0]]})
     return texture_model({"description": "all kinds", "kind": "layers", "layers": layers})

@@ -6,7 +6,8 @@ Renderer(device=None, output="audio://", *, texture=None, rate_hz=192000, block_
          options=RenderOptions(), stall_timeout_s=0.5)
     context manager; ``start()``, ``stop()``, ``set_texture(texture_or_path)``,
     ``push_finger(x_mm, y_mm, force_n=None, t=None)``, ``lift()``, ``now_s()``,
-    ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``iter_telemetry(period_s)``, ``record(path)``,
+    ``stats() -> dict``, ``telemetry() -> dict[str, ndarray]``, ``iter_telemetry(period_s)``,
+    ``record(path, input_url="api")``,
     ``join(timeout_s=None)``, ``check()``, ``stream_time_s()``, ``recent_fingers()``,
     ``texture_t0_s()``, ``.texture``, ``.drive``, ``.callback_table``, ``.rate_hz``,
     ``.block_frames``, ``.running``, ``.driver`` (what runs the output: :mod:`tpad_rt.drivers`)
@@ -38,6 +39,7 @@ and a watcher thread that drains telemetry and polls the driver for failures.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import numbers
 import threading
@@ -48,12 +50,11 @@ from typing import Any
 
 import numpy as np
 
-from tpad_rt.compiling import compile_notice, ensure_compiled
 from tpad_rt.device import Device
 from tpad_rt.drive import DriveSpec
 from tpad_rt.drivers import Driver, open_driver
 from tpad_rt.errors import ConfigError
-from tpad_rt.kernel import table as tab
+from tpad_rt.kernel import table_layout as tab
 from tpad_rt.kernel.layout import (
     CFG_POWER_AVG_W, CFG_POWER_CAP_W, OP_PUSH_ONE, STATE_GATE, STATE_NEXT_INDEX, STATE_RAMP_START, TEX_PROG_COLS,
 )
@@ -149,6 +150,9 @@ class Renderer:
         self._reported: BaseException | None = None  # the driver's failure the watcher raised
         self._producer: threading.Lock = threading.Lock()  # orders push_finger/lift callers (the callback takes no lock)
         self._texture: CompiledTexture = compiled
+        self._texture_sets: int = 0  # set_texture calls so far
+        self._record_from_sets: int = 0  # that count when record() was called
+        self._record_input_url: str = "api"  # what fed the fingers, as record() was told
 
     # --- lifecycle -----------------------------------------------------------------
 
@@ -195,8 +199,7 @@ class Renderer:
         table.slot_t0_s[0] = self.now_s()
         self._last_table = table
         try:
-            with compile_notice():  # the first run in a fresh numba cache compiles the kernels here
-                ensure_compiled()  # all of them, for every path, in worker processes
+            with _warm_notice(driver):  # the first run in a fresh numba cache compiles the kernels here
                 driver.warm(table.copy())
                 driver.open(self._pipeline)
             self._pipeline.start()
@@ -244,7 +247,9 @@ class Renderer:
                 if failure is not None and failure is not self._reported:  # the watcher's is reported once
                     self._error = self._error or failure
             if self._log.recording:
-                self._log.write_recording(self._metadata())
+                one_texture = self._texture_sets == self._record_from_sets  # else no one texture to judge against
+                self._log.write_recording(self._metadata(), self._texture if one_texture else None,
+                                          float(table.slot_t0_s[table.active_slot]))
         except BaseException as error:  # noqa: BLE001 - re-raised by check() below
             self._error = self._error or error
         finally:
@@ -311,6 +316,7 @@ class Renderer:
         """
         compiled, path = _compiled(texture)
         self._texture, self._texture_path = compiled, path
+        self._texture_sets += 1
         if self._table is not None:
             self._table.set_texture(compiled, self.now_s(), running=True)
         else:
@@ -390,12 +396,16 @@ class Renderer:
         ``compute_us_p50/p99/max``
         (time in the callback, over the recent blocks); ``callback_load_p99`` (that p99 as a
         fraction of a block's duration); ``blocks``,
-        ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (blocks), ``power_mean_w``,
+        ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (blocks), ``voltage_peak_v`` (the drive's
+        peak, V), ``kick_blocks`` (blocks in which the shaper held the drive at a limit to move the plate as fast as
+        it allows: telemetry flag SHAPER_LIMIT, by design, not saturation) and ``voltage_peak_outside_kicks_v``
+        (the peak in the other blocks, V), ``power_mean_w``,
         ``power_peak_w``, ``power_budget_w``, ``power_avg_w`` (from telemetry); ``plate_peak_w`` (the most power
         the plate held, as the kernel's model has it) and ``over_cap_blocks`` (blocks in which that was over the cap:
         a press);
         ``latency_ms_p50/p99``: from a push to the DAC time of the first block that
-        read it, over the recent blocks; ``dac_delay_ms``: the part of it the host
+        read it, over every block since the renderer was made (a running histogram: within 1.2 %,
+        tpad_rt.telemetry); ``dac_delay_ms``: the part of it the host
         reports from a callback to the DAC (median over the recent blocks, from the
         time stamps PortAudio passes each callback; 0 on paced outputs; PortAudio's
         stream-level ``outputLatency`` is not reported: JACK's dummy driver says 0 there
@@ -424,7 +434,7 @@ class Renderer:
         result["callback_load_p99"] = result["compute_us_p99"] * 1e-6 * self.rate_hz / self.block_frames
         dac_delay_ms = blocks[:, tab.BLOCK_DAC_DELAY_NS] * 1e-6
         result["dac_delay_ms"] = float(np.median(dac_delay_ms)) if len(dac_delay_ms) else math.nan
-        result.update(self._log.latency_ms(blocks))
+        result.update(self._log.latency_ms())
         totals = self._log.totals()
         cfg = self._pipeline.arrays.cfg
         result.update(blocks=totals["blocks"], voltage_saturated=totals["voltage_saturated"],
@@ -432,6 +442,8 @@ class Renderer:
                       power_mean_w=totals["energy_w"] / totals["blocks"] if totals["blocks"] else math.nan,
                       power_peak_w=totals["peak_w"], power_budget_w=float(cfg[CFG_POWER_CAP_W]),
                       power_avg_w=float(cfg[CFG_POWER_AVG_W]), plate_peak_w=totals["plate_peak_w"],
+                      voltage_peak_v=totals["peak_v"], kick_blocks=totals["kick_blocks"],
+                      voltage_peak_outside_kicks_v=totals["peak_outside_kicks_v"],
                       over_cap_blocks=self._pipeline.over_cap_blocks)
         result.update(self._pipeline.faults())
         return result
@@ -460,16 +472,35 @@ class Renderer:
             yield rows
         self.check()
 
-    def record(self, path: str | Path) -> None:
+    def record(self, path: str | Path, input_url: str = "api") -> None:
         """Record the drive and telemetry from now on; :meth:`stop` writes them to ``path`` (.npz, the
-        format of ``tpad-rt render``). Raises ConfigError unless ``path`` ends in ``.npz``, or when it is no
+        format of ``tpad-rt render``), its metadata naming ``input_url`` as what fed the fingers (``"api"``:
+        the caller's own pushes). On an output that measures the plate (``sim://``) the recording has the
+        simulated plate's columns, and, when one texture was rendered all along, ``departed``
+        (tpad_rt.telemetry). Raises ConfigError unless ``path`` ends in ``.npz``, or when it is no
         place to write (no folder, a FIFO, a directory). A recording
         keeps at most ``tpad_rt.limits.MAX_RECORDING_SAMPLES`` drive samples in memory: past that the
         run ends with a TpadError (re-raised once, by :meth:`check`, :meth:`join` or :meth:`stop`), and
         :meth:`stop` writes what came before it, its metadata's ``truncated`` saying why."""
         self._log.record(path)
+        self._record_from_sets = self._texture_sets
+        self._record_input_url = input_url
 
     def _metadata(self) -> dict[str, Any]:
         """The recording's metadata (:func:`tpad_rt.recording.run_metadata`)."""
         return run_metadata(self._pipeline, self._texture, texture_path=self._texture_path,
-                            block_frames=self.block_frames, input_url="api", output_url=self.output_url)
+                            block_frames=self.block_frames, input_url=self._record_input_url,
+                            output_url=self.output_url)
+
+
+def _warm_notice(driver: Driver) -> contextlib.AbstractContextManager[object]:
+    """The compile notice (:func:`tpad_rt.compiling.compile_notice`) around warming ``driver`` up and opening it,
+    after compiling the whole compile plan when numba's cache lacks it (:func:`tpad_rt.compiling.ensure_compiled`),
+    unless the driver compiles nothing (its callback and output are ahead-of-time code): numba is then not
+    imported."""
+    if not driver.warm_compiles():
+        return contextlib.nullcontext()
+    from tpad_rt.compiling import compile_notice, ensure_compiled
+
+    ensure_compiled()  # every kernel of every path, in worker processes, when numba's cache lacks them
+    return compile_notice()

@@ -7,20 +7,26 @@ texture_at_finger(finger, texture, t_s, texture_t0_s=0.0) -> (mu, valid)
     position interpolated between its samples, and where that is known
 departures(felt_mu, achieved_mu, judged, tolerance_mu=DEPARTURE_TOLERANCE_MU) -> mask
     the blocks whose achieved friction is further than ``tolerance_mu`` from the felt one
+judge_blocks(blocks, finger, texture, *, block_s, mu_floor, texture_t0_s=0.0) -> Judged
+    both, for telemetry rows: what ``render``, ``play`` and a Renderer's recording judge
 start_ramps(t_s, touching, window_s, touch_start_s=-inf, was_touching=False) -> (mask, touch_start_s)
     the touching blocks within ``window_s`` of their touch's start, where the drive fades in
 
 Used to judge a rendering against its texture free of the kernel's own extrapolation
 (``horizon_ms``): ``tpad-rt render``'s summary and plots (through
-:func:`tpad_rt.offline.texture_under_finger`) and ``tpad-rt play``'s status on ``sim://``.
+:func:`tpad_rt.offline.texture_under_finger`), ``tpad-rt play``'s status on ``sim://`` and the
+``departed`` column of recordings (``render``'s and a Renderer's), all by :func:`judge_blocks`.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
+from tpad_rt.kernel.layout import FLAG_WATCHDOG
 from tpad_rt.texture import CompiledTexture
 
 #: How far (relative friction) the achieved friction may be from the texture under the finger
@@ -32,6 +38,32 @@ def departures(felt_mu: np.ndarray, achieved_mu: np.ndarray, judged: np.ndarray,
                tolerance_mu: float = DEPARTURE_TOLERANCE_MU) -> np.ndarray:
     """True for the ``judged`` blocks where ``|felt_mu - achieved_mu| > tolerance_mu`` (NaN counts as departed)."""
     return judged & ~(np.abs(felt_mu - achieved_mu) <= tolerance_mu)
+
+
+@dataclass(frozen=True)
+class Judged:
+    """Blocks judged against the texture under the finger: ``felt_mu`` (the texture at each block's middle,
+    clamped to ``[mu_floor, 1]`` as the kernel renders it; 1 where not known), ``known`` (where it is known),
+    ``judged`` (touching blocks where it is known and the plate's friction was measured) and ``departed`` (judged blocks further than
+    DEPARTURE_TOLERANCE_MU from it)."""
+
+    felt_mu: np.ndarray
+    known: np.ndarray
+    judged: np.ndarray
+    departed: np.ndarray
+
+
+def judge_blocks(blocks: Mapping[str, np.ndarray], finger: np.ndarray, texture: CompiledTexture, *, block_s: float,
+                 mu_floor: float, texture_t0_s: float = 0.0) -> Judged:
+    """Judge telemetry ``blocks`` (``t``, ``saturated`` and the plate's ``achieved_mu``, NaN where not measured;
+    blocks of ``block_s`` s) against ``texture`` (started at stream time ``texture_t0_s``, s) under ``finger``
+    (FINGER_DTYPE samples in time order, :func:`texture_at_finger`), with the kernel's floor ``mu_floor``."""
+    felt_mu, known = texture_at_finger(finger, texture, blocks["t"] + 0.5 * block_s, texture_t0_s)
+    felt_mu = np.clip(felt_mu, mu_floor, 1.0)
+    achieved_mu = blocks["achieved_mu"]
+    touching = (blocks["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0
+    judged = known & touching & np.isfinite(achieved_mu)
+    return Judged(felt_mu, known, judged, departures(felt_mu, achieved_mu, judged))
 
 
 def start_ramps(t_s: np.ndarray, touching: np.ndarray, window_s: float, touch_start_s: float = -math.inf,

@@ -13,7 +13,8 @@ Pipeline(device, texture, fs_hz=192000, options=RenderOptions())
     ``.stream_time_s``, ``.last_time_s``, ``.position_range_mm``, ``.check_time(t_s, name)``, ``.faults() -> dict``
     ``.set_texture(texture, t_s=None)``, ``.start()``, ``.stop()``
     ``.drive``, ``.set_drive(drive)``, ``.device_drive``: the drive it renders for (:class:`tpad_rt.drive.DriveSpec`)
-    ``.recent_fingers()``: the newest samples of the finger ring, decoded
+    ``.recent_fingers()``: the newest samples of the finger ring, decoded; ``.fingers_since(first)``: those from
+    sample number ``first`` on
     ``.render(out)``: the next ``len(out)`` float32 samples (1.0 = ``volts_per_full_scale``)
     ``.drain_telemetry() -> dict[str, np.ndarray]``: rows since the last drain, keyed by TEL_NAMES
     ``.last_telemetry_row() -> dict[str, float]``: the newest row, not drained
@@ -47,9 +48,7 @@ from tpad_rt.drive import Consumes, DriveSpec
 from tpad_rt.errors import ConfigError, SampleError, TpadError
 from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel import layout
-from tpad_rt.kernel.atomics import publish
-from tpad_rt.kernel.batch import render_blocks
-from tpad_rt.kernel.render import render_block
+from tpad_rt.aot.library import publish
 from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, position_range_mm
 from tpad_rt.texture import CompiledTexture
 
@@ -540,7 +539,7 @@ class Pipeline:
         or before the previous sample's, a position beyond :attr:`position_range_mm` (one plate
         length or width past each edge), a force outside ``[0, MAX_FORCE_N]``. Safe from several
         threads (a lock orders them); writes the ring row, then bumps the count the kernel reads
-        with a release store (:func:`tpad_rt.kernel.atomics.publish`).
+        with a release store (:func:`tpad_rt.aot.library.publish`).
         """
         row = (*self._checked_sample(t_s, x_mm, y_mm, force_n), 1.0 if down else 0.0)
         with self._producer:
@@ -581,15 +580,21 @@ class Pipeline:
 
         Read without a lock while a producer may push: the ring's oldest row is left out.
         """
+        return self.fingers_since(0)[0]
+
+    def fingers_since(self, first: int) -> tuple[np.ndarray, int]:
+        """The finger samples from number ``first`` (0: the first ever pushed) on that the ring still holds (at most
+        ``finger_ring - 2``, oldest first, as :data:`tpad_rt.inputs.base.FINGER_DTYPE`), and the number after the
+        last of them (the count they were read at). Read without a lock, as :meth:`recent_fingers`."""
         count = int(self._arrays.finger_count[0])
         ring = self._arrays.finger
-        rows = ring[np.arange(max(0, count - len(ring) + 2), count) % len(ring)]
+        rows = ring[np.arange(max(first, count - len(ring) + 2), count) % len(ring)]
         samples = np.zeros(len(rows), dtype=FINGER_DTYPE)
         for name, column in (("t_s", layout.FINGER_T_S), ("x_mm", layout.FINGER_X_MM), ("y_mm", layout.FINGER_Y_MM),
                              ("force_n", layout.FINGER_FORCE_N)):
             samples[name] = rows[:, column]
         samples["down"] = rows[:, layout.FINGER_DOWN] > 0.5
-        return samples
+        return samples, count
 
     @property
     def over_cap_blocks(self) -> int:
@@ -643,6 +648,8 @@ class Pipeline:
             raise TypeError("out: must be a writable C-contiguous 1-D float32 NumPy array")
         if not 1 <= out.size <= MAX_BLOCK_FRAMES:
             raise ValueError(f"out: must hold 1 to {MAX_BLOCK_FRAMES} samples, got {out.size}")
+        from tpad_rt.kernel.render import render_block  # numba: imported by what renders here, not at import
+
         render_block(out, self.sample_index, *self._arrays)
         self.sample_index += out.size
 
@@ -695,6 +702,8 @@ class Pipeline:
             if not self.finger_rows_pass(rows, due, block_frames):
                 raise SampleError("render_blocks: a finger sample push_finger refuses; push them one by one to "
                                   "learn which")
+            from tpad_rt.kernel.batch import render_blocks  # numba: imported by what renders here
+
             render_blocks(out, block_frames, self.sample_index, rows, due, *self._arrays)
             if len(rows) and len(due) and due[-1] > 0:
                 self._last_t_s = float(rows[int(due[-1]) - 1, layout.FINGER_T_S])
@@ -733,6 +742,9 @@ class Pipeline:
 
         The pipeline's own state is untouched; the first real :meth:`render` is then fast.
         """
+        from tpad_rt.kernel.batch import render_blocks
+        from tpad_rt.kernel.render import render_block
+
         frames = self.options.control_interval + 1
         scratch = KernelArrays(*(array.copy() for array in self._arrays))
         render_block(np.zeros(frames, dtype=np.float32), self.sample_index, *scratch)

@@ -4,12 +4,12 @@ API map
 -------
 CallbackTable(arrays, texture, *, channels=1, channel=0, scratch_frames=4096, drive_frames=2**20,
               block_rows=4096)
-    owns the pointer table (``.table``, int64, layout in :mod:`tpad_rt.kernel.callback`) and
+    owns the pointer table (``.table``, int64, layout in :mod:`tpad_rt.kernel.table_layout`) and
     every array it points to: the render kernel's arrays (:class:`tpad_rt.pipeline.KernelArrays`,
     shared, not copied), two texture slots, the output scratch, the drive ring, the
     statistics (``.stats``) and the per-block records (``.blocks``)
     ``.user_data``: the address to pass as ``userData``; ``.set_texture(texture, t0_s, running)``;
-    ``.recent_blocks()``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.drive_end()``; ``.copy()``;
+    ``.recent_blocks()``, ``.blocks_since(first)``; ``.dac_sample(now_ns)``; ``.next_sample``; ``.drive_end()``; ``.copy()``;
     ``.set_lead_bound_s(seconds)`` / ``.lead_bound_s`` (the most output lead the driver's output can have);
     ``.call(out, callback=None, dac_delay_s=0.0)``
 monotonic_ns() -> int
@@ -28,9 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from tpad_rt.kernel import callback as cb
-from tpad_rt.kernel import table as tab
-from tpad_rt.kernel.atomics import publish
+from tpad_rt.aot import library as native
+from tpad_rt.kernel import table_layout as tab
 from tpad_rt.kernel.layout import CFG_FS_HZ, CFG_TEXTURE_T0_S, MAX_OUTPUT_LEAD_S, STATE_NEXT_INDEX
 from tpad_rt.pipeline import KernelArrays
 from tpad_rt.texture import CompiledTexture
@@ -135,15 +134,21 @@ class CallbackTable:
                 time.sleep(0.0005)
         idle = 1 - self.active_slot
         self._write_slot(idle, texture, t0_s)
-        publish(self.table, tab.TAB_ACTIVE_SLOT, idle)  # after the slot: a release store
+        native.publish(self.table, tab.TAB_ACTIVE_SLOT, idle)  # after the slot: a release store
         self._flip_callbacks = int(self.stats[tab.STAT_CALLBACKS])
 
     def recent_blocks(self) -> np.ndarray:
         """The block records still in the ring, oldest first (int64 ``[rows, BLOCK_COLS]``, a copy)."""
+        return self.blocks_since(0)[0]
+
+    def blocks_since(self, first: int) -> tuple[np.ndarray, int]:
+        """The records of block number ``first`` (0: the run's first block) and after that are still in the ring,
+        oldest first (int64 ``[rows, BLOCK_COLS]``, a copy), and the number of the first of them (above ``first``
+        when the ring lost some)."""
         callbacks = int(self.stats[tab.STAT_CALLBACKS])
         rows = self.blocks.shape[0]
-        first = max(0, callbacks - rows + 1)  # the oldest row may be rewritten by the running callback
-        return self.blocks[np.arange(first, callbacks) % rows]
+        start = max(first, callbacks - rows + 1, 0)  # the oldest row may be rewritten by the running callback
+        return self.blocks[np.arange(start, callbacks) % rows], start
 
     def dac_sample(self, now_ns: int) -> float:
         """The stream sample (fractional) at the DAC at CLOCK_MONOTONIC ``now_ns``, from the newest block.
@@ -197,13 +202,13 @@ class CallbackTable:
         return twin
 
     def call(self, out: np.ndarray, callback: Any = None, dac_delay_s: float = 0.0) -> None:
-        """Run ``callback`` (None: ``render_callback``) once from Python on ``out`` (float32, frames x
-        channels), as PortAudio would.
+        """Run ``callback`` (None: the render callback, :func:`tpad_rt.aot.library.render_callback`) once from
+        Python on ``out`` (float32, frames x channels), as PortAudio would.
 
         Its time info says the first sample plays ``dac_delay_s`` (s) from now (DAC time - current time;
         any float, as a driver might report it). The ctypes call releases the GIL while the callback runs.
         """
-        callback = cb.render_callback if callback is None else callback
+        callback = native.render_callback() if callback is None else callback
         channels = int(self.table[tab.TAB_CHANNELS])
         if out.dtype != np.float32 or not out.flags.c_contiguous or out.size % channels:
             raise ValueError(f"out: must be C-contiguous float32 holding whole frames of {channels} channels")

@@ -13,9 +13,11 @@ reads every one):
   speed_mm_s, force_n, target_mu, amplitude_um, voltage_v, power_w, saturated, plate_w``
   (``tpad_rt.kernel.layout.TEL_NAMES``; ``plate_w`` may be absent from a recording made before
   it was added), plus ``achieved_mu`` and
-  ``plate_amplitude_um`` when the output was the simulated plate, and ``departed``
-  (1 where the achieved friction was further than the metadata's
-  ``departure_tolerance_mu`` from the texture under the finger) from ``tpad-rt render``;
+  ``plate_amplitude_um`` when the output was the simulated plate (NaN for a block it did
+  not measure), and ``departed`` (1 where the achieved friction was further than the
+  metadata's ``departure_tolerance_mu`` from the texture under the finger:
+  :func:`tpad_rt.felt.judge_blocks`) from ``tpad-rt render``, and from a Renderer's
+  recording (``play --record``) that rendered one texture all along;
 - ``metadata_json`` (0-d str): a JSON object with at least the keys in
   :data:`REQUIRED_METADATA` (texture path and description, device label, carrier,
   volts per full scale, max voltage, power budgets, block size, tpad-rt version); a run's

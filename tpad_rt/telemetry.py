@@ -7,10 +7,10 @@ TelemetryLog(pipeline, rate_hz)
     ``drain(table)`` (the watcher, and readers, call it), ``take()`` (the rows since the
     last take, by TEL_NAMES column, and the output's measured columns), ``totals()``,
     ``record(path)``, ``recording``, ``failure`` (a recording's limit error),
-    ``write_recording(metadata)``;
+    ``write_recording(metadata, texture=None, texture_t0_s=0.0)``;
     measurements: ``begin_measurements(names)``, ``add_measurements(t_s, columns)``,
     ``end_measurements()``, ``measured_names``;
-    latency: ``note_push(index, pushed_ns)``, ``latency_ms(blocks)``
+    latency: ``note_push(index, pushed_ns)``, ``latency_ms()`` (over every block drained)
 joined(chunks, names=TEL_NAMES) -> dict[str, ndarray]
     telemetry chunks concatenated column by column
 
@@ -19,7 +19,14 @@ and friction) has its driver hand the measurements here, each block's with the b
 time ``t``: :meth:`TelemetryLog.take` gives them as more columns of the same rows, and
 holds a row back until its measurement came (or the measuring ended), so a reader sees
 every block once, measured. Everything kept between takes is bounded (MAX_PENDING_ROWS
-rows each), whoever reads or not.
+rows each), whoever reads or not. A recording keeps the measurements too, and the finger
+samples (at most MAX_RECORDED_FINGERS), and writes them as ``tpad-rt render`` does: the
+simulated plate's columns, and ``departed`` judged against the texture under the finger
+(:func:`tpad_rt.felt.judge_blocks`).
+
+Push-to-DAC latency covers every block of every run: each drain folds the blocks since the
+last one into a :class:`~tpad_rt.log_histogram.LogHistogram` (fixed memory), so a run whose
+finger stopped long before its end still reports the latency of its pushes.
 
 One lock orders the drains: any thread may call any method (:meth:`TelemetryLog.note_push`
 takes none: one producer at a time, the Renderer's).
@@ -38,17 +45,25 @@ import numpy as np
 import numpy.typing as npt
 
 from tpad_rt.errors import ConfigError, TpadError
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks
 from tpad_rt.files import check_writable_target
-from tpad_rt.kernel import table as tab
-from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, TEL_NAMES
-from tpad_rt.limits import MAX_RECORDING_SAMPLES
+from tpad_rt.kernel import table_layout as tab
+from tpad_rt.kernel.layout import FLAG_FAULT, FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, TEL_NAMES
+from tpad_rt.limits import MAX_RECORDING_SAMPLES, MAX_TRAJECTORY_ROWS
+from tpad_rt.log_histogram import LogHistogram
 from tpad_rt.pipeline import Pipeline
 from tpad_rt.realtime import CallbackTable
 from tpad_rt.recording import Recording, write_recording
+from tpad_rt.texture import CompiledTexture
 
 #: Telemetry rows kept for :meth:`TelemetryLog.take` between calls (the oldest go first); as many rows wait at
 #: most for their measurements, and as many measured blocks for their rows.
 MAX_PENDING_ROWS = 2**18
+#: The range (ms) of the latency histogram: a latency outside it counts at its end.
+LATENCY_RANGE_MS = (1e-3, 1e4)
+#: Finger samples a recording keeps to judge its blocks with (as many as a trajectory file may hold): past them
+#: it is written without ``departed``.
+MAX_RECORDED_FINGERS = MAX_TRAJECTORY_ROWS
 
 class TelemetryLog:
     """Telemetry of ``pipeline``'s runs at ``rate_hz`` (Hz: the drive's sample rate, for recordings)."""
@@ -61,10 +76,19 @@ class TelemetryLog:
         self._pending_rows = 0
         self._measured = _MeasuredBlocks()
         self._push_ns = np.zeros(len(pipeline.arrays.finger), dtype=np.int64)  # by finger ring row
+        self._latency_ms = LogHistogram(*LATENCY_RANGE_MS)
+        self._latency_table: CallbackTable | None = None  # the run whose blocks were folded in last
+        self._latency_next = 0  # that run's next block to fold in
+        self._latency_seen: int | None = None  # the finger count the block before it read (None: not known)
         self._totals: dict[str, Any] = {"blocks": 0, "voltage_saturated": 0, "power_saturated": 0,
-                                        "fault_blocks": 0, "energy_w": 0.0, "peak_w": 0.0, "plate_peak_w": 0.0}
+                                        "fault_blocks": 0, "energy_w": 0.0, "peak_w": 0.0, "plate_peak_w": 0.0,
+                                        "peak_v": 0.0, "kick_blocks": 0, "peak_outside_kicks_v": 0.0}
         self._record_path: Path | None = None
         self._recorded: list[dict[str, np.ndarray]] = []
+        self._recorded_measured: list[dict[str, np.ndarray]] = []  # "t" and the measured names, oldest first
+        self._recorded_fingers: list[np.ndarray] = []  # FINGER_DTYPE chunks, oldest first (emptied past the limit)
+        self._fingers_kept: int | None = 0  # samples in _recorded_fingers; None once past MAX_RECORDED_FINGERS
+        self._finger_from = 0  # the next finger sample to copy out of the ring while recording
         self._drive_chunks: list[np.ndarray] = []
         self._drive_from = 0  # next drive sample to copy out of the ring while recording
         self._record_from = 0  # the recording's first drive sample
@@ -81,6 +105,7 @@ class TelemetryLog:
         """
         with self._lock:
             frames = table.drive_end()  # not the next index: a block's samples reach the ring after it is published
+            self._fold_latency(table)
             rows = self._pipeline.drain_telemetry()
             count = len(rows["t"])
             if count == 0:
@@ -94,6 +119,11 @@ class TelemetryLog:
             totals["energy_w"] += float(rows["power_w"].sum())
             totals["peak_w"] = max(totals["peak_w"], float(rows["power_w"].max()))
             totals["plate_peak_w"] = max(totals["plate_peak_w"], float(rows["plate_w"].max()))
+            kicks = (flags & FLAG_SHAPER_LIMIT) != 0
+            totals["kick_blocks"] += int(np.count_nonzero(kicks))
+            totals["peak_v"] = max(totals["peak_v"], float(rows["voltage_v"].max()))
+            totals["peak_outside_kicks_v"] = max(totals["peak_outside_kicks_v"],
+                                                 float(rows["voltage_v"][~kicks].max(initial=0.0)))
             self._keep(self._measured.rows_in(rows))
             if self._record_path is not None:
                 self._record(rows, table, frames)
@@ -127,6 +157,12 @@ class TelemetryLog:
             self.failure = TpadError(f"record: {problem}; the recording ends before it (written on stop)")
             return
         self._recorded.append(rows)
+        fingers, self._finger_from = self._pipeline.fingers_since(self._finger_from)
+        if self._fingers_kept is not None and self._fingers_kept + len(fingers) <= MAX_RECORDED_FINGERS:
+            self._recorded_fingers.append(fingers)
+            self._fingers_kept += len(fingers)
+        else:
+            self._recorded_fingers, self._fingers_kept = [], None
         self._drive_chunks.append(table.drive[np.arange(self._drive_from, frames) % len(table.drive)])
         self._drive_from = max(self._drive_from, frames)
 
@@ -160,6 +196,10 @@ class TelemetryLog:
         with self._lock:
             self._measured.add(np.asarray(t_s, dtype=np.float64), columns)
             self._keep(self._measured.release())
+            if self._record_path is not None and self._truncated is None and len(t_s):
+                self._recorded_measured.append({"t": np.asarray(t_s, dtype=np.float64),
+                                                **{name: np.asarray(columns[name], dtype=np.float64)
+                                                   for name in self._measured.names}})
 
     def end_measurements(self) -> None:
         """The output measures no more blocks (it closed or failed): rows stop waiting (a row drained from now
@@ -175,30 +215,47 @@ class TelemetryLog:
         ``pushed_ns`` (ns). Takes no lock: one producer at a time."""
         self._push_ns[index % len(self._push_ns)] = pushed_ns
 
-    def latency_ms(self, blocks: np.ndarray) -> dict[str, float]:
+    def latency_ms(self) -> dict[str, float]:
         """``latency_ms_p50``, ``latency_ms_p99`` (ms; NaN without any): from the push of each finger sample to
-        the DAC time of the first of ``blocks`` (block records, oldest first: CallbackTable.recent_blocks) that
-        read it, over the samples whose push time is still kept (the newest ``finger_ring``)."""
-        latency = self._latencies_ms(blocks)
-        return {f"latency_ms_p{q}": float(np.percentile(latency, q)) if len(latency) else math.nan for q in (50, 99)}
+        the DAC time of the first block that read it, over every block drained (every run's), within 1.2 %
+        (:class:`~tpad_rt.log_histogram.LogHistogram`). A sample read by a run's first block (pushed before
+        the run) or whose push time was overwritten before its block was drained (more than ``finger_ring``
+        pushes since) is not counted."""
+        with self._lock:
+            return {f"latency_ms_p{q}": self._latency_ms.percentile(q) for q in (50, 99)}
 
-    def _latencies_ms(self, blocks: np.ndarray) -> np.ndarray:
-        """Push-to-DAC latency (ms) of each finger sample first read by one of ``blocks`` (oldest first)."""
+    def _fold_latency(self, table: CallbackTable) -> None:
+        """Add the latencies of ``table``'s blocks since the last fold to the histogram (under the lock)."""
+        if table is not self._latency_table:
+            self._latency_table, self._latency_next, self._latency_seen = table, 0, None
+        blocks, first = table.blocks_since(self._latency_next)
+        if not len(blocks):
+            return
         counts = blocks[:, tab.BLOCK_FINGER_COUNT]
-        if len(counts) < 2:
-            return np.zeros(0)
-        first_seen = np.flatnonzero(np.diff(counts) > 0) + 1
-        new = counts[first_seen] - counts[first_seen - 1]
-        samples = np.repeat(counts[first_seen], new) - (np.arange(new.sum()) - np.repeat(np.cumsum(new) - new, new)) - 1
+        seen = self._latency_seen  # what the block before them read (None: not known, or lost from the ring)
+        before = int(counts[0]) if seen is None or first != self._latency_next else seen
+        self._latency_ms.add(self._latencies_ms(before, blocks))
+        self._latency_next, self._latency_seen = first + len(blocks), int(counts[-1])
+
+    def _latencies_ms(self, before: int, blocks: np.ndarray) -> np.ndarray:
+        """Push-to-DAC latency (ms) of each finger sample first read by one of ``blocks`` (oldest first), the
+        block before them having read ``before`` samples."""
+        counts = np.r_[before, blocks[:, tab.BLOCK_FINGER_COUNT]]
+        new = np.diff(counts)
+        first_seen = np.flatnonzero(new > 0)  # the blocks that read new samples
+        new = new[first_seen]
+        samples = np.repeat(counts[first_seen + 1], new) - (np.arange(new.sum()) - np.repeat(np.cumsum(new) - new, new)) - 1
         out_ns = np.repeat(blocks[first_seen, tab.BLOCK_ENTRY_NS] + blocks[first_seen, tab.BLOCK_DAC_DELAY_NS], new)
         pushed = int(self._pipeline.arrays.finger_count[0])
         kept = samples >= pushed - len(self._push_ns)  # their push times are still in the ring
         return (out_ns[kept] - self._push_ns[samples[kept] % len(self._push_ns)]) * 1e-6
 
     def totals(self) -> dict[str, Any]:
-        """``blocks``, ``voltage_saturated``, ``power_saturated``, ``fault_blocks`` (counts), ``energy_w`` (the
-        sum of the blocks' drive power, W), ``peak_w`` (W), ``plate_peak_w`` (the most power the plate held as
-        the model has it, W), over every row drained."""
+        """``blocks``, ``voltage_saturated``, ``power_saturated``, ``fault_blocks``, ``kick_blocks`` (blocks in
+        which the shaper held the drive at a limit: FLAG_SHAPER_LIMIT) (counts), ``energy_w`` (the sum of the
+        blocks' drive power, W), ``peak_w`` (W), ``plate_peak_w`` (the most power the plate held as the model has
+        it, W), ``peak_v`` (the drive's peak, V) and ``peak_outside_kicks_v`` (its peak in the other blocks, V),
+        over every row drained."""
         with self._lock:
             return dict(self._totals)
 
@@ -213,6 +270,7 @@ class TelemetryLog:
         with self._lock:
             self._record_path = path
             self._recorded, self._drive_chunks, self._truncated = [], [], None
+            self._recorded_measured, self._recorded_fingers, self._fingers_kept, self._finger_from = [], [], 0, 0
             self.failure = None
 
     @property
@@ -220,17 +278,34 @@ class TelemetryLog:
         """True after :meth:`record` until :meth:`write_recording`."""
         return self._record_path is not None
 
-    def write_recording(self, metadata: dict[str, Any]) -> None:
+    def write_recording(self, metadata: dict[str, Any], texture: CompiledTexture | None = None,
+                        texture_t0_s: float = 0.0) -> None:
         """Write what was recorded, with ``metadata`` and ``truncated`` (None, or why the recording ended
         early), to the path :meth:`record` named (the format of ``tpad-rt render``,
-        :mod:`tpad_rt.recording`), and stop recording."""
+        :mod:`tpad_rt.recording`), and stop recording. The output's measurements are columns of their blocks
+        (NaN for a block not measured); with the simulated plate's friction (``achieved_mu``) and ``texture``
+        (the one rendered all along, started at stream time ``texture_t0_s``, s), ``departed`` judges each
+        block against it under the recorded finger, and ``metadata`` gets ``departure_tolerance_mu``."""
         with self._lock:
             path, self._record_path = self._record_path, None
             recorded, drive_chunks, truncated = self._recorded, self._drive_chunks, self._truncated
+            measured_chunks, finger_chunks = self._recorded_measured, self._recorded_fingers
+            fingers_kept, names = self._fingers_kept is not None, self._measured.names
             self._recorded, self._drive_chunks, self._truncated = [], [], None
+            self._recorded_measured, self._recorded_fingers = [], []
         assert path is not None, "record() first"
         drive = np.concatenate(drive_chunks) if drive_chunks else np.zeros(0, dtype=np.float32)
-        write_recording(path, Recording(self.rate_hz, drive, joined(recorded), {**metadata, "truncated": truncated}))
+        blocks = joined(recorded)
+        metadata = {**metadata, "truncated": truncated}
+        if names:
+            blocks.update(_at_times(blocks["t"], joined(measured_chunks, ("t", *names)), names))
+        if "achieved_mu" in blocks and texture is not None and fingers_kept and finger_chunks:
+            judged = judge_blocks(blocks, np.concatenate(finger_chunks), texture,
+                                  block_s=metadata["block_frames"] / self.rate_hz,
+                                  mu_floor=self._pipeline.options.mu_floor, texture_t0_s=texture_t0_s)
+            blocks["departed"] = judged.departed.astype(np.int8)
+            metadata["departure_tolerance_mu"] = DEPARTURE_TOLERANCE_MU
+        write_recording(path, Recording(self.rate_hz, drive, blocks, metadata))
 
 
 def joined(chunks: list[dict[str, np.ndarray]], names: Sequence[str] = TEL_NAMES) -> dict[str, np.ndarray]:
@@ -299,15 +374,23 @@ class _MeasuredBlocks:
         if ready == 0:
             return []
         out = {name: column[:ready] for name, column in rows.items()}
-        at = np.minimum(np.searchsorted(measured["t"], out["t"]), max(len(measured["t"]) - 1, 0))
-        hit = measured["t"][at] == out["t"] if len(measured["t"]) else np.zeros(ready, dtype=bool)
-        for name in self.names:
-            out[name] = np.full(ready, math.nan)
-            out[name][hit] = measured[name][at[hit]]
+        out.update(_at_times(out["t"], measured, self.names))
         left = measured["t"] > out["t"][-1]  # measurements of blocks not drained yet
         self._measured = deque([{name: column[left] for name, column in measured.items()}] if left.any() else [])
         self._measured_rows = int(np.count_nonzero(left))
         return [out]
+
+
+def _at_times(t_s: np.ndarray, measured: dict[str, np.ndarray], names: Sequence[str]) -> dict[str, np.ndarray]:
+    """The ``names`` columns of ``measured`` (blocks by their time ``"t"``, s, in order) at the block times ``t_s``
+    (s): NaN for a block not measured."""
+    at = np.minimum(np.searchsorted(measured["t"], t_s), max(len(measured["t"]) - 1, 0))
+    hit = measured["t"][at] == t_s if len(measured["t"]) else np.zeros(len(t_s), dtype=bool)
+    columns = {}
+    for name in names:
+        columns[name] = np.full(len(t_s), math.nan)
+        columns[name][hit] = measured[name][at[hit]]
+    return columns
 
 
 def _keep_newest(chunks: deque[dict[str, np.ndarray]], rows: int) -> int:

@@ -45,7 +45,6 @@ from tpad_rt.config.texture_schema import (
 )
 from tpad_rt.errors import ConfigError
 from tpad_rt.kernel import layout
-from tpad_rt.kernel.texture_eval import eval_texture_points
 
 _WAVEFORMS = {
     "sine": layout.WAVE_SINE,
@@ -127,6 +126,8 @@ class CompiledTexture:
         out = np.empty(flat[0].size, dtype=np.float64)
         stack = np.empty(self.stack_depth, dtype=np.float64)
         x, y, ux_, uy_, t = flat
+        from tpad_rt.kernel.texture_eval import eval_texture_points  # numba: imported when a texture is evaluated
+
         prog, params, img = self._kernel_arrays
         eval_texture_points(prog, params, img, stack, x, y, ux_, uy_, t, out)
         return out.reshape(arrays[0].shape)

@@ -132,7 +132,7 @@ def stream_native(callback: str, block: int, seconds: float, gil_threads: int) -
     from tpad_rt.device import Device
     from tpad_rt.engine import Renderer
     from tpad_rt.kernel import callback as cb
-    from tpad_rt.kernel import table as tab
+    from tpad_rt.kernel import table_layout as tab  # the layout only: no numba
     from tpad_rt.outputs import audio
     from tpad_rt.pipeline import Pipeline
     from tpad_rt.realtime import CallbackTable, monotonic_ns
@@ -201,7 +201,7 @@ def read_by(rows, pushes: list[tuple[int, int]]):
     earlier)."""
     import numpy as np
 
-    from tpad_rt.kernel import table as tab
+    from tpad_rt.kernel import table_layout as tab  # the layout only: no numba
     pushed_ns, index = np.array(pushes, dtype=np.int64).reshape(-1, 2).T
     counts = rows[:, tab.BLOCK_FINGER_COUNT]
     first = np.searchsorted(counts, index, side="right")
@@ -275,7 +275,7 @@ def startup(block: int) -> dict:
     from time import monotonic_ns
     begin_ns = monotonic_ns()
     from tpad_rt.engine import Renderer
-    from tpad_rt.kernel import table as tab
+    from tpad_rt.kernel import table_layout as tab  # the layout only: no numba
     imported_ns = monotonic_ns()
     renderer = Renderer(output=f"audio://?rate={RATE_HZ}&block={block}", texture=GRATING)
     built_ns = monotonic_ns()
@@ -300,7 +300,7 @@ def startup_play(block: int) -> dict:
     begin_ns = monotonic_ns()
     from tpad_rt import cli, compiling
     from tpad_rt.engine import Renderer
-    from tpad_rt.kernel import table as tab
+    from tpad_rt.kernel import table_layout as tab  # the layout only: no numba
     imported_ns = monotonic_ns()
     original = Renderer.start
     noted: dict = {}

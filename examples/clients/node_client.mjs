@@ -20,6 +20,8 @@ if (typeof WebSocket === "undefined") {
 
 const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, Math.max(0, ms)));
 const now = () => performance.now() / 1000;
+// A figure in ms to 0.01 ms, or "n/a" for none (the server sends null where nothing was measured).
+const milliseconds = (value) => (value == null ? "n/a" : `${value.toFixed(2)} ms`);
 
 async function main() {
   const tpad = await TpadClient.connect(url);
@@ -55,7 +57,8 @@ async function main() {
   tpad.lift(now());
   await sleep(200);
   const stats = (await tpad.stats()).renderer;
-  console.log(`push-to-output latency p50 ${stats.latency_ms_p50} ms, p99 ${stats.latency_ms_p99} ms; ${errors} errors`);
+  console.log(`push-to-output latency p50 ${milliseconds(stats.latency_ms_p50)}, ` +
+    `p99 ${milliseconds(stats.latency_ms_p99)}; ${errors} errors`);
   tpad.close();
   return errors ? 1 : 0;
 }

@@ -84,9 +84,14 @@ def main(url: str, texture: str) -> int:
             return 1
         stats = replies[-1]["renderer"]
         errors = [reply for reply in replies if reply["type"] == "error"]
-        print(f"push-to-output latency p50 {stats['latency_ms_p50']} ms, p99 {stats['latency_ms_p99']} ms; "
-              f"{len(errors)} errors")
+        print(f"push-to-output latency p50 {milliseconds(stats['latency_ms_p50'])}, "
+              f"p99 {milliseconds(stats['latency_ms_p99'])}; {len(errors)} errors")
         return 1 if errors else 0
+
+
+def milliseconds(value: float | None) -> str:
+    """A figure in ms to 0.01 ms, or "n/a" for none (the server sends null where nothing was measured)."""
+    return "n/a" if value is None else f"{value:.2f} ms"
 
 
 if __name__ == "__main__":

@@ -3,7 +3,9 @@
 ``--output auto`` (default) picks an audio device that accepts ``--rate`` (a JACK
 device first, then the default output), else the simulated plate ``sim://``;
 ``--input auto`` picks ``mouse://`` when an X display answers, else endless
-back-and-forth swipes (:data:`AUTO_SWIPE`). The first line says both choices and why.
+back-and-forth swipes (:func:`auto_swipe`) at the speed and force the texture's file
+recommends (its ``finger``; :data:`FALLBACK_FINGER` for a file without one), the mouse
+pressing with that force. The first line says both choices and why.
 A :class:`~tpad_rt.inputs.live.LiveFeed` feeds the input into the renderer; a status
 panel (finger, target friction and, on an output that simulates the plate (``sim://``),
 the texture under the finger and the friction the simulated plate gave, volts, power,
@@ -46,12 +48,15 @@ from rich.live import Live
 from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number
-from tpad_rt.cli.render import add_session_arguments, over_cap_line, session_options
+from tpad_rt.cli.headroom import FingerTally, hint_lines, swipe_url
+from tpad_rt.cli.render import add_session_arguments, over_cap_line, peak_text, session_options
 from tpad_rt.compiling import compile_notice, ensure_compiled
+from tpad_rt.config import load_texture
+from tpad_rt.config.texture_schema import Finger
 from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
-from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures, start_ramps, texture_at_finger
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks, start_ramps
 from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import INSTALL_HINT, pynput_installed, screen_size_px
@@ -63,8 +68,8 @@ from tpad_rt.outputs import audio
 if TYPE_CHECKING:
     from tpad_rt.engine import Renderer
 
-#: The input ``--input auto`` uses without a display: endless back-and-forth swipes at 100 mm/s.
-AUTO_SWIPE = "scripted://swipe?speed_mm_s=100&repeat=0&back_and_forth=1"
+#: The finger ``--input auto`` follows for a texture whose file recommends none (its ``finger``): 100 mm/s, 0.5 N.
+FALLBACK_FINGER = Finger(speed_mm_s=100.0, force_n=0.5)
 #: Status refreshes per second.
 STATUS_HZ = 5
 #: The telemetry column of the friction a simulated plate gave each block (``sim://`` measures it).
@@ -92,7 +97,9 @@ def add_parser(subparsers: Subparsers) -> None:
     )
     add_session_arguments(
         parser, input_default="auto", max_duration_s=MAX_INPUT_S,
-        input_help=f"finger input URL, or auto: mouse:// with an X display, else {AUTO_SWIPE}",
+        input_help="finger input URL, or auto: mouse:// with an X display, else endless back-and-forth swipes at "
+        "the speed and force the texture's file recommends (its finger; without one "
+        f"{auto_swipe(FALLBACK_FINGER)})",
         output_default="auto", output_help="output URL (audio://[device]?..., sim://, null://), or auto: an audio "
         "device that accepts --rate (JACK first), else sim://")
     parser.add_argument("--record", metavar="FILE.npz",
@@ -122,18 +129,31 @@ def choose_output(requested: str, rate_hz: int) -> Choice:
     return Choice("sim://", f"no audio device runs {rate_hz} Hz")
 
 
-def choose_input(requested: str) -> Choice:
+def auto_swipe(finger: Finger) -> str:
+    """Endless back-and-forth swipes along the plate at ``finger``'s speed (mm/s) and force (N)."""
+    return swipe_url(finger.speed_mm_s, finger.force_n)
+
+
+def choose_input(requested: str, recommended: Finger | None, force_n: float | None = None) -> Choice:
     """``requested``, or for ``auto`` ``mouse://`` when pynput is installed and an X display answers, else
-    :data:`AUTO_SWIPE`."""
+    :func:`auto_swipe`: at the ``recommended`` finger's speed (mm/s) and force (N), :data:`FALLBACK_FINGER`'s
+    when None; ``force_n`` (N, ``--force``) replaces the force."""
     if requested != "auto":
         return Choice(requested)
+    finger = recommended or FALLBACK_FINGER
+    whose = "the texture's recommended finger" if recommended else "no finger in the texture's file"
+    why = f"{whose}: {finger.speed_mm_s:g} mm/s under {finger.force_n:g} N"
+    if force_n is not None:
+        finger = finger.model_copy(update={"force_n": force_n})
+        why = f"{whose}: {finger.speed_mm_s:g} mm/s, under --force {force_n:g} N"
     if not pynput_installed():
-        return Choice(AUTO_SWIPE, f"no pynput for the mouse: {INSTALL_HINT}")
+        return Choice(auto_swipe(finger), f"no pynput for the mouse: {INSTALL_HINT}; {why}")
     try:
         width, height = screen_size_px()
     except BackendError:
-        return Choice(AUTO_SWIPE, "no display")
-    return Choice("mouse://", f"{width}x{height} screen onto the plate, left button held touches")
+        return Choice(auto_swipe(finger), f"no display; {why}")
+    return Choice(f"mouse://?force_n={finger.force_n:g}",
+                  f"{width}x{height} screen onto the plate, left button held touches; {why}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -143,7 +163,8 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--record: must end in .npz, got '{args.record}'")
         check_writable_target(args.record, "recordings")
     console = Console(soft_wrap=True, highlight=False, markup=False, emoji=False)
-    output, finger = choose_output(args.output, args.rate), choose_input(args.input)
+    recommended = load_texture(args.texture).finger if args.input == "auto" else None
+    output, finger = choose_output(args.output, args.rate), choose_input(args.input, recommended, args.force)
     options = session_options(args)
     with contextlib.ExitStack() as compiling:
         # A first run compiles the kernels (about 10 s): say so at once, and compile everything
@@ -158,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
             console.print(f"output {output}, input {finger}; "
                           + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
             if args.record is not None:
-                renderer.record(args.record)
+                renderer.record(args.record, input_url=finger.url)
             ensure_compiled()  # every argument checked: compile the whole plan if the cache lacks it
             renderer.texture.evaluate(np.zeros(1), np.zeros(1))  # the status line's texture under the finger
             renderer.start()
@@ -217,15 +238,13 @@ def _loop(session: Session, feed: LiveFeed, interrupted: threading.Event, durati
 
 @dataclass
 class Session:
-    """A running play (from when the renderer and the feed run): the renderer, the last telemetry row, the
-    peak volts, and where the telemetry holds it the simulated plate's friction, the texture under the finger,
+    """A running play (from when the renderer and the feed run): the renderer, the last telemetry row, and where the telemetry holds it the simulated plate's friction, the texture under the finger,
     and their differences."""
 
     renderer: Renderer
     console: Console
     started: float = field(default_factory=time.monotonic)
     latest: dict[str, float] = field(default_factory=dict)
-    peak_v: float = 0.0
     achieved: float | None = None
     felt: float | None = None
     judged_blocks: int = 0
@@ -235,17 +254,19 @@ class Session:
     was_touching: bool = False  # whether the last judged block was touching
     error_sum: float = 0.0
     error_max: float = 0.0
+    departed_saturated_blocks: int = 0  # of departed_blocks, those the drive saturated in
+    tally: FingerTally = field(default_factory=FingerTally)  # the touching blocks' finger, asks and saturation
 
     def elapsed_s(self) -> float:
         """Seconds since play started."""
         return time.monotonic() - self.started
 
     def take_telemetry(self) -> dict[str, np.ndarray]:
-        """Drain the renderer's telemetry: keep the last row and the peak volts; the rows drained."""
+        """Drain the renderer's telemetry: keep the last row; the rows drained."""
         rows = self.renderer.telemetry()
         if len(rows["t"]):
             self.latest = {name: float(column[-1]) for name, column in rows.items()}
-            self.peak_v = max(self.peak_v, float(rows["voltage_v"].max()))
+            self.tally.add(rows)
         return rows
 
     def tick(self) -> None:
@@ -255,29 +276,30 @@ class Session:
     def judge(self, rows: dict[str, np.ndarray]) -> None:
         """When ``rows`` (telemetry, oldest first) hold the friction the simulated plate gave each block
         (:data:`PLATE_FRICTION`), judge each block against the texture under the finger at its middle
-        (felt.departures: touching, measured blocks, the texture clamped to the floor the kernel renders)."""
+        (felt.judge_blocks: touching, measured blocks, the texture clamped to the floor the kernel renders)."""
         if PLATE_FRICTION not in rows or not len(rows["t"]):
             return
         renderer = self.renderer
         achieved = rows[PLATE_FRICTION]
-        middle_s = rows["t"] + 0.5 * renderer.block_frames / renderer.rate_hz
-        felt, known = texture_at_finger(renderer.recent_fingers(), renderer.texture, middle_s, renderer.texture_t0_s())
-        felt = np.clip(felt, renderer.options.mu_floor, 1.0)
+        judgement = judge_blocks(rows, renderer.recent_fingers(), renderer.texture,
+                                 block_s=renderer.block_frames / renderer.rate_hz, mu_floor=renderer.options.mu_floor,
+                                 texture_t0_s=renderer.texture_t0_s())
+        felt, judged, departed = judgement.felt_mu, judgement.judged, judgement.departed
         touching = (rows["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0
-        judged = known & touching & np.isfinite(achieved)  # NaN: a block the output did not measure (it failed)
         errors = np.abs(felt - achieved)[judged]
-        departed = departures(felt, achieved, judged)
         ramping, self.touch_start_s = start_ramps(rows["t"], touching, self.ramp_window_s(), self.touch_start_s,
                                                   self.was_touching)
         self.was_touching = bool(touching[-1])
         self.judged_blocks += len(errors)
         self.departed_blocks += int(np.count_nonzero(departed))
         self.ramp_departed_blocks += int(np.count_nonzero(departed & ramping))
+        saturated = (rows["saturated"].astype(np.int64) & (FLAG_VOLTAGE | FLAG_POWER)) != 0
+        self.departed_saturated_blocks += int(np.count_nonzero(departed & saturated))
         if len(errors):
             self.error_sum += float(errors.sum())
             self.error_max = max(self.error_max, float(errors.max()))
         self.achieved = float(achieved[-1]) if np.isfinite(achieved[-1]) else None
-        self.felt = float(felt[-1]) if known[-1] else None
+        self.felt = float(felt[-1]) if judgement.known[-1] else None
 
     def ramp_window_s(self) -> float:
         """How long (s) a touch's start ramp lasts: the drive's fade-in (ramp_ms) and the simulated plate's
@@ -332,7 +354,8 @@ class Session:
         """The end-of-play summary from the renderer's stats (and the judged friction, where measured)."""
         stats = self.renderer.stats()
         blocks = max(stats["blocks"], 1)
-        amplifier = self.renderer.drive.consumes is Consumes.ENVELOPE  # frames to an amplifier that makes the carrier
+        drive = self.renderer.drive
+        amplifier = drive.consumes is Consumes.ENVELOPE  # frames to an amplifier that makes the carrier
         block, output = ("frame", "amplifier") if amplifier else ("callback", "DAC")
         lines = [
             f"played {stats['played_s']:.2f} s of drive in {self.elapsed_s():.2f} s"
@@ -345,8 +368,9 @@ class Session:
             f"push-to-output latency: p50 {stats['latency_ms_p50']:.2f} ms, p99 {stats['latency_ms_p99']:.2f} ms"
             + (f" (of which the host reports {stats['dac_delay_ms']:.2f} ms from {block} to {output})"
                if stats["dac_delay_ms"] > 0 else ""),
-            f"drive: peak {self.peak_v:.2f} V of {self.renderer.drive.max_voltage_v:g} V max"
-            + ("" if self.renderer.drive.source == "device file" else f" ({self.renderer.drive.source}'s clamp)")
+            "drive: " + peak_text(stats["voltage_peak_v"], drive.max_voltage_v, stats["kick_blocks"],
+                                  stats["voltage_peak_outside_kicks_v"],
+                                  "" if drive.source == "device file" else drive.source)
             + "; saturated "
             f"{100 * stats['voltage_saturated'] / blocks:.1f} % of blocks (voltage), "
             f"{100 * stats['power_saturated'] / blocks:.1f} % (power)",
@@ -368,6 +392,9 @@ class Session:
                          f"departures: {self.departed_blocks} blocks "
                          f"({100 * self.departed_blocks / self.judged_blocks:.1f} %) further than "
                          f"{DEPARTURE_TOLERANCE_MU:g}{self.ramp_text()}")
+        lines += hint_lines(self.tally, self.renderer.device, self.renderer.drive.max_voltage_v,
+                            stats["power_budget_w"], self.judged_blocks, self.departed_blocks,
+                            self.departed_saturated_blocks)
         return [line.replace("nan", "n/a") for line in lines]
 
 

@@ -34,11 +34,11 @@ from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.compiling import compile_notice, ensure_compiled
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
-from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, departures
+from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks
 from tpad_rt.files import check_writable_target
 from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
-    FLAG_FAULT, FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION,
+    FLAG_FAULT, FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION,
 )
 from tpad_rt.limits import MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, MAX_RECORDING_SAMPLES, MAX_RENDER_S
 from tpad_rt.offline import OfflineRender, RenderResult, check_render_size, input_span_s, texture_under_finger
@@ -225,10 +225,9 @@ def judge_departures(result: RenderResult, metadata: dict[str, Any], texture: Co
     blocks = result.blocks
     if "achieved_mu" not in blocks:
         return
-    felt_mu, known = texture_under_finger(result, texture)
-    touching = (blocks["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0
-    felt_mu = np.clip(felt_mu, metadata["render_options"]["mu_floor"], 1.0)
-    blocks["departed"] = departures(felt_mu, blocks["achieved_mu"], touching & known).astype(np.int8)
+    judged = judge_blocks(blocks, result.finger, texture, block_s=result.block_frames / result.fs_hz,
+                          mu_floor=metadata["render_options"]["mu_floor"])
+    blocks["departed"] = judged.departed.astype(np.int8)
     metadata["departure_tolerance_mu"] = DEPARTURE_TOLERANCE_MU
 
 
@@ -247,6 +246,19 @@ def _departure_line(result: RenderResult, texture: CompiledTexture) -> str:
     return (f"departures: {np.count_nonzero(departed)} of {np.count_nonzero(touching)} touching blocks "
             f"({_percent(departed[touching])}) further than {DEPARTURE_TOLERANCE_MU:g} from the texture under the "
             f"finger ({worst_text}); `tpad-rt plot` shades them")
+
+
+def peak_text(peak_v: float, max_v: float, kick_blocks: int, outside_kicks_v: float, clamp: str = "") -> str:
+    """The drive's peak ``peak_v`` (V) against ``max_v`` (V; from ``clamp``, e.g. an amplifier, when not the
+    device file) for ``play``'s and ``render``'s summaries; when the
+    shaper held the drive at a limit in ``kick_blocks`` blocks (FLAG_SHAPER_LIMIT: the kick that moves the plate's
+    envelope as fast as the limits allow, at a touch-down or a steep step), says that the peak is there and what it
+    was outside them, ``outside_kicks_v`` (V): a kick is by design, not saturation."""
+    text = f"peak {peak_v:.2f} V of {max_v:g} V max" + (f" ({clamp}'s clamp)" if clamp else "")
+    if not kick_blocks:
+        return text
+    return (f"{text}, in the shaper's kicks ({kick_blocks} block{'s' if kick_blocks != 1 else ''} at the limit to "
+            f"move the plate as fast as it allows), {outside_kicks_v:.2f} V outside them")
 
 
 def over_cap_line(blocks: int, peak_w: float) -> str:
@@ -270,12 +282,14 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
     flags = blocks["saturated"].astype(np.int64)
     touching = (flags & FLAG_WATCHDOG) == 0
     saturated = (flags & (FLAG_VOLTAGE | FLAG_POWER)) != 0
+    kicks = (flags & FLAG_SHAPER_LIMIT) != 0
     avg_budget = metadata["power_avg_w"]
     speed = result.seconds / max(wall_s, 1e-9)
     lines = [
         f"rendered {result.seconds:.3f} s of audio in {wall_s:.3g} s ({speed:.1f}x real time), "
         f"{len(flags)} blocks of {result.block_frames} at {result.fs_hz} Hz",
-        f"drive: peak {blocks['voltage_v'].max(initial=0.0):.2f} V of {metadata['max_voltage_v']:g} V max",
+        "drive: " + peak_text(blocks["voltage_v"].max(initial=0.0), metadata["max_voltage_v"], int(np.count_nonzero(kicks)),
+                              blocks["voltage_v"][~kicks].max(initial=0.0)),
         f"power: mean {blocks['power_w'].mean():.3f} W, peak {blocks['power_w'].max(initial=0.0):.3f} W "
         f"(cap {metadata['power_budget_w']:g} W"
         + (f", average budget {avg_budget:g} W over {metadata['power_window_s']:g} s)" if avg_budget else ")"),

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Union
 
 import numpy as np
-from annotated_types import Ge, Le, MaxLen, MinLen
+from annotated_types import Ge, Gt, Le, MaxLen, MinLen
 from pydantic import (
     AfterValidator,
     Field,
@@ -61,6 +61,13 @@ MAX_HEIGHT_MM = 100.0
 #: Slowest and fastest temporal texture (Hz): one cycle in 100 s; above ~1 kHz skin feels no change.
 MIN_FREQUENCY_HZ = 0.01
 MAX_FREQUENCY_HZ = 1000.0
+
+#: Slowest and fastest finger (mm/s) a texture may be designed for: a crawl (below the ~5 mm/s at which a
+#: device's friction model stops following speed) to a fast flick.
+MIN_FINGER_SPEED_MM_S = 1.0
+MAX_FINGER_SPEED_MM_S = 1000.0
+#: Hardest press (N) a texture may be designed for: a pressing finger stays under 10 N.
+MAX_FINGER_FORCE_N = 10.0
 
 Gain = Annotated[float, Strict(), Ge(-MAX_GAIN), Le(MAX_GAIN)]
 HeightMm = Annotated[float, Strict(), Ge(-MAX_HEIGHT_MM), Le(MAX_HEIGHT_MM)]
@@ -144,8 +151,17 @@ class EdgeFriction(StrictModel):
 # --- shared parts of kinds ---------------------------------------------------
 
 
+class Finger(StrictModel):
+    """The finger a texture is designed for: its stroke speed (mm/s) and contact force (N), what ``tpad-rt play``
+    swipes with when it picks the input."""
+
+    speed_mm_s: Annotated[float, Strict(), Ge(MIN_FINGER_SPEED_MM_S), Le(MAX_FINGER_SPEED_MM_S)]
+    force_n: Annotated[float, Strict(), Gt(0), Le(MAX_FINGER_FORCE_N)]
+
+
 class _Texture(StrictModel):
     description: Text
+    finger: Finger | None = None
 
 
 class _Periodic(_Texture):
@@ -333,6 +349,13 @@ class _LayerFields(StrictModel):
     description: Text | None = None
     op: Literal["multiply", "min", "max", "add"] = "multiply"
     region: Region | None = None
+
+    @model_validator(mode="after")
+    def _finger_at_top(self) -> _LayerFields:
+        if "finger" in self.model_fields_set:
+            raise rule_error("not allowed in a layer (the file's top level states the finger it is designed for)",
+                             "finger")
+        return self
 
 
 class GratingLayer(_LayerFields, Grating):  # type: ignore[misc]

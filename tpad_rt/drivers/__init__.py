@@ -7,7 +7,7 @@ open_driver(url, *, device, rate_hz, block_frames, options, stall_timeout_s) -> 
     ConfigError as :func:`tpad_rt.outputs.output_kind`, or for a kind whose driver is no Driver
 Driver
     base class: ``rate_hz``, ``block_frames``, ``options``, ``consumes``, ``channels``,
-    ``channel``, ``clock``, ``log``; ``prepare()``, ``warm(table)``, ``open(pipeline)``,
+    ``channel``, ``clock``, ``log``; ``prepare()``, ``warm(table)``, ``warm_compiles()``, ``open(pipeline)``,
     ``start(table)``, ``poll(table)``, ``wait_silent(table, ended)``, ``close(ramp_ms)``,
     ``stats()``, ``summary_lines(stats)``, ``stream_time_s()``
 

@@ -1,6 +1,7 @@
 """The ``audio://`` driver: PortAudio's audio thread calls the native render callback.
 
-The callback is ``tpad_rt.kernel.callback.render_callback``, handed to PortAudio with
+The callback is the render callback (:func:`tpad_rt.aot.library.render_callback`: the ahead-of-time
+library's when it is built, else ``tpad_rt.kernel.callback.render_callback``), handed to PortAudio with
 the table's address as ``userData`` (:class:`tpad_rt.outputs.audio.AudioStream`): no
 Python runs per block (docs/realtime.md says why). A stream that stops by itself (its
 device or JACK server went away) or stops calling back for the stall limit is
@@ -18,8 +19,8 @@ from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
 from tpad_rt.drivers.stall_watch import StallWatch
 from tpad_rt.errors import BackendError
-from tpad_rt.kernel import callback as cb
-from tpad_rt.kernel import table as tab
+from tpad_rt.aot import library as native
+from tpad_rt.kernel import table_layout as tab
 from tpad_rt.kernel.layout import MAX_OUTPUT_LEAD_S
 from tpad_rt.outputs import audio
 from tpad_rt.pipeline import RenderOptions
@@ -65,6 +66,10 @@ class AudioCallbackDriver(Driver):
         return [f"the JACK server buffers {stats['dac_delay_ms'] / period_ms:.0f} periods before the DAC: "
                 f"started with jackd -S (synchronous mode) it buffers one, {period_ms:.2f} ms less"]
 
+    def warm_compiles(self) -> bool:
+        """Only without the ahead-of-time library: PortAudio runs the callback and nothing else compiled."""
+        return native.load() is None
+
     def prepare(self) -> None:
         """Find the device; BackendError when it is missing or lacks the URL's channel."""
         device = audio.find_output_device(self.target.device)
@@ -80,7 +85,7 @@ class AudioCallbackDriver(Driver):
         self._stalled = False
         self._failure = None
         self._watch = StallWatch(round(self.stall_limit_s() * 1e9), self.clock)
-        address = cb.render_callback.address
+        address = native.render_callback().address
         assert address is not None
         self.stream = audio.AudioStream(self.audio_device, self.rate_hz, self.block_frames, self.channels,
                                         address, table.user_data)

@@ -69,6 +69,11 @@ class Driver(ABC):
         """Compile (or load) what the driver runs, calling it on ``table``, a copy of the real one."""
         table.call(np.zeros(self.block_frames * self.channels, dtype=np.float32))
 
+    def warm_compiles(self) -> bool:
+        """Whether :meth:`warm` and :meth:`open` may compile numba code (then under the compile notice): yes
+        unless a driver knows better."""
+        return True
+
     def open(self, pipeline: Pipeline) -> None:
         """Open the hardware before the drive starts (BackendError when it cannot); nothing by default."""
 

@@ -22,7 +22,7 @@ import numpy as np
 from tpad_rt.clock import Clock
 from tpad_rt.device import Device
 from tpad_rt.drivers.base import Driver
-from tpad_rt.kernel import table as tab
+from tpad_rt.kernel import table_layout as tab
 from tpad_rt.outputs import Output, open_paced
 from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.realtime import CallbackTable

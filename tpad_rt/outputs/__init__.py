@@ -37,6 +37,7 @@ kind" walks through one.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import importlib
 import re
@@ -165,7 +166,14 @@ def output_forms() -> dict[str, tuple[UrlForm, ...]]:
 
 
 def output_kind(url: str) -> tuple[Url, OutputKind]:
-    """``url`` parsed, and its scheme's :class:`OutputKind`; ConfigError as the module docstring says."""
+    """``url`` parsed, and its scheme's :class:`OutputKind`; ConfigError as the module docstring says. A URL of a
+    shipped or registered scheme that parses imports that scheme's module only (a renderer on ``audio://``
+    imports no other output); any other is parsed against every scheme, for the message."""
+    scheme, separator, _ = url.partition("://") if isinstance(url, str) else ("", "", "")
+    if separator and (scheme in BUILTIN_SCHEMES or scheme in _registered):
+        with contextlib.suppress(ConfigError):
+            parsed = parse_url(url, "output", {scheme: output_module(scheme).FORMS})
+            return parsed, output_module(scheme).KIND
     parsed = parse_url(url, "output", _schemes())
     return parsed, output_module(parsed.scheme).KIND
 

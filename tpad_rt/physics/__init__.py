@@ -16,6 +16,15 @@ numba-compiled scalar twin ``<name>_core`` (``njit(cache=True, nogil=True)``, no
 checks) for the real-time kernels.
 """
 
-from tpad_rt.physics import electromech, friction, plate
+import importlib
+from types import ModuleType
 
 __all__ = ["electromech", "friction", "plate"]
+
+
+def __getattr__(name: str) -> ModuleType:
+    """The submodule ``name`` of __all__, imported on first use: friction and plate import numba, which a
+    renderer on the ahead-of-time kernels never needs (docs/kernel.md "Ahead-of-time kernels")."""
+    if name in __all__:
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -39,6 +39,12 @@ namespace TpadRt
             return Convert.ToDouble(value, CultureInfo.InvariantCulture).ToString(format, CultureInfo.InvariantCulture);
         }
 
+        // A figure in ms to 0.01 ms, or "n/a" for none (the server sends null where nothing was measured).
+        static string Milliseconds(object value)
+        {
+            return value == null ? "n/a" : F(value, "F2") + " ms";
+        }
+
         static int Run(Uri url, string textureName)
         {
             var clock = Stopwatch.StartNew();
@@ -106,8 +112,8 @@ namespace TpadRt
                 Thread.Sleep(200);
                 tpad.Stats("stats").Wait();
                 if (!statsReply.Wait(10000)) throw new TimeoutException("no stats within 10 s");
-                Console.WriteLine("push-to-output latency p50 " + stats["latency_ms_p50"] + " ms, p99 " + stats["latency_ms_p99"]
-                                  + " ms; " + errors + " errors");
+                Console.WriteLine("push-to-output latency p50 " + Milliseconds(stats["latency_ms_p50"]) + ", p99 "
+                                  + Milliseconds(stats["latency_ms_p99"]) + "; " + errors + " errors");
                 tpad.CloseAsync().Wait();
             }
             return errors > 0 ? 1 : 0;
