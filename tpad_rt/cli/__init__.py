@@ -16,7 +16,7 @@ from typing import NoReturn, Sequence
 from tpad_rt.errors import TpadError
 
 #: Subcommand modules, in the order ``tpad-rt --help`` lists them.
-_SUBCOMMANDS = ("check", "schema", "design", "show", "render", "plot", "play", "serve", "devices", "amp", "calibrate")
+_SUBCOMMANDS = ("check", "schema", "design", "show", "render", "plot", "play", "serve", "devices", "amp", "calibrate", "warm")
 
 
 class _Parser(argparse.ArgumentParser):

@@ -50,7 +50,7 @@ from rich.table import Table
 from tpad_rt.cli.arguments import Subparsers, number
 from tpad_rt.cli.headroom import FingerTally, hint_lines, swipe_url
 from tpad_rt.cli.render import add_session_arguments, over_cap_line, peak_text, session_options
-from tpad_rt.compiling import announce_if_uncached, compile_notice
+from tpad_rt.compiling import compile_notice, ensure_compiled
 from tpad_rt.config import load_texture
 from tpad_rt.config.texture_schema import Finger
 from tpad_rt.device import Device
@@ -61,8 +61,6 @@ from tpad_rt.inputs import open_input
 from tpad_rt.inputs.live import LiveFeed, PushFinger
 from tpad_rt.inputs.mouse import INSTALL_HINT, pynput_installed, screen_size_px
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_VOLTAGE, FLAG_WATCHDOG
-from tpad_rt.kernel.render import render_block
-from tpad_rt.kernel.texture_eval import eval_texture_points
 from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT_S
 from tpad_rt.drive import Consumes
 from tpad_rt.outputs import audio
@@ -195,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
                           + (f"{args.duration:g} s or " if args.duration else "") + "Ctrl-C stops")
             if args.record is not None:
                 renderer.record(args.record, input_url=finger.url)
-            announce_if_uncached(render_block, eval_texture_points)  # every argument checked: say it at once
+            ensure_compiled()  # every argument checked: compile the whole plan if the cache lacks it
             renderer.texture.evaluate(np.zeros(1), np.zeros(1))  # the status line's texture under the finger
             renderer.start()
             compiling.close()

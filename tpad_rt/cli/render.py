@@ -31,7 +31,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
 
 from tpad_rt.cli.arguments import Subparsers, number, whole
-from tpad_rt.compiling import announce_if_uncached, compile_notice
+from tpad_rt.compiling import compile_notice, ensure_compiled
 from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks
@@ -40,8 +40,6 @@ from tpad_rt.inputs import open_input
 from tpad_rt.kernel.layout import (
     FLAG_FAULT, FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION,
 )
-from tpad_rt.kernel.batch import render_blocks
-from tpad_rt.kernel.render import render_block
 from tpad_rt.limits import MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, MAX_RECORDING_SAMPLES, MAX_RENDER_S
 from tpad_rt.offline import OfflineRender, RenderResult, check_render_size, input_span_s, texture_under_finger
 from tpad_rt.outputs import Capability, open_output, output_kind
@@ -183,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
         with compile_notice():  # the first run compiles the kernels: say so at once
             session = open_session(args, stack, keep_drive=out.suffix.lower() == ".npz",
                                    wav_path=out if out.suffix.lower() == ".wav" else None)
-            announce_if_uncached(render_block, render_blocks)  # every argument checked: say it at once
+            ensure_compiled()  # every argument checked: compile the whole plan if the cache lacks it
             session.render.warm_up()
         started = time.perf_counter()
         _run_with_progress(session.render, console)
