@@ -8,6 +8,7 @@ it names the cache folder. Ctrl-C stops it (exit 130). Nothing here imports numb
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from tpad_rt.cli.arguments import whole
@@ -35,8 +36,31 @@ def run(args: argparse.Namespace) -> int:
     from tpad_rt import compiling, kernel_cache
 
     report = compiling.ensure_compiled(args.jobs)
-    # The ahead-of-time kernels' build (issue 23, helper `aot`) is called here, once, when a C compiler is present.
     if report is None:
         where = kernel_cache.cache_dir(kernel_cache.COMPILED_PACKAGES[0])
         print(f"tpad-rt warm: every kernel is compiled already, cached in {where}")
+    _build_ahead_of_time()
     return 0
+
+
+def _build_ahead_of_time() -> None:
+    """Build the audio callbacks' ahead-of-time library (docs/kernel.md "Ahead-of-time kernels") unless the one for
+    the current sources is there; without a C compiler, or when the build fails, say so in one line: the renderer
+    then runs numba's callbacks, which start about half a second later."""
+    from tpad_rt.aot import build, library
+
+    found = library.load()
+    if found is not None:
+        print(f"tpad-rt warm: the ahead-of-time audio callbacks are built already: {found.path}")
+        return
+    try:
+        path = build.build_library()
+    except build.BuildError as err:
+        print(f"tpad-rt warm: the ahead-of-time audio callbacks were not built ({err}); the renderer uses numba's",
+              file=sys.stderr)
+        return
+    if path is None:
+        print("tpad-rt warm: no C compiler (cc, gcc, clang or $CC): the ahead-of-time audio callbacks are not "
+              "built; the renderer uses numba's, which start about half a second later")
+    else:
+        print(f"tpad-rt warm: built the ahead-of-time audio callbacks: {path}")
