@@ -24,6 +24,7 @@ from compile_counter import COMPILED
 from conftest import REPO_ROOT
 
 from tpad_rt import kernel_cache
+from tpad_rt.aot.build import find_compiler
 from tpad_rt.compile_plan import STEPS
 from tpad_rt.compiling import NOTICE
 
@@ -118,6 +119,12 @@ def test_warm_compiles_the_whole_plan_with_progress_as_steps_done_of_the_total(w
     assert [count for count, _ in counts] == sorted({count for count, _ in counts}) and counts[-1][0] == len(STEPS)
     final = re.fullmatch(r"tpad-rt: compiled (\d+) functions in [\d.]+ s with 2 jobs, cached in (.+)", lines[-1])
     assert final is not None, lines[-1]
+    built = re.fullmatch(r"tpad-rt warm: built the ahead-of-time audio callbacks: (.+)\n", done.stdout)
+    if find_compiler() is None:
+        assert done.stdout.startswith("tpad-rt warm: no C compiler"), done.stdout
+    else:  # the library for these sources, where numba's cache is (NUMBA_CACHE_DIR)
+        assert built is not None, done.stdout
+        assert Path(built[1]).parent == warmed.cache / "tpad_rt_aot" and Path(built[1]).is_file()
     assert int(final[1]) > 20  # the rest of the plan after the interrupted run's first step
     assert list(Path(final[2]).glob("render.render_block-*.nbi"))  # where numba itself put the render kernel
     assert not list(warmed.cache.rglob("*.tmp.*"))
@@ -128,6 +135,9 @@ def test_warm_again_says_everything_is_compiled(warmed: Warmed) -> None:
                            capture_output=True, text=True, timeout=120)
     assert again.returncode == 0 and again.stderr == ""
     assert again.stdout.startswith("tpad-rt warm: every kernel is compiled already, cached in ")
+    if find_compiler() is not None:  # and the ahead-of-time library is not built twice
+        assert again.stdout.splitlines()[1].startswith("tpad-rt warm: the ahead-of-time audio callbacks are built "
+                                                       f"already: {warmed.cache / 'tpad_rt_aot'}")
 
 
 def _counted(args: list[str], env: dict[str, str]) -> subprocess.Popen[str]:
