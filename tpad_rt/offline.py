@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -69,6 +69,9 @@ class RenderResult:
     drive: npt.NDArray[np.float32] | None
     blocks: dict[str, np.ndarray]
     finger: np.ndarray
+    #: :func:`texture_under_finger`'s answers, by the texture's id: (texture, mu, valid), read-only
+    _felt: dict[int, tuple[CompiledTexture, np.ndarray, np.ndarray]] = field(
+        default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def seconds(self) -> float:
@@ -262,6 +265,12 @@ def texture_under_finger(result: RenderResult, texture: CompiledTexture) -> tupl
     :func:`tpad_rt.felt.texture_at_finger` at the blocks' middle times: ``valid`` is
     False where the finger was lifted or the render ran past the input's last sample.
     This is what the finger should have felt, free of the kernel's own extrapolation.
+    Computed once per result and texture (``tpad-rt render`` asks three times); the arrays are read-only.
     """
-    middle_s = result.blocks["t"] + 0.5 * result.block_frames / result.fs_hz
-    return texture_at_finger(result.finger, texture, middle_s)
+    known = result._felt.get(id(texture))
+    if known is None or known[0] is not texture:
+        middle_s = result.blocks["t"] + 0.5 * result.block_frames / result.fs_hz
+        mu, valid = texture_at_finger(result.finger, texture, middle_s)
+        mu.flags.writeable = valid.flags.writeable = False
+        known = result._felt[id(texture)] = (texture, mu, valid)
+    return known[1], known[2]
