@@ -58,13 +58,20 @@ class CallbackTable:
     ``channels`` interleaved output channels with the drive in ``channel`` (0-based);
     ``scratch_frames`` the most frames rendered per ``render_block`` call;
     ``drive_frames`` samples the drive ring keeps; ``block_rows`` blocks the record
-    ring keeps. Raises ValueError for a channel outside ``[0, channels)``.
+    ring keeps. Raises ValueError when ``channels``, ``scratch_frames``, ``drive_frames`` or
+    ``block_rows`` is not a whole number of at least 1 (the callback would loop for ever on an
+    empty scratch, and write past an empty ring: its remainders by 0 give 0, not an error), or
+    for a channel outside ``[0, channels)``.
     """
 
     def __init__(self, arrays: KernelArrays, texture: CompiledTexture, *, channels: int = 1, channel: int = 0,
                  scratch_frames: int = 4096, drive_frames: int = 2**20, block_rows: int = 4096):
-        if not 0 <= channel < channels:
-            raise ValueError(f"channel: must be in [0, {channels}), got {channel}")
+        for name, count in (("channels", channels), ("scratch_frames", scratch_frames),
+                            ("drive_frames", drive_frames), ("block_rows", block_rows)):
+            if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+                raise ValueError(f"{name}: must be a whole number of at least 1, got {count!r}")
+        if isinstance(channel, bool) or not isinstance(channel, (int, np.integer)) or not 0 <= channel < channels:
+            raise ValueError(f"channel: must be a whole number in [0, {channels}), got {channel!r}")
         self.arrays = arrays
         self.scratch = np.zeros(scratch_frames, dtype=np.float32)
         self.drive = np.zeros(drive_frames, dtype=np.float32)

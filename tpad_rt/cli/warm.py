@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from tpad_rt.cli.arguments import whole
@@ -43,18 +45,22 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _build_ahead_of_time() -> None:
-    """Build the audio callbacks' ahead-of-time library (docs/kernel.md "Ahead-of-time kernels") unless the one for
-    the current sources is there; without a C compiler, or when the build fails, say so in one line: the renderer
-    then runs numba's callbacks, which start about half a second later."""
+def _build_ahead_of_time(folders: Sequence[Path] | None = None) -> None:
+    """Build the audio callbacks' ahead-of-time library (docs/kernel.md "Ahead-of-time kernels") in the first writable
+    of ``folders`` (default: beside numba's cache) unless a sound one for the current sources is there. A file there
+    that the loader refuses (cut short, damaged, another stamp) is named in one line with what was wrong and rebuilt
+    in its place, never loaded. Without a C compiler, or when the build fails, one line says so: the renderer then
+    runs numba's callbacks, which start about half a second later."""
     from tpad_rt.aot import build, library
 
-    found = library.load()
-    if found is not None:
+    found = library.find(folders)
+    if found.library is not None:
         print(f"tpad-rt warm: the ahead-of-time audio callbacks are built already: {found.path}")
         return
+    if found.problem is not None:
+        print(f"tpad-rt warm: the ahead-of-time library {found.path} {found.problem}: building it again")
     try:
-        path = build.build_library()
+        path = build.build_library(folders=folders)
     except build.BuildError as err:
         print(f"tpad-rt warm: the ahead-of-time audio callbacks were not built ({err}); the renderer uses numba's",
               file=sys.stderr)
