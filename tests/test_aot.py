@@ -324,7 +324,7 @@ def test_a_library_without_the_callbacks_is_refused(tmp_path: Path) -> None:
     assert compiler is not None
     stamp = aot_stamp.library_stamp()
     (tmp_path / "other.c").write_text(f'const char tpad_rt_aot_stamp[] = "{stamp}";\n')
-    subprocess.run([compiler, "-shared", "-fPIC", "-o", str(tmp_path / "other.so"), str(tmp_path / "other.c")],
+    subprocess.run([*compiler, "-shared", "-fPIC", "-o", str(tmp_path / "other.so"), str(tmp_path / "other.c")],
                    check=True, timeout=60)
     path = tmp_path / "sealed.so"
     path.write_bytes(seal((tmp_path / "other.so").read_bytes()))
@@ -435,15 +435,31 @@ def test_a_renderer_on_audio_starts_without_numba_when_the_library_is_there(buil
 
 def test_the_build_command_says_in_one_line_when_there_is_no_compiler_or_it_fails(
         monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.setenv("CC", "no-such-compiler")
+    monkeypatch.setenv("CC", "/no/such/cc -m64")
     assert build.main() == 1
     assert capsys.readouterr().err.strip().splitlines() == [
-        "aot: no C compiler (set CC, or install cc, gcc or clang): the kernels stay on numba's JIT"]
+        "aot: no C compiler (CC=/no/such/cc -m64 names no program on PATH): the kernels stay on numba's JIT"]
     false = shutil.which("false")
     require_system(false is not None, "program 'false'")
     monkeypatch.setenv("CC", str(false))
     assert build.main() == 1
     assert capsys.readouterr().err.strip().splitlines()[-1] == f"aot: linking with {false} failed (exit 1): no message"
+    monkeypatch.setenv("PATH", "/nonexistent")
+    monkeypatch.delenv("CC")
+    assert build.main() == 1
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "aot: no C compiler (set CC, or install cc, gcc or clang): the kernels stay on numba's JIT"]
+
+
+def test_the_build_takes_cc_with_flags_as_make_does(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    compiler = find_compiler()
+    require_system(compiler is not None, "a C compiler (cc, gcc or clang)")
+    assert compiler is not None
+    monkeypatch.setenv("CC", f"{Path(compiler[0]).name} -O2 -g0")
+    said: list[str] = []
+    path = build_library(said.append, folders=[tmp_path])
+    assert path is not None and f"linking with {compiler[0]} -O2 -g0" in said
+    assert open_library(path, aot_stamp.library_stamp()).path == path
 
 
 @pytest.mark.parametrize("name", ["channels", "scratch_frames", "drive_frames", "block_rows"])

@@ -11,7 +11,7 @@ build_library(progress=None, folders=None) -> Path | None
     it into place atomically and durably (written, synced, renamed, the folder synced) in
     the first writable of ``folders`` (default :func:`tpad_rt.aot.stamp.library_dirs`),
     replacing whatever file had its name. Its path; None when there is no C compiler
-    (``$CC``, else ``cc``, ``gcc`` or ``clang``). ``progress`` is called with a line per
+    (``$CC``, a program and its flags, else ``cc``, ``gcc`` or ``clang``). ``progress`` is called with a line per
     step. Raises BuildError when this numba cannot build it, the compiler fails, the
     result does not load or no folder is writable.
 ``python -m tpad_rt.aot.build``
@@ -39,6 +39,7 @@ a numba or llvmlite without them ends in BuildError, and the JIT stays.
 from __future__ import annotations
 
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -70,13 +71,18 @@ class BuildError(RuntimeError):
     """The library could not be built (the message says why)."""
 
 
-def find_compiler() -> str | None:
-    """The C compiler: ``$CC`` when set, else the first of cc, gcc, clang on PATH; None if there is none."""
-    names = [os.environ["CC"]] if os.environ.get("CC") else ["cc", "gcc", "clang"]
-    for name in names:
-        found = shutil.which(name)
+def find_compiler() -> list[str] | None:
+    """The C compiler's command words: ``$CC`` when set (split as a shell would: a program and its flags, as make
+    takes it; its program looked up on PATH), else the first of cc, gcc, clang on PATH; None if there is none."""
+    given = os.environ.get("CC", "").strip()
+    try:
+        candidates = [shlex.split(given)] if given else [["cc"], ["gcc"], ["clang"]]
+    except ValueError:  # unbalanced quotes: no program to run
+        return None
+    for program, *flags in candidates:
+        found = shutil.which(program)
         if found:
-            return found
+            return [found, *flags]
     return None
 
 
@@ -149,22 +155,22 @@ def _emit_object(cfunc: Any, symbol: str) -> bytes:
     return bytes(machine.emit_object(module))
 
 
-def _link(compiler: str, objects: list[Path], folder: Path, stamp: str) -> Path:
+def _link(compiler: list[str], objects: list[Path], folder: Path, stamp: str) -> Path:
     """Link ``objects`` and the C part into ``folder``/library.so; BuildError when the compiler fails."""
     c_part = folder / "tpad_rt_aot.c"
     c_part.write_text(_c_part(stamp))
     script = folder / "exports.map"
     script.write_text(_version_script())
     output = folder / "library.so"
-    command = [compiler, "-shared", "-fPIC", "-O2", "-o", str(output), *map(str, objects), str(c_part),
+    command = [*compiler, "-shared", "-fPIC", "-O2", "-o", str(output), *map(str, objects), str(c_part),
                f"-Wl,--version-script={script}", "-lm"]
     try:
         result = subprocess.run(command, capture_output=True, text=True, timeout=COMPILER_TIMEOUT_S)
     except (OSError, subprocess.TimeoutExpired) as error:
-        raise BuildError(f"aot: the C compiler {compiler} did not run: {error}") from error
+        raise BuildError(f"aot: the C compiler {shlex.join(compiler)} did not run: {error}") from error
     if result.returncode != 0:
         last = (result.stderr.strip().splitlines() or ["no message"])[-1]
-        raise BuildError(f"aot: linking with {compiler} failed (exit {result.returncode}): {last}")
+        raise BuildError(f"aot: linking with {shlex.join(compiler)} failed (exit {result.returncode}): {last}")
     return output
 
 
@@ -217,13 +223,13 @@ def build_library(progress: Progress | None = None, folders: Sequence[Path] | No
     with tempfile.TemporaryDirectory(prefix="tpad_rt_aot-") as scratch:
         folder = Path(scratch)
         objects = _callback_objects(folder, say)
-        say(f"linking with {compiler}")
+        say(f"linking with {shlex.join(compiler)}")
         built = _link(compiler, objects, folder, stamp)
         built.write_bytes(seal(built.read_bytes()))
         try:
             open_library(built, stamp)
         except LibraryProblem as problem:
-            raise BuildError(f"aot: the library built with {compiler} {problem}") from None
+            raise BuildError(f"aot: the library built with {shlex.join(compiler)} {problem}") from None
         path = _install(built, stamp, library_dirs() if folders is None else folders)
     say(f"wrote {path}")
     return path
@@ -241,8 +247,9 @@ def main() -> int:
         print("aot: interrupted", file=sys.stderr)
         return 130
     if path is None:
-        print("aot: no C compiler (set CC, or install cc, gcc or clang): the kernels stay on numba's JIT",
-              file=sys.stderr)
+        given = os.environ.get("CC", "").strip()
+        where = f"CC={given} names no program on PATH" if given else "set CC, or install cc, gcc or clang"
+        print(f"aot: no C compiler ({where}): the kernels stay on numba's JIT", file=sys.stderr)
         return 1
     print(path)
     return 0
