@@ -252,10 +252,11 @@ def peak_text(peak_v: float, max_v: float, kick_blocks: int, outside_kicks_v: fl
     """The drive's peak ``peak_v`` (V) against ``max_v`` (V; from ``clamp``, e.g. an amplifier, when not the
     device file) for ``play``'s and ``render``'s summaries; when the
     shaper held the drive at a limit in ``kick_blocks`` blocks (FLAG_SHAPER_LIMIT: the kick that moves the plate's
-    envelope as fast as the limits allow, at a touch-down or a steep step), says that the peak is there and what it
-    was outside them, ``outside_kicks_v`` (V): a kick is by design, not saturation."""
+    envelope as fast as the limits allow, at a touch-down or a steep step) and the drive outside them stayed below
+    the peak, at ``outside_kicks_v`` (V), says that the peak is there and what it was outside them: a kick is by
+    design, not saturation."""
     text = f"peak {peak_v:.2f} V of {max_v:g} V max" + (f" ({clamp}'s clamp)" if clamp else "")
-    if not kick_blocks:
+    if not kick_blocks or outside_kicks_v >= peak_v:
         return text
     return (f"{text}, in the shaper's kicks ({kick_blocks} block{'s' if kick_blocks != 1 else ''} at the limit to "
             f"move the plate as fast as it allows), {outside_kicks_v:.2f} V outside them")
