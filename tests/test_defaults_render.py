@@ -157,3 +157,40 @@ def test_departures_without_saturation_name_the_plates_lag_and_a_slower_finger()
     assert (f"none saturated: the plate lags the texture's changes at 30 mm/s under 0.5 N (its envelope's time "
             f"constant is {tau_ms:.2f} ms at 0.5 N); a slower finger leaves more headroom (try --input "
             "'scripted://swipe?speed_mm_s=15&force_n=0.5&repeat=0&back_and_forth=1')") in line, line
+
+
+@pytest.mark.parametrize(("lowest_mu", "reach"), [
+    (0.0, "no finger speed reaches 0.00 with this drive (the friction model takes a finger slower than the device's "
+          "speed floor, 5 mm/s, as that fast, and there the drive lowers it to 0.05 at best)"),
+    (0.05, "only a finger at 5 to 5.1 mm/s (the device's speed floor) reaches 0.05"),
+])
+def test_a_lowest_friction_no_finger_speed_reaches_with_a_margin_asks_for_a_higher_one(lowest_mu: float,
+                                                                                       reach: str) -> None:
+    """Below the speed floor (or within SPEED_MARGIN of it) a slower swipe cannot help: no speed is suggested, the
+    texture's lowest friction is, one the drive reaches at the run's speed (rounded up)."""
+    tally = FingerTally(touching=1000, saturated=500, speed_sum_mm_s=100_000.0, force_sum_n=500.0, lowest_mu=lowest_mu)
+    why, _ = hint_lines(tally, Device.default(), 40.0, 0.8, judged=1000, departed=500, departed_saturated=400)
+    assert (f"; {reach}: raise the texture's lowest friction to 0.64, or use a device with more headroom") in why, why
+    assert "try --input" not in why
+
+
+@pytest.mark.parametrize("speed_mm_s", [0.0, 8.0])
+def test_a_finger_too_slow_to_halve_is_not_told_to_go_slower(speed_mm_s: float) -> None:
+    """A still or tapping finger (0 mm/s), or one whose half speed is below the 5 mm/s floor, departs at the
+    texture's changes: the hint asks for gentler changes, not a slower (or faster) swipe."""
+    tally = FingerTally(touching=1000, saturated=0, speed_sum_mm_s=1000 * speed_mm_s, force_sum_n=500.0, lowest_mu=0.6)
+    (line,) = hint_lines(tally, Device.default(), 40.0, 0.8, judged=1000, departed=100, departed_saturated=0)
+    assert line.endswith("; gentler changes in the texture leave more headroom; --record then `tpad-rt plot` shows "
+                         "where"), line
+    assert "swipe" not in line
+
+
+def test_a_finger_at_no_force_is_not_told_to_swipe_at_no_force() -> None:
+    """A finger pressing 0 N: the swipe a hint suggests presses with the swipe's own force."""
+    device = Device.default()
+    for lowest_mu, saturated in ((0.6, 0), (0.3, 500)):
+        tally = FingerTally(touching=1000, saturated=saturated, speed_sum_mm_s=60_000.0, force_sum_n=0.0,
+                            lowest_mu=lowest_mu)
+        line = hint_lines(tally, device, 40.0, 0.8, judged=1000, departed=100, departed_saturated=0)[0]
+        suggested = line.split("try --input '")[1].split("'")[0]
+        assert suggested.startswith("scripted://swipe?speed_mm_s=") and "force_n" not in suggested, line
