@@ -5,9 +5,15 @@ from __future__ import annotations
 
 import importlib.util
 import re
+import site
+import sys
 from types import ModuleType
 
+import pytest
 from conftest import REPO_ROOT
+
+from tpad_rt.cli.play import choose_input
+from tpad_rt.config import load_texture
 
 
 def _tool() -> ModuleType:
@@ -42,6 +48,24 @@ def test_a_shape_masks_measurements_and_keeps_settings_and_every_line() -> None:
     stale[power] = stale[power].replace("(cap 0.8 W", "(cap 0.55 W")  # a setting no run prints: another shape
     assert "(cap 0.8 W" in readme[power] and SAMPLE.shape(stale) != SAMPLE.shape(readme)
     assert SAMPLE.shape(readme[:-1]) != SAMPLE.shape(readme)  # a line missing
-    header = [readme[0].replace("(no display)", "(no pynput for the mouse: pip install 'tpad-rt[inputs]')"),
-              *readme[1:]]
-    assert SAMPLE.shape(header) == SAMPLE.shape(readme)  # the README's text names both reasons
+
+
+def test_the_first_line_has_one_shape_with_pynput_and_without(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The README's run has pynput and no display; without pynput the input's reason (play's choose_input, with
+    pynput out of the import system's reach) begins with what to install: one shape, as the README's text names
+    both, while the rest of the reason (the finger the swipe takes) is kept."""
+    readme = SAMPLE.readme_block((REPO_ROOT / "README.md").read_text())
+    finger = load_texture(REPO_ROOT / "textures" / "grating.yaml").finger
+    monkeypatch.delenv("DISPLAY", raising=False)
+    no_display = choose_input("auto", finger).reason
+    for name in ("pynput", "Xlib"):
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    installed = {*site.getsitepackages(), site.getusersitepackages()}
+    monkeypatch.setattr(sys, "path", [entry for entry in sys.path if entry not in installed])
+    no_pynput = choose_input("auto", finger).reason
+    assert no_display.startswith("no display; ") and no_pynput.startswith("no pynput for the mouse: ")
+    without = readme[0].replace(f"({no_display})", f"({no_pynput})")
+    assert without != readme[0], f"the README's first line names another input: {readme[0]}"
+    assert SAMPLE.shape([without, *readme[1:]]) == SAMPLE.shape(readme)
+    slower = without.replace(f"{finger.speed_mm_s:g} mm/s under", f"{finger.speed_mm_s / 2:g} mm/s under")
+    assert slower != without and SAMPLE.shape([slower, *readme[1:]]) != SAMPLE.shape(readme)

@@ -14,8 +14,9 @@ measures masked (times, counts, latencies, volts, power) and the settings kept (
 block size, the power cap and budget, the volt limit, the departure judge's tolerance,
 everything in the first line). Segments only some runs print are left out of the shape
 (:data:`OPTIONAL`: departures in a touch's start ramp, a stalled output, a host-reported
-DAC delay), a count of one block reads as any count; the first line's input reason reads the same whether pynput is missing or the
-display is (the README's text says both).
+DAC delay), a count of one block reads as any count; the first clause of the first line's input
+reason reads the same whether pynput is missing or the display is (the README's text says both);
+the rest of the reason (the finger the swipe takes, and why) is kept.
 """
 
 from __future__ import annotations
@@ -44,8 +45,9 @@ OPTIONAL = (re.compile(r"; [\d,]+ of them in a touch's start ramp \(the drive fa
             re.compile(r" \(of which the host reports [^)]*\)"))
 #: A count of one, in the singular ("1 block"): the same shape as any other count.
 ONE_BLOCK = re.compile(r"# block\b")
-#: The first line's input reason without pynput, which the README's text names beside "no display".
-NO_PYNPUT = re.compile(r"\(no pynput for the mouse: [^)]*\)")
+#: The first clause of the first line's input reason without pynput (what to install; it holds no ';'), which
+#: the README's text names beside "no display".
+NO_PYNPUT = re.compile(r"\(no pynput for the mouse: [^;]*;")
 
 
 def run_sample() -> list[str]:
@@ -87,7 +89,7 @@ def shape(lines: list[str]) -> list[str]:
         for segment in OPTIONAL:
             line = segment.sub("", line)
         if number == 0:
-            shaped.append(NO_PYNPUT.sub("(no display)", line))
+            shaped.append(NO_PYNPUT.sub("(no display;", line))
             continue
         pieces, kept = SETTINGS.split(line), SETTINGS.findall(line)
         masked = [re.sub(r"(?<![\w.])\d+(?:[.,]\d+)*", "#", piece) for piece in pieces]  # not p50's
