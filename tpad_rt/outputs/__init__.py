@@ -44,11 +44,14 @@ import re
 from importlib import metadata
 from collections.abc import Sequence
 from types import ModuleType
+from typing import TYPE_CHECKING
 
-from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.outputs.base import Capability, Consumes, Output, OutputKind
 from tpad_rt.urls import Url, UrlForm, parse_url
+
+if TYPE_CHECKING:
+    from tpad_rt.device import Device  # annotations only: the device model loads pydantic
 
 #: The schemes tpad-rt ships: scheme -> module.
 BUILTIN_SCHEMES = {
