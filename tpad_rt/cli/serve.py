@@ -34,13 +34,10 @@ from rich.console import Console
 from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.cli.play import choose_output
 from tpad_rt.cli.render import add_drive_arguments, session_options
-from tpad_rt.compiling import compile_notice
-from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, printable
 from tpad_rt.files import check_writable_target
 from tpad_rt.limits import MAX_INPUT_S, MAX_STALL_TIMEOUT_S
 from tpad_rt.shipped import TEXTURES_DIR, texture_file
-from tpad_rt.texture import load_compiled
 
 if TYPE_CHECKING:
     from tpad_rt.engine import Renderer
@@ -104,7 +101,10 @@ def add_parser(subparsers: Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve (module docstring); 0 when it ends by Ctrl-C, SIGTERM or --duration."""
+    from tpad_rt.compiling import compile_notice
+    from tpad_rt.device import Device
     from tpad_rt.serve.server import Server
+    from tpad_rt.texture import load_compiled
 
     settings = _settings(args)
     if args.record is not None:
