@@ -17,7 +17,6 @@ the token (``--token``, or one made up and printed). Ctrl-C (or SIGTERM, or
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import dataclasses
 import errno
@@ -40,6 +39,8 @@ from tpad_rt.limits import MAX_INPUT_S, MAX_STALL_TIMEOUT_S
 from tpad_rt.shipped import TEXTURES_DIR, texture_file
 
 if TYPE_CHECKING:
+    import asyncio
+
     from tpad_rt.engine import Renderer
     from tpad_rt.serve.server import Server, Settings
 
@@ -101,6 +102,8 @@ def add_parser(subparsers: Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve (module docstring); 0 when it ends by Ctrl-C, SIGTERM or --duration."""
+    import asyncio
+
     from tpad_rt.compiling import compile_notice
     from tpad_rt.device import Device
     from tpad_rt.serve.server import Server
@@ -177,6 +180,8 @@ async def _serve(server: Server, settings: Settings, duration_s: float | None, c
                  output: str) -> str:
     """Run ``server`` until Ctrl-C, SIGTERM or ``duration_s``; what stopped it. BackendError when it cannot
     listen; the renderer's error when it fails."""
+    import asyncio
+
     stop, ready = asyncio.Event(), asyncio.Event()
     reasons: list[str] = []
     loop = asyncio.get_running_loop()
