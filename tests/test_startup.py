@@ -2,7 +2,7 @@
 
 Each command runs in a fresh interpreter, as a user starts it, and reports the modules it
 imported. Building the parser (``tpad-rt --help``, ``tpad-rt X --help``) imports no subcommand's
-implementation; ``check``, ``schema``, ``design``, ``devices``, ``plot`` and the calibration fits
+implementation, and a command's parser is built without the other subcommands' modules; ``check``, ``schema``, ``design``, ``devices``, ``plot`` and the calibration fits
 import neither numba nor a kernel. ``tpad_rt.kernel.layout`` is allowed: it is the kernels'
 constant indices (telemetry columns, flags), plain ints that import nothing. Pydantic, which
 validates files, loads only for the commands that read a texture or device file or print
@@ -87,6 +87,9 @@ def test_commands_that_render_nothing_import_no_kernel(args: list[str], statuses
     assert status in statuses
     assert kernel_code(modules) == set()
     assert ("pydantic" in modules) == reads_files  # the file models load only where a file is read
+    # The parser is built for the command alone: no other subcommand's module is imported.
+    assert {name for name in modules if name.startswith("tpad_rt.cli.")} == {"tpad_rt.cli.arguments",
+                                                                             f"tpad_rt.cli.{args[0]}"}
 
 
 def test_the_probe_sees_the_kernels_a_command_loads(tmp_path: Path) -> None:
