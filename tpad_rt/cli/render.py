@@ -233,8 +233,6 @@ def _settled(t_s: np.ndarray, touching: np.ndarray, settle_s: float) -> np.ndarr
 def judge_departures(result: RenderResult, metadata: dict[str, Any], texture: CompiledTexture) -> None:
     """On the simulated plate, add the ``departed`` block column (1 where a touching block's achieved friction
     is further than DEPARTURE_TOLERANCE_MU from the texture under the finger) and its tolerance to ``metadata``."""
-    from tpad_rt.offline import texture_under_finger
-
     blocks = result.blocks
     if "achieved_mu" not in blocks:
         return
