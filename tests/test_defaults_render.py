@@ -164,7 +164,7 @@ def test_departures_without_saturation_name_the_plates_lag_and_a_slower_finger()
 @pytest.mark.parametrize(("lowest_mu", "reach"), [
     (0.0, "no finger speed reaches 0.00 with this drive (the friction model takes a finger slower than the device's "
           "speed floor, 5 mm/s, as that fast, and there the drive lowers it to 0.05 at best)"),
-    (0.05, "only a finger at 5 to 5.1 mm/s (the device's speed floor) reaches 0.05"),
+    (0.05, "only a finger between the device's speed floor, 5 mm/s, and 5.1 mm/s reaches 0.05"),
 ])
 def test_a_lowest_friction_no_finger_speed_reaches_with_a_margin_asks_for_a_higher_one(lowest_mu: float,
                                                                                        reach: str) -> None:

@@ -174,5 +174,5 @@ def _change_for_friction(reach: _Reach, target_mu: float, force_n: float | None)
         return (f"no finger speed reaches {target_mu:.2f} with this drive (the friction model takes a finger slower "
                 f"than the device's speed floor, {reach.floor_mm_s:g} mm/s, as that fast, and there the drive lowers "
                 f"it to {reach.floor_mu:.2f} at best): {raise_mu}")
-    return (f"only a finger at {reach.floor_mm_s:g} to {reach.fastest_mm_s:.1f} mm/s (the device's speed floor) "
-            f"reaches {target_mu:.2f}: {raise_mu}")
+    return (f"only a finger between the device's speed floor, {reach.floor_mm_s:g} mm/s, and "
+            f"{reach.fastest_mm_s:.1f} mm/s reaches {target_mu:.2f}: {raise_mu}")
