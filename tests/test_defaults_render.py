@@ -80,14 +80,14 @@ def render(texture: str, input_url: str, device: Path | None = None, *options: s
         while not session.render.done:
             session.render.step()
     result: RenderResult = session.render.result()
-    blocks, texture = result.blocks, session.render.pipeline.texture
-    judged = judge_blocks(blocks, result.finger, texture, block_s=result.block_frames / result.fs_hz,
+    blocks, compiled = result.blocks, session.render.pipeline.texture
+    judged = judge_blocks(blocks, result.finger, compiled, block_s=result.block_frames / result.fs_hz,
                           mu_floor=session.metadata["render_options"]["mu_floor"])
     tally = FingerTally()
     tally.add(blocks)
     assert tally.touching > 0.9 * PLAY_S * 192000 / 64  # the swipe touches all along
     saturated = (blocks["saturated"].astype(np.int64) & (FLAG_VOLTAGE | FLAG_POWER)) != 0
-    felt_mu, known = texture_under_finger(result, texture)
+    felt_mu, known = texture_under_finger(result, compiled)
     felt_mu = felt_mu[known & ((blocks["saturated"].astype(np.int64) & FLAG_WATCHDOG) == 0)]
     return Run(tally, float(np.ptp(felt_mu)), int(np.count_nonzero(judged.judged)),
                int(np.count_nonzero(judged.departed)), int(np.count_nonzero(judged.departed & saturated)))

@@ -58,6 +58,7 @@ def test_the_first_line_has_one_shape_with_pynput_and_without(monkeypatch: pytes
     both, while the rest of the reason (the finger the swipe takes) is kept."""
     readme = SAMPLE.readme_block((REPO_ROOT / "README.md").read_text())
     finger = load_texture(REPO_ROOT / "textures" / "grating.yaml").finger
+    assert finger is not None
     monkeypatch.delenv("DISPLAY", raising=False)
     no_display = choose_input("auto", finger).reason
     for name in ("pynput", "Xlib"):
