@@ -45,3 +45,12 @@ def test_aot_loader_survives_a_truncated_library_at_the_stamped_path(tmp_path: P
     assert result.stdout.strip() == "None"
 
 
+def test_show_refuses_an_absurd_time_in_one_line(tmp_path: Path) -> None:
+    """Defect: ``tpad-rt show temporal_pulse --t-s 1e20`` ends in a traceback (ValueError: mu_rel must be in (0, 1],
+    got nan, from plate_maps); a time the texture cannot be evaluated at must be refused in one line."""
+    run = tpad_rt("show", "temporal_pulse", "--t-s", "1e20", "--resolution-mm", "4", "--out", str(tmp_path / "show.png"))
+    assert run.returncode == 1
+    assert "Traceback" not in run.stderr
+    assert len(run.stderr.strip().splitlines()) == 1, run.stderr
+
+
