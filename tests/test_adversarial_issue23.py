@@ -54,3 +54,18 @@ def test_show_refuses_an_absurd_time_in_one_line(tmp_path: Path) -> None:
     assert len(run.stderr.strip().splitlines()) == 1, run.stderr
 
 
+def test_show_time_hint_names_a_time_that_draws_another_level(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """Defect: at ``--t-s 86401`` the flat-map hint prints its time with 4 significant digits ("--t-s 8.64e+04
+    draws it at 0.6"): 86400 s, a whole number of the texture's 2 s periods, where the map is flat again and the
+    hint repeats itself. The time it names must draw another level."""
+    out = tmp_path / "show.png"
+    texture = str(TEXTURES / "temporal_pulse.yaml")
+    assert main(["show", texture, "--t-s", "86401", "--resolution-mm", "4", "--out", str(out)]) == 0
+    hint = capsys.readouterr().out
+    suggested = re.search(r"--t-s (\S+) draws it at", hint)
+    assert suggested is not None, hint
+    assert main(["show", texture, "--t-s", suggested.group(1), "--resolution-mm", "4", "--out", str(out)]) == 0
+    again = capsys.readouterr().out
+    assert "the map is flat" not in again, f"--t-s {suggested.group(1)} (from {hint!r}) draws a flat map: {again!r}"
+
+
