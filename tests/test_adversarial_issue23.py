@@ -69,3 +69,22 @@ def test_show_time_hint_names_a_time_that_draws_another_level(tmp_path: Path, ca
     assert "the map is flat" not in again, f"--t-s {suggested.group(1)} (from {hint!r}) draws a flat map: {again!r}"
 
 
+def _saturated_tally(speed_mm_s: float, force_n: float, lowest_mu: float) -> FingerTally:
+    """100 touching blocks, all saturated, at ``speed_mm_s`` (mm/s) and ``force_n`` (N), asking ``lowest_mu``."""
+    return FingerTally(touching=100, saturated=100, speed_sum_mm_s=100 * speed_mm_s, force_sum_n=100 * force_n,
+                       lowest_mu=lowest_mu)
+
+
+def test_headroom_hint_never_suggests_a_finger_faster_than_the_fastest_it_names() -> None:
+    """Defect: for a texture asking friction below what the drive reaches near the speed floor (``friction.low:
+    0.001``; play at 30 mm/s), the hint says "a finger at most 1 mm/s reaches 0.01: try --input
+    'scripted://swipe?speed_mm_s=5...'": the suggested speed is rounded up to a 5 mm/s floor, above the fastest it
+    just named. Played at that suggestion, the summary saturates again and suggests the very input it ran."""
+    lines = hint_lines(_saturated_tally(30.0, 0.5, 0.01), Device.default(), 40.0, 0.8, 100, 50, 50)
+    text = " ".join(lines)
+    fastest = re.search(r"a finger at most (\S+) mm/s reaches", text)
+    suggested = re.search(r"speed_mm_s=([0-9.e+-]+)&", text)
+    assert fastest is not None and suggested is not None, text
+    assert float(suggested.group(1)) <= float(fastest.group(1)), text
+
+
