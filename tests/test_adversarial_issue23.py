@@ -88,3 +88,11 @@ def test_headroom_hint_never_suggests_a_finger_faster_than_the_fastest_it_names(
     assert float(suggested.group(1)) <= float(fastest.group(1)), text
 
 
+def test_headroom_hint_does_not_suggest_the_input_the_run_used() -> None:
+    """Defect: a run that saturated at 5 mm/s is told "a slower finger leaves more headroom (try --input
+    'scripted://swipe?speed_mm_s=5&force_n=0.5...')": the very finger it ran with (the 5 mm/s rounding floor)."""
+    lines = hint_lines(_saturated_tally(5.0, 0.5, 0.75), Device.default(), 40.0, 0.8, 100, 50, 0)
+    text = " ".join(lines)
+    assert "speed_mm_s=5&force_n=0.5&" not in text, text
+
+
