@@ -96,3 +96,12 @@ def test_headroom_hint_does_not_suggest_the_input_the_run_used() -> None:
     assert "speed_mm_s=5&force_n=0.5&" not in text, text
 
 
+def test_log_histogram_refuses_a_percentile_beyond_100() -> None:
+    """Defect: percentile(150) reads one bin past the last and answers 1.01 for a histogram bounded at 1.0 holding
+    only 0.001 (a value above every value added and above ``high``). A q outside [0, 100] must raise ValueError."""
+    histogram = LogHistogram(1e-6, 1.0)
+    histogram.add([1e-3])
+    with pytest.raises(ValueError):
+        histogram.percentile(150.0)
+
+
