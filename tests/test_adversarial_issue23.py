@@ -105,3 +105,17 @@ def test_log_histogram_refuses_a_percentile_beyond_100() -> None:
         histogram.percentile(150.0)
 
 
+@pytest.mark.parametrize("script", ["kernel/run.py", "latency/emulator_pty.py"])
+def test_bench_smoke_out_naming_a_file_is_one_line(script: str, tmp_path: Path) -> None:
+    """Defect: ``python bench/kernel/run.py --smoke --out FILE`` (and emulator_pty.py) runs the whole benchmark,
+    then ends in a traceback (FileExistsError from Path.mkdir) and loses the results. --out must be checked up front
+    and refused in one line."""
+    target = tmp_path / "a_file"
+    target.write_text("not a folder\n")
+    result = subprocess.run([sys.executable, str(REPO_ROOT / "bench" / script), "--smoke", "--out", str(target)],
+                            cwd=REPO_ROOT, env={**os.environ, "PYTHONPATH": str(REPO_ROOT)}, capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode != 0
+    assert "Traceback" not in result.stderr, result.stderr[-600:]
+
+
