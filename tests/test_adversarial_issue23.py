@@ -119,3 +119,10 @@ def test_bench_smoke_out_naming_a_file_is_one_line(script: str, tmp_path: Path) 
     assert "Traceback" not in result.stderr, result.stderr[-600:]
 
 
+def test_aot_build_names_the_cc_it_could_not_find() -> None:
+    """Defect: with ``CC=/nonexistent/cc`` (or ``CC='gcc -m64'``, a compiler with flags, as make allows) the builder
+    says "no C compiler (set CC, or install cc, gcc or clang)" although CC is set and cc is installed: the line
+    must name the CC it could not run."""
+    result = _python("from tpad_rt.aot.build import main; raise SystemExit(main())", {"CC": "/nonexistent/cc"})
+    assert result.returncode == 1
+    assert "/nonexistent/cc" in result.stderr, result.stderr
