@@ -126,3 +126,17 @@ def test_aot_build_names_the_cc_it_could_not_find() -> None:
     result = _python("from tpad_rt.aot.build import main; raise SystemExit(main())", {"CC": "/nonexistent/cc"})
     assert result.returncode == 1
     assert "/nonexistent/cc" in result.stderr, result.stderr
+
+
+def test_plot_along_x_of_a_run_that_never_touches_says_so(tmp_path: Path) -> None:
+    """Defect: ``tpad-rt plot REC --along x`` of a recording whose finger never touched (play --record with the
+    mouse and no button held; here a file:// trajectory with down = 0) writes four empty panels, x from -0.05 to
+    0.05 mm, and says only "wrote FILE" (exit 0). It must say there is no touching block to plot along x."""
+    trajectory = tmp_path / "lifted.csv"
+    trajectory.write_text("t,x_mm,y_mm,down\n0,40,30,0\n0.1,60,30,0\n0.2,80,30,0\n")
+    recording = tmp_path / "lifted.npz"
+    rendered = tpad_rt("render", "grating", "--input", f"file://{trajectory}", "--out", str(recording))
+    assert rendered.returncode == 0, rendered.stderr
+    run = tpad_rt("plot", str(recording), "--along", "x", "--out", str(tmp_path / "plot.png"))
+    assert "Traceback" not in run.stderr
+    assert run.returncode != 0 or "touch" in run.stdout, (run.returncode, run.stdout, run.stderr)
