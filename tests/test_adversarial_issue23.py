@@ -140,3 +140,20 @@ def test_plot_along_x_of_a_run_that_never_touches_says_so(tmp_path: Path) -> Non
     run = tpad_rt("plot", str(recording), "--along", "x", "--out", str(tmp_path / "plot.png"))
     assert "Traceback" not in run.stderr
     assert run.returncode != 0 or "touch" in run.stdout, (run.returncode, run.stdout, run.stderr)
+
+
+@pytest.mark.parametrize(("script", "stem"), [("kernel/run.py", "kernel"), ("latency/emulator_pty.py", "emulator_pty")])
+def test_bench_smoke_without_out_leaves_the_committed_results_alone(script: str, stem: str) -> None:
+    """Defect: ``python bench/kernel/run.py --smoke`` (no --out; emulator_pty.py too) overwrites the committed
+    bench/results/kernel.{json,md} with a smoke run's figures, which its own docstring calls meaningless. A smoke
+    run must write elsewhere (a temporary folder) or ask for --out. The files are restored afterwards."""
+    results = [REPO_ROOT / "bench" / "results" / f"{stem}.{suffix}" for suffix in ("json", "md")]
+    before = [path.read_bytes() for path in results]
+    try:
+        subprocess.run([sys.executable, str(REPO_ROOT / "bench" / script), "--smoke"], cwd=REPO_ROOT,
+                       env={**os.environ, "PYTHONPATH": str(REPO_ROOT)}, capture_output=True, text=True, timeout=120)
+        after = [path.read_bytes() for path in results]
+    finally:
+        for path, content in zip(results, before):
+            path.write_bytes(content)
+    assert after == before, f"a smoke run without --out rewrote {[str(path) for path in results]}"
