@@ -8,6 +8,7 @@ from __future__ import annotations
 import _ctypes
 import os
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -157,3 +158,19 @@ def test_bench_smoke_without_out_leaves_the_committed_results_alone(script: str,
         for path, content in zip(results, before):
             path.write_bytes(content)
     assert after == before, f"a smoke run without --out rewrote {[str(path) for path in results]}"
+
+
+def test_aot_build_interrupted_ends_without_a_traceback() -> None:
+    """Defect: Ctrl-C during ``python -m tpad_rt.aot.build`` (once it says "aot: compiling ...") ends in a
+    KeyboardInterrupt traceback. Issue 23 asks that Ctrl-C stop a compile at once; it must end in one line and a
+    non-zero exit, as every tpad-rt command does."""
+    process = subprocess.Popen([sys.executable, "-m", "tpad_rt.aot.build"], cwd=REPO_ROOT, text=True,
+                               env={**os.environ, "PYTHONPATH": str(REPO_ROOT)}, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert process.stderr is not None
+    first = process.stderr.readline()  # the builder's first progress line: it is under way
+    process.send_signal(signal.SIGINT)
+    _, rest = process.communicate(timeout=60)
+    assert first.startswith("aot: "), first
+    assert process.returncode != 0
+    assert "Traceback" not in rest, rest[-600:]
