@@ -20,7 +20,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # foundation: errors, limits, files, text and URL parsing, clocks: no tpad_rt module above them
     ("tpad_rt.version", "tpad_rt.errors", "tpad_rt.limits", "tpad_rt.files", "tpad_rt.decimal_text",
      "tpad_rt.json_text", "tpad_rt.urls", "tpad_rt.csv_lines", "tpad_rt.shipped", "tpad_rt.clock",
-     "tpad_rt.drive_guard", "tpad_rt.figures", "tpad_rt.compiling", "tpad_rt.log_histogram"),
+     "tpad_rt.drive_guard", "tpad_rt.figures", "tpad_rt.compiling", "tpad_rt.log_histogram",
+     "tpad_rt.compile_runner", "tpad_rt.kernel_cache"),
     # physics: the paper's equations, vectorised
     ("tpad_rt.physics",),
     # kernels: numba, pure; and the same callbacks compiled ahead of time (loaded without numba)
@@ -36,7 +37,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # drivers: what runs each output's callback
     ("tpad_rt.drivers",),
     # the engines: real time (Renderer), offline, calibration
-    ("tpad_rt.engine", "tpad_rt.offline", "tpad_rt.calibrate"),
+    ("tpad_rt.engine", "tpad_rt.offline", "tpad_rt.calibrate", "tpad_rt.compile_plan"),
     # the network API
     ("tpad_rt.serve",),
     # the command line, the package's facade, and the script that made the shipped textures' images

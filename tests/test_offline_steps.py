@@ -11,6 +11,7 @@ import pytest
 from tpad_rt import offline
 from tpad_rt.device import Device
 from tpad_rt.inputs import open_input
+from tpad_rt.felt import texture_at_finger as felt
 from tpad_rt.offline import OfflineRender, RenderResult
 from tpad_rt.outputs.sim import SimOutput
 from tpad_rt.pipeline import Pipeline
@@ -66,3 +67,17 @@ def test_a_step_ends_where_the_input_ends(monkeypatch: pytest.MonkeyPatch) -> No
     block, input_s = 64, 0.1  # 300 input blocks: not a multiple of STEP_BLOCKS
     _, steps = _render("grating.yaml", "scripted://swipe?speed_mm_s=100", block, input_s)
     assert int(np.ceil(input_s * RATE_HZ / block)) in steps
+
+
+def test_the_texture_under_the_finger_is_computed_once_per_result_and_texture(monkeypatch: pytest.MonkeyPatch) -> None:
+    result, _ = _render("grating.yaml", "scripted://swipe?speed_mm_s=100", 64, 0.05)
+    grating, other = load_compiled(TEXTURES / "grating.yaml"), load_compiled(TEXTURES / "temporal_pulse.yaml")
+    calls = []
+    monkeypatch.setattr(offline, "texture_at_finger", lambda *args: calls.append(args) or felt(*args))
+    first = offline.texture_under_finger(result, grating)
+    assert offline.texture_under_finger(result, grating) is not None and len(calls) == 1
+    again = offline.texture_under_finger(result, grating)
+    assert again[0] is first[0] and again[1] is first[1] and not first[0].flags.writeable
+    assert np.array_equal(first[0], felt(result.finger, grating, result.blocks["t"] + 32 / RATE_HZ)[0])
+    offline.texture_under_finger(result, other)  # another texture: computed for it
+    assert len(calls) == 2

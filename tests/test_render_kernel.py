@@ -555,3 +555,22 @@ def test_render_block_runs_inside_a_cfunc_on_raw_pointers() -> None:
     out = np.zeros(64, dtype=np.float32)
     callback.ctypes(addresses, out.ctypes.data_as(ctypes.POINTER(ctypes.c_float)), 64, pipeline.sample_index)
     assert np.array_equal(out, reference.samples[-64:])
+
+
+def test_a_decay_onto_a_silent_command_ends_at_zero_not_in_subnormal_floats() -> None:
+    """The smoothing decays onto a command of 0 (the finger moves where the texture asks for no vibration): the
+    carried volts end at exactly 0, never at a subnormal float (every operation on one costs up to 100x more; the
+    smallest one times the step's decay, about 0.51, rounds back to itself)."""
+    pipeline = Pipeline(device(), compile_texture(texture("layers_window")), fs_hz=FS_HZ)
+    pipeline.start()
+    block = np.zeros(64, dtype=np.float32)
+    carried = [layout.STATE_SMOOTH_START_V, layout.STATE_MODEL_V, layout.STATE_MODEL_SLIP_V]
+    for k in range(int(0.4 * FS_HZ / 64)):
+        t_s = k * 64 / FS_HZ
+        if k % 3 == 0:  # inside the window for 20 ms (a command), then outside the frame (friction 1: none)
+            pipeline.push_finger(t_s, 65.0 if t_s < 0.02 else 10.0, 30.0 if t_s < 0.02 else 5.0, 0.5)
+        pipeline.render(block)
+        values = np.abs(pipeline.arrays.state[carried])
+        assert np.all((values == 0.0) | (values >= np.finfo(np.float64).tiny)), (k, values)
+    assert pipeline.arrays.state[layout.STATE_COMMAND_V] == 0.0
+    assert pipeline.arrays.state[layout.STATE_SMOOTH_START_V] == 0.0

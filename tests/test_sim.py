@@ -173,3 +173,22 @@ def test_measurements_are_kept_until_taken() -> None:
     assert output.latest() == {"plate_amplitude_um": taken["plate_amplitude_um"][-1],
                                "achieved_mu": taken["achieved_mu"][-1]}
     assert [len(values) for values in output.measurements().values()] == [0, 0]
+
+
+def test_a_plate_rung_down_rests_at_zero_not_in_subnormal_floats() -> None:
+    """After the drive stops, the ring-down ends with the state at exactly 0 (NEGLIGIBLE_M), never in subnormal
+    floats (every operation on one costs up to 100x more), and a drive afterwards rings it up as from rest."""
+    q = float(DEVICE.quality_factor(0.5))
+    coef, state = np.zeros(COEF_SIZE), np.zeros(SIM_STATE_SIZE)
+    resonator_coefficients(F0_HZ, q, float(DEVICE.amplitude_m_per_v(0.5)), F0_HZ, 192000, coef)
+    drive = _sine(30.0, F0_HZ, 192000, 4096)
+    envelope = np.zeros(len(drive))
+    resonate(drive, VOLTS_PER_FS, coef, state, envelope)
+    silence = np.zeros(4096, dtype=np.float32)
+    for _ in range(400):  # 8.5 s of silence in blocks, long enough to decay through every float
+        resonate(silence, VOLTS_PER_FS, coef, state, envelope)
+        assert np.all((state == 0.0) | (np.abs(state) >= np.finfo(np.float64).tiny)), state
+    assert np.all(state == 0.0)
+    again = np.zeros(len(drive))
+    resonate(drive, VOLTS_PER_FS, coef, state, again)
+    assert np.array_equal(again, _envelope(drive, q, float(DEVICE.amplitude_m_per_v(0.5)), 192000))

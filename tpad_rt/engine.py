@@ -495,9 +495,12 @@ class Renderer:
 
 def _warm_notice(driver: Driver) -> contextlib.AbstractContextManager[object]:
     """The compile notice (:func:`tpad_rt.compiling.compile_notice`) around warming ``driver`` up and opening it,
-    unless it compiles nothing (its callback and output are ahead-of-time code): numba is then not imported."""
+    after compiling the whole compile plan when numba's cache lacks it (:func:`tpad_rt.compiling.ensure_compiled`),
+    unless the driver compiles nothing (its callback and output are ahead-of-time code): numba is then not
+    imported."""
     if not driver.warm_compiles():
         return contextlib.nullcontext()
-    from tpad_rt.compiling import compile_notice
+    from tpad_rt.compiling import compile_notice, ensure_compiled
 
+    ensure_compiled()  # every kernel of every path, in worker processes, when numba's cache lacks them
     return compile_notice()

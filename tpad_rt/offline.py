@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -69,6 +69,9 @@ class RenderResult:
     drive: npt.NDArray[np.float32] | None
     blocks: dict[str, np.ndarray]
     finger: np.ndarray
+    #: :func:`texture_under_finger`'s answers, by the texture's id: (texture, mu, valid), read-only
+    _felt: dict[int, tuple[CompiledTexture, np.ndarray, np.ndarray]] = field(
+        default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def seconds(self) -> float:
@@ -155,6 +158,9 @@ class OfflineRender:
         self._step_blocks = max(1, min(STEP_BLOCKS, pipeline.options.telemetry_ring, STEP_SAMPLES // block_frames))
         self._buffer = np.zeros(self._step_blocks * block_frames, dtype=np.float32)
         self._drive: list[np.ndarray] | None = [] if keep_drive else None
+        # A kept drive of known length is rendered in place, not copied out of the buffer and joined at the end.
+        self._whole = np.zeros(int(self.total_blocks) * block_frames, dtype=np.float32) \
+            if keep_drive and math.isfinite(self.total_blocks) else None
         self._rows: dict[str, list[np.ndarray]] = {name: [] for name in TEL_NAMES}
         self._pushed_until_s = -math.inf
         self._finger: list[np.ndarray] = []
@@ -198,7 +204,8 @@ class OfflineRender:
         self._pushed_until_s = float(ends_s[-1])
         self._finger.append(samples)
         due = np.searchsorted(samples["t_s"], ends_s, side="right")  # samples due by each block's end
-        drive = self._buffer[:count * frames]
+        drive = self._buffer[:count * frames] if self._whole is None else \
+            self._whole[self.blocks_done * frames:(self.blocks_done + count) * frames]
         try:
             pipeline.render_blocks(drive, frames, self._finger_rows(samples), due)
         except SampleError:  # a sample push_finger refuses: block by block, to name it (a ConfigError)
@@ -208,7 +215,7 @@ class OfflineRender:
             output.write_blocks(drive, frames, telemetry)
         for name in TEL_NAMES:
             self._rows[name].append(telemetry[name])
-        if self._drive is not None:
+        if self._drive is not None and self._whole is None:
             self._drive.append(drive.copy())
         self.latest = {name: float(column[-1]) for name, column in telemetry.items()}
         for output in self.outputs:
@@ -250,7 +257,9 @@ class OfflineRender:
         for output in self.outputs:
             blocks.update(output.measurements())
         drive = None
-        if self._drive is not None:
+        if self._whole is not None:
+            drive = self._whole[:self.blocks_done * self.block_frames]
+        elif self._drive is not None:
             drive = np.concatenate(self._drive) if self._drive else np.zeros(0, dtype=np.float32)
         finger = np.concatenate(self._finger) if self._finger else np.zeros(0, dtype=FINGER_DTYPE)
         return RenderResult(int(self.pipeline.fs_hz), self.block_frames, drive, blocks, finger)
@@ -262,6 +271,12 @@ def texture_under_finger(result: RenderResult, texture: CompiledTexture) -> tupl
     :func:`tpad_rt.felt.texture_at_finger` at the blocks' middle times: ``valid`` is
     False where the finger was lifted or the render ran past the input's last sample.
     This is what the finger should have felt, free of the kernel's own extrapolation.
+    Computed once per result and texture (``tpad-rt render`` asks three times); the arrays are read-only.
     """
-    middle_s = result.blocks["t"] + 0.5 * result.block_frames / result.fs_hz
-    return texture_at_finger(result.finger, texture, middle_s)
+    known = result._felt.get(id(texture))
+    if known is None or known[0] is not texture:
+        middle_s = result.blocks["t"] + 0.5 * result.block_frames / result.fs_hz
+        mu, valid = texture_at_finger(result.finger, texture, middle_s)
+        mu.flags.writeable = valid.flags.writeable = False
+        known = result._felt[id(texture)] = (texture, mu, valid)
+    return known[1], known[2]

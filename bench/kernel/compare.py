@@ -7,11 +7,14 @@ at the end). Each round starts one worker process per revision, with its worktre
 and PYTHONPATH and a NUMBA_CACHE_DIR of its own, so each imports its own ``tpad_rt`` and
 compiles its own kernel (the ``@cfunc`` driver of that revision's
 bench/kernel/realtime_driver.py). The workers measure with that revision's
-bench/kernel/run.py (``Case.kernel``, ``ns_per_sample``, the same textures and finger
-path), one at a time: for each texture and block, ``--pairs`` alternations A B / B A per
-round. A figure is the median over ``--runs`` fresh streams of ``--seconds`` of audio
-(default: run.py's full plan), in ns per output sample at 192 kHz; a ratio is B's figure
-over A's in the same pair (adjacent in time, so the machine's other work hits both).
+bench/kernel/run.py (``Case.kernel``, the same textures and finger path), one at a time:
+for each texture and block, ``--pairs`` alternations A B / B A per round. A figure is the
+median over ``--runs`` fresh streams of ``--seconds`` of audio (default: run.py's full
+plan), in ns per output sample at 192 kHz: by default the CPU time of the thread that runs
+the ``@cfunc`` (``time.thread_time``: the time slices a shared machine gives other
+processes are not counted), with ``--clock wall`` the revision's own ``run.ns_per_sample``
+(wall clock); a ratio is B's figure over A's in the same pair (adjacent in time, so the
+machine's other work hits both).
 
 Reported per texture and block: median (p10-p90) ns/sample of each revision over all
 rounds, and median (p10-p90) of the paired ratios B / A; and whether the two revisions'
@@ -41,6 +44,19 @@ Message = dict[str, Any]
 
 
 # --- worker: runs in a revision's worktree -------------------------------------------------------
+
+
+def thread_ns_per_sample(prepare: Any, runs: int) -> float:
+    """Median over ``runs`` runs (each prepared untimed by ``prepare``, returning the samples it rendered) of the
+    calling thread's CPU time per sample (ns): the @cfunc renders on this thread, and time slices the shared
+    machine gives to other processes are not counted."""
+    results = []
+    for _ in range(runs):
+        go = prepare()
+        start = time.thread_time()
+        samples = go()
+        results.append((time.thread_time() - start) * 1e9 / samples)
+    return statistics.median(results)
 
 
 def worker_main() -> int:
@@ -84,8 +100,11 @@ def worker_main() -> int:
             if (kind, block) not in warm:  # first stream of this case in this process: untimed
                 case(kind).kernel(block, seconds)()
                 warm.add((kind, block))
-            figure = run.ns_per_sample(lambda: case(kind).kernel(block, seconds), int(request["runs"]))
-            answer({"ns_per_sample": figure["median"]})
+            prepare = lambda: case(kind).kernel(block, seconds)  # noqa: E731
+            runs = int(request["runs"])
+            figure = run.ns_per_sample(prepare, runs)["median"] if request["clock"] == "wall" else \
+                thread_ns_per_sample(prepare, runs)
+            answer({"ns_per_sample": figure})
         elif request["op"] == "dump":
             seconds = float(request["seconds"])
             total = round(seconds * run.FS_HZ / block) * block
@@ -150,7 +169,7 @@ def band(values: list[float]) -> dict[str, float]:
 
 
 def measure(trees: dict[str, Path], folder: Path, kinds: list[str] | None, blocks: list[int], rounds: int,
-            pairs: int, runs: int, seconds: float | None, log: Any) -> Message:
+            pairs: int, runs: int, seconds: float | None, log: Any, clock: str = "cpu") -> Message:
     """Every figure of the comparison (module docstring); ``trees``: worktree of revision "a" and "b"."""
     times: dict[tuple[str, int], dict[str, list[float]]] = {}
     infos: dict[str, list[Message]] = {"a": [], "b": []}
@@ -166,7 +185,7 @@ def measure(trees: dict[str, Path], folder: Path, kinds: list[str] | None, block
             first = infos["a"][0]
             if round_index == 0:
                 chosen = kinds or list(first["textures"])
-                plan = {"kinds": chosen, "blocks": blocks, "rounds": rounds, "pairs": pairs, "runs": runs,
+                plan = {"kinds": chosen, "blocks": blocks, "rounds": rounds, "pairs": pairs, "runs": runs, "clock": clock,
                         "seconds": seconds or first["kernel_s"], "dump_seconds": first["agreement_s"]}
                 for kind in chosen:
                     for block in blocks:
@@ -187,7 +206,7 @@ def measure(trees: dict[str, Path], folder: Path, kinds: list[str] | None, block
                     order = ("a", "b") if (round_index + case_index + pair) % 2 == 0 else ("b", "a")
                     for name in order:
                         answer = workers[name].request(op="time", kind=kind, block=block, runs=runs,
-                                                       seconds=plan["seconds"])
+                                                       seconds=plan["seconds"], clock=clock)
                         series[name].append(answer["ns_per_sample"])
         finally:
             for worker in workers.values():
@@ -224,7 +243,8 @@ def markdown(report: Message) -> str:
         f"numba {report['machine']['numba']}; load average at start {report['load_average'][0]:.2f}.",
         f"ns per output sample of `render_block` from the `@cfunc` driver (bench/kernel/realtime_driver.py) at "
         f"{report['fs_hz']} Hz, default RenderOptions: median (p10-p90) over {plan['rounds']} rounds x "
-        f"{plan['pairs']} pairs, each figure the median of {plan['runs']} fresh streams of {plan['seconds']:g} s; "
+        f"{plan['pairs']} pairs, each figure the median of {plan['runs']} fresh streams of {plan['seconds']:g} s "
+        f"({'CPU time of the rendering thread' if plan.get('clock', 'wall') == 'cpu' else 'wall-clock time'}); "
         "each round a fresh process per revision (its own worktree, tpad_rt and compiled kernel), the two run one "
         "at a time, alternating A B / B A. B / A: median (p10-p90) of the ratios within each pair. identical: "
         f"the two revisions' DAC samples ({plan['dump_seconds']:g} s) equal bit for bit.",
@@ -250,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pairs", type=int, default=3, help="A/B pairs per texture and block per round")
     parser.add_argument("--runs", type=int, default=3, help="fresh streams per figure (its median)")
     parser.add_argument("--seconds", type=float, help="seconds of audio per stream (default: run.py's full plan)")
+    parser.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
+                        help="time each stream by the worker thread's CPU time (default) or by the wall clock")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for kernel_compare.*")
     args = parser.parse_args(argv)
     revisions = {name: {"name": rev, "commit": git("rev-parse", "--verify", f"{rev}^{{commit}}")}
@@ -262,7 +284,7 @@ def main(argv: list[str] | None = None) -> int:
             for name, tree in trees.items():
                 git("worktree", "add", "--detach", str(tree), revisions[name]["commit"])
             report = measure(trees, folder, args.kinds, args.blocks, args.rounds, args.pairs, args.runs,
-                             args.seconds, lambda line: print(line, flush=True))
+                             args.seconds, lambda line: print(line, flush=True), args.clock)
         finally:
             for tree in trees.values():
                 if tree.exists():

@@ -27,17 +27,20 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from rich.console import Console
 
 from tpad_rt.cli.arguments import Subparsers, decimal
-from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.figures import figure_target, pyplot, save
-from tpad_rt.plate_maps import Finger, PlateMaps, plate_maps
-from tpad_rt.texture import CompiledTexture, load_compiled
+
+# The parser needs none of these (the maps come from the texture kernel): run imports them.
+if TYPE_CHECKING:
+    from tpad_rt.device import Device
+    from tpad_rt.plate_maps import Finger, PlateMaps
+    from tpad_rt.texture import CompiledTexture
 
 _BUDGET_COLOUR = "#00c8ff"
 #: Seconds of the texture's time sampled, 1 ms apart from ``--t-s``, to tell whether a flat map changes in time.
@@ -72,6 +75,10 @@ def run(args: argparse.Namespace) -> int:
     ``--out`` that exists and is not a regular file, BackendError when the figure
     cannot be written.
     """
+    from tpad_rt.device import Device
+    from tpad_rt.plate_maps import Finger, plate_maps
+    from tpad_rt.texture import load_compiled
+
     finger = Finger(
         speed_mm_s=_checked("--speed-mm-s", args.speed_mm_s, minimum=0.0),
         direction_deg=_checked("--direction-deg", args.direction_deg),

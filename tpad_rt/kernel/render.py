@@ -177,6 +177,11 @@ from tpad_rt.physics.friction import amplitude_for_core
 #: and the budgets times ``1 - SAFETY_MARGIN``, so float32 output rounding (2**-24
 #: relative) and sums of rounded powers stay under the true limits.
 SAFETY_MARGIN = 1e-6
+#: Volts of a carried difference (the smoothing's distance from the command, the plate model, its slip) below
+#: which it is 0 (far below any DAC's step): a decay that ends on the command otherwise leaves it a subnormal
+#: float for good (the smallest one times a decay over 1/2 rounds back to itself), and every operation on
+#: subnormals costs up to a hundred times more (the layers texture rendered 3x slower).
+NEGLIGIBLE_V = 1e-24
 #: Carrier phase resolution: phases are integers in units of 2**-PHASE_BITS cycles.
 PHASE_BITS = 60
 _HALF_BITS = PHASE_BITS // 2
@@ -184,6 +189,7 @@ _HALF_MASK = (1 << _HALF_BITS) - 1
 _HALF_SPAN = float(1 << _HALF_BITS)
 _PHASE_MASK = (1 << PHASE_BITS) - 1
 _TWO_PI = 2.0 * math.pi
+_SMALLEST_FACTOR = 1e-200
 # The carrier phasor of a phase: a table at the top 8 bits, a polynomial for the rest.
 _COARSE_BITS = 8
 _FINE_BITS = PHASE_BITS - _COARSE_BITS
@@ -291,8 +297,9 @@ def _refresh_tables(cfg: np.ndarray, state: np.ndarray, carrier_hz: float) -> No
     smoothing_samples = smoothing_s * fs_hz
     for j in range(MAX_CONTROL_INTERVAL):
         state[STATE_COS_TABLE + j], state[STATE_SIN_TABLE + j] = _unit_phasor(carrier_phase_units(j, step_units))
-    for j in range(MAX_CONTROL_INTERVAL + 1):
-        state[STATE_DECAY_TABLE + j] = math.exp(-j / smoothing_samples)
+    for j in range(MAX_CONTROL_INTERVAL + 1):  # (0 past the normal floats: a subnormal factor is slow)
+        decay = math.exp(-j / smoothing_samples)
+        state[STATE_DECAY_TABLE + j] = decay if decay >= _SMALLEST_FACTOR else 0.0
     state[STATE_TABLE_FS_HZ] = fs_hz
     state[STATE_TABLE_CARRIER_HZ] = carrier_hz
     state[STATE_TABLE_SMOOTHING_S] = smoothing_s
@@ -359,6 +366,12 @@ def _drive_power_w(state: np.ndarray, energy_v2: float, samples: int) -> float:
 
 
 @_kernel
+def _noticeable_v(value_v: float) -> float:
+    """``value_v`` (V), or 0 when its magnitude is below NEGLIGIBLE_V (NaN is kept: the guards see it)."""
+    return 0.0 if abs(value_v) < NEGLIGIBLE_V else value_v
+
+
+@_kernel
 def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> None:
     """Account for the open control step: its power into the ring, its smoothing and ramp advanced.
 
@@ -389,10 +402,12 @@ def _close_step(cfg: np.ndarray, state: np.ndarray, power_ring: np.ndarray) -> N
     # The plate and the model follow the same drive with the same step: what one holds beyond the other decays
     # (all of it when the step is corrupt).
     keep = 1.0 - state[STATE_MODEL_STEP]
-    state[STATE_MODEL_SLIP_V] *= keep ** samples if 0.0 <= keep < 1.0 else 0.0
+    state[STATE_MODEL_SLIP_V] = _noticeable_v(state[STATE_MODEL_SLIP_V] * (keep ** samples if 0.0 <= keep < 1.0
+                                                                           else 0.0))
+    state[STATE_MODEL_V] = _noticeable_v(state[STATE_MODEL_V])
     command_v = state[STATE_COMMAND_V]
     decay = state[STATE_DECAY_TABLE + samples]
-    state[STATE_SMOOTH_START_V] = command_v + (state[STATE_SMOOTH_START_V] - command_v) * decay
+    state[STATE_SMOOTH_START_V] = command_v + _noticeable_v((state[STATE_SMOOTH_START_V] - command_v) * decay)
     direction = 1.0 if state[STATE_GATE] != 0.0 else -1.0
     ramp = state[STATE_RAMP_START] + direction * samples
     state[STATE_RAMP_START] = min(max(ramp, 0.0), state[STATE_RAMP_SAMPLES])
@@ -887,6 +902,63 @@ def _step_flags(state: np.ndarray) -> int:
     return int(flags) if 0.0 <= flags < 256.0 else 0
 
 
+@_inline
+def _shape_at_full_gain(
+    envelope: np.ndarray, decay: np.ndarray, first: int, stop: int, command_v: float, start_offset_v: float,
+    cap_v: float, low_v: float, follow_gain: float, model_step: float, on_reference: bool, model_v: float,
+) -> tuple[bool, float, int]:
+    """The shaper over ``envelope[first:stop]``, all at full gain: ``(on_reference, model_v, clipped)`` after them.
+
+    Sample by sample as :func:`_shape_in_sequence` describes, in runs: while the model sits on the command, each
+    drive depends on the command alone; while a drive is held at the cap (or at ``low_v``), the next one depends
+    on the model alone, which moves by one multiply-add per sample. The run's test is off that chain (a branch
+    the processor predicts), so a run costs a few cycles per sample instead of the whole drive-clamp-model chain.
+    The same expressions as one sample at a time: the same values to the bit.
+    """
+    clipped = 0
+    j = first
+    while j < stop:
+        if on_reference:
+            while j < stop:  # on the command: no value carried
+                reference_before_v = command_v + start_offset_v * decay[j]
+                drive_v = reference_before_v + (command_v + start_offset_v * decay[j + 1] - reference_before_v) \
+                    * follow_gain
+                if not low_v <= drive_v <= cap_v:
+                    break
+                envelope[j] = drive_v
+                j += 1
+            if j == stop:
+                break
+            model_v = command_v + start_offset_v * decay[j]  # the model leaves the command at sample j
+            on_reference = False
+        while j < stop:  # held at the cap: the model climbs to it
+            drive_v = model_v + (command_v + start_offset_v * decay[j + 1] - model_v) * follow_gain
+            if not drive_v > cap_v:
+                break
+            envelope[j] = cap_v
+            clipped += 1
+            model_v += (cap_v - model_v) * model_step
+            j += 1
+        while j < stop and low_v <= cap_v:  # held at low_v (braking): the model falls to it
+            drive_v = model_v + (command_v + start_offset_v * decay[j + 1] - model_v) * follow_gain
+            if not drive_v < low_v:
+                break
+            envelope[j] = low_v
+            clipped += 1
+            model_v += (low_v - model_v) * model_step
+            j += 1
+        if j == stop:
+            break
+        drive_v = model_v + (command_v + start_offset_v * decay[j + 1] - model_v) * follow_gain
+        e_v = min(max(drive_v, low_v), cap_v)
+        envelope[j] = e_v
+        on_reference = e_v == drive_v
+        clipped += 0 if on_reference else 1
+        model_v += (e_v - model_v) * model_step
+        j += 1
+    return on_reference, model_v, clipped
+
+
 @_kernel
 def _shape_in_sequence(
     state: np.ndarray, envelope: np.ndarray, decay: np.ndarray, command_v: float, start_offset_v: float,
@@ -898,27 +970,35 @@ def _shape_in_sequence(
 
     ``decay[k] = d^j`` for the sample before ``envelope[k]``; ``ramp`` is the gain ramp at the first sample
     before clipping to ``[0, ramp_samples]``. While ramping the drive is the ramped smoothed command and the
-    model follows it; at full gain the drive lands the model on the command (docs/kernel.md "Per sample").
+    model follows it; at full gain the drive lands the model on the command (docs/kernel.md "Per sample"),
+    in runs (:func:`_shape_at_full_gain`).
     """
     on_reference = state[STATE_MODEL_ON_REF] != 0.0
     model_v = state[STATE_MODEL_V]
     clipped = 0
-    for k in range(envelope.shape[0]):
-        reference_before_v = command_v + start_offset_v * decay[k]
-        reference_v = command_v + start_offset_v * decay[k + 1]
-        gain = min(max(ramp + ramp_direction * k, 0.0), ramp_samples)
-        if on_reference:
-            model_v = reference_before_v
-        if gain < ramp_samples:
-            e_v = gain * (1.0 / ramp_samples) * min(max(reference_v, 0.0), cap_v)
+    count = envelope.shape[0]
+    k = 0
+    while k < count:
+        full = k
+        while full < count and not min(max(ramp + ramp_direction * full, 0.0), ramp_samples) < ramp_samples:
+            full += 1
+        if full > k:
+            on_reference, model_v, held = _shape_at_full_gain(
+                envelope, decay, k, full, command_v, start_offset_v, cap_v, low_v, follow_gain, model_step,
+                on_reference, model_v)
+            clipped += held
+            k = full
+        while k < count:  # ramping: the ramped smoothed command, the model following it
+            gain = min(max(ramp + ramp_direction * k, 0.0), ramp_samples)
+            if not gain < ramp_samples:
+                break
+            if on_reference:
+                model_v = command_v + start_offset_v * decay[k]
+            e_v = gain * (1.0 / ramp_samples) * min(max(command_v + start_offset_v * decay[k + 1], 0.0), cap_v)
             on_reference = False
-        else:
-            drive_v = model_v + (reference_v - model_v) * follow_gain
-            e_v = min(max(drive_v, low_v), cap_v)
-            on_reference = e_v == drive_v
-            clipped += 0 if on_reference else 1
-        model_v += (e_v - model_v) * model_step
-        envelope[k] = e_v
+            model_v += (e_v - model_v) * model_step
+            envelope[k] = e_v
+            k += 1
     state[STATE_MODEL_ON_REF] = 1.0 if on_reference else 0.0
     state[STATE_MODEL_V] = 0.0 if on_reference else model_v  # on the command: not used, kept canonical
     return clipped
