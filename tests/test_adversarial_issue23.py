@@ -89,8 +89,10 @@ def test_headroom_hint_never_suggests_a_finger_faster_than_the_fastest_it_names(
     text = " ".join(lines)
     fastest = re.search(r"a finger at most (\S+) mm/s reaches", text)
     suggested = re.search(r"speed_mm_s=([0-9.e+-]+)&", text)
-    assert fastest is not None and suggested is not None, text
-    assert float(suggested.group(1)) <= float(fastest.group(1)), text
+    if suggested is not None:  # a speed suggested is one the hint says reaches the level
+        assert fastest is not None and float(suggested.group(1)) <= float(fastest.group(1)), text
+    else:  # below the speed floor no finger reaches it: the hint says so instead of naming a speed
+        assert fastest is None and "no finger speed reaches 0.01" in text, text
 
 
 def test_headroom_hint_does_not_suggest_the_input_the_run_used() -> None:
