@@ -10,8 +10,9 @@ the endless back-and-forth swipe; no JACK) with the tree of ``--repo`` on PYTHON
 the child's VmRSS from /proc every 0.1 s, and reports its RSS one second after play
 started (the ``output ...`` line, printed just before the renderer starts) and at the end,
 the growth in between (MB, and MB/s), and the peak. ``null://`` is the baseline measured
-in the same run: the same renderer, input and telemetry with no plate simulated. The
-issue's target: ``sim://`` grows by at most 5 MB after its first second over 60 s.
+in the same run, at the same time (both plays run at once, a thread reading each): the same
+renderer, input and telemetry with no plate simulated. The issue's target: ``sim://`` grows
+by at most 5 MB after its first second over 60 s.
 
 Writes bench/results/memory_play.json and memory_play.md (with ``--label``: memory_play_LABEL.*; ``--out``: elsewhere)
 and prints the table. Not a test (docs/testing.md "Benchmarks are not tests").
@@ -26,6 +27,7 @@ import platform
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -92,7 +94,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if not args.seconds >= MIN_SECONDS:
         parser.error(f"--seconds: at least {MIN_SECONDS:g} (RSS is read from 1 s in to 1 s before the end)")
-    rows = [measure(args.repo.resolve(), output, args.seconds) for output in ("sim://", "null://")]
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        rows = list(pool.map(lambda output: measure(args.repo.resolve(), output, args.seconds), ("sim://", "null://")))
     result = {"repo": str(args.repo.resolve()), "python": platform.python_version(), "machine": platform.machine(),
               "cpus": os.cpu_count(), "load_average": os.getloadavg(), "rows": rows}
     stem = "memory_play" + (f"_{args.label}" if args.label else "")
