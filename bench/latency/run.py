@@ -57,6 +57,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 sys.path.insert(0, str(HERE))
 
 from jack import cpu_hogs, jack_server, playback_latency_frames, wait_for_no_clients  # noqa: E402
@@ -633,12 +635,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=None,
                         help="seconds per load and callback, split into 6 runs (default 30; --quick 6, 3 runs)")
     parser.add_argument("--gil-threads", type=int, default=1, help="Python threads spinning for GIL load (default 1)")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for latency.json/.md")
+    parser.add_argument("--out", type=results_folder.folder, default=ROOT / "bench" / "results", help="folder for latency.json/.md")
     parser.add_argument("--startup-only", action="store_true",
                         help="measure part 4 (start-up) only; keep the other parts of latency.json as they are")
     parser.add_argument("--rewrite-md", action="store_true",
                         help="measure nothing: rewrite latency.md (and the summary in latency.json) from latency.json")
     args = parser.parse_args(argv)
+    results_folder.refuse_smoke_into_results(parser, args.smoke, args.out)
     if args.rewrite_md:
         report = json.loads((args.out / "latency.json").read_text())
         report["summary"] = summarise(report)

@@ -45,6 +45,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 sys.path.insert(0, str(HERE))
 
 from jack import cpu_hogs  # noqa: E402
@@ -169,8 +171,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=5, help="runs per row (default 5)")
     parser.add_argument("--buffer-ms", type=float, default=1.0, help="the host's target fill (default 1 ms)")
     parser.add_argument("--envelope-hz", type=int, default=16000, help="envelope rate (default 16000 Hz)")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for the results")
+    parser.add_argument("--out", type=results_folder.folder, default=ROOT / "bench" / "results", help="folder for the results")
     args = parser.parse_args(argv)
+    results_folder.refuse_smoke_into_results(parser, args.smoke, args.out)
     seconds, rounds = (0.3, 1) if args.smoke else (2.0, 2) if args.quick else (args.seconds, args.runs)
     loads = ["idle"] if args.smoke else list(LOADS)
     writers = ["tpad"] if args.smoke else list(WRITERS)

@@ -32,6 +32,8 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 RESULTS = ROOT / "bench" / "results"
 #: The shortest run measured: RSS is read from one second in until one second before the end.
 MIN_SECONDS = 3.0
@@ -90,7 +92,7 @@ def main(argv: list[str] | None = None) -> None:
                         help=f"play duration (s, default 60, at least {MIN_SECONDS:g})")
     parser.add_argument("--repo", type=Path, default=ROOT, help="the checkout to run (default: this one)")
     parser.add_argument("--label", default="", help="suffix of the result files")
-    parser.add_argument("--out", type=Path, default=RESULTS, help="folder for the results (default bench/results)")
+    parser.add_argument("--out", type=results_folder.folder, default=RESULTS, help="folder for the results (default bench/results)")
     args = parser.parse_args(argv)
     if not args.seconds >= MIN_SECONDS:
         parser.error(f"--seconds: at least {MIN_SECONDS:g} (RSS is read from 1 s in to 1 s before the end)")
