@@ -983,6 +983,8 @@ def _shape_in_sequence(
     k = 0
     while k < count:
         full = k
+        if ramp_direction > 0.0 and not min(max(ramp + ramp_direction * k, 0.0), ramp_samples) < ramp_samples:
+            full = count  # rising and at full gain: at full gain to the end (no search sample by sample)
         while full < count and not min(max(ramp + ramp_direction * full, 0.0), ramp_samples) < ramp_samples:
             full += 1
         if full > k:
