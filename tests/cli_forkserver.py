@@ -3,8 +3,8 @@
     python tests/cli_forkserver.py      (driven by tests/cli_run.py over its stdin and stdout)
 
 Most CLI tests run a command that refuses its input in one line; in a new interpreter
-each would spend about a second importing numpy, numba and tpad-rt, before a few
-milliseconds of work. Here that import happens once. Each request is one JSON line,
+each would spend about a second importing numpy, numba and tpad-rt (what the command
+imports when it runs), before a few milliseconds of work. Here that import happens once. Each request is one JSON line,
 ``{"args": [...], "cwd": DIR, "env": {...}, "stdout": FILE, "stderr": FILE}``; the
 server forks, answers ``{"pid": PID}`` (the child leads a session of its own, so a
 timeout can kill it and whatever it started), and when the child ends, answers
@@ -15,7 +15,7 @@ the request's files, the environment is the request's, ``tpad_rt`` runs as
 ``__main__`` through runpy as ``python -m`` does, and the child exits as the
 interpreter would (an uncaught exception's traceback and exit status 1, non-daemon
 threads joined, atexit handlers run, output flushed) but without the module teardown. Its peak memory includes the server's imports (every command's
-module) and its load of the default device's physics ufuncs, which the command would have made itself. Modules imported here read some of the environment once (numba its
+module, and what they import when they run) and the default device it loads, which the command would have made itself. Modules imported here read some of the environment once (numba its
 ``NUMBA_*`` settings): cli_run.py runs a request that changes those in a new interpreter.
 """
 
@@ -30,15 +30,22 @@ import threading
 
 sys.path[0] = os.getcwd()  # as ``python -m`` has it: the repository (the server's cwd), not tests/
 
-import numba  # noqa: E402,F401  (the imports every command makes)
+import importlib  # noqa: E402
+
+import numba  # noqa: E402,F401  (the imports the commands make)
 import numpy  # noqa: E402,F401
 
 import tpad_rt.cli  # noqa: E402,F401
-import tpad_rt.config  # noqa: E402,F401
-import tpad_rt.physics  # noqa: E402,F401
 from tpad_rt.device import Device  # noqa: E402
 
-Device.default()  # loads the physics ufuncs from numba's cache (0.7 s), as every command does first
+#: What the commands import when they run (their parser imports none of it: tests/test_startup.py): the
+#: device model and the files, the kernels, every output, the offline render, the emulator and the fits.
+COMMAND_IMPORTS = ("tpad_rt.config.loader", "tpad_rt.config.json_schema", "tpad_rt.compiling", "tpad_rt.offline",
+                   "tpad_rt.plate_maps", "tpad_rt.outputs.serial_amp", "tpad_rt.outputs.sim", "tpad_rt.outputs.wav",
+                   "tpad_rt.amp.emulator", "tpad_rt.calibrate.device_file")
+for _name in COMMAND_IMPORTS:
+    importlib.import_module(_name)
+Device.default()  # the shipped default device, which most commands load first
 tpad_rt.cli.build_parser()  # imports every command's module
 
 

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import os
 import pty
 import subprocess
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -43,19 +46,61 @@ def test_missing_portaudio_is_one_line_and_status_1() -> None:
     assert "Traceback" not in done.stderr
 
 
-def test_a_port_the_system_does_not_describe_is_listed_in_words_only_when_it_opens(tmp_path: Path) -> None:
-    """pyserial's "n/a" (a built-in UART's slot): a port that opens (a pty here) is listed in words, one that does
-    not (nothing there) is named as left out; a described port (a USB adapter) is listed as described."""
+#: inotify's event for a file opened (linux/inotify.h); an event on a watched file (no name) is 16 bytes.
+IN_OPEN = 0x20
+EVENT_BYTES = 16
+
+
+@contextlib.contextmanager
+def opens_of(path: str) -> Iterator[Callable[[], int]]:
+    """Within: a function counting the opens of ``path`` (inotify IN_OPEN, any process) since it last counted."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    watch = libc.inotify_init1(os.O_NONBLOCK)
+    assert watch >= 0 and libc.inotify_add_watch(watch, os.fsencode(path), IN_OPEN) >= 0, os.strerror(ctypes.get_errno())
+
+    def count() -> int:
+        try:
+            return len(os.read(watch, 64 * EVENT_BYTES)) // EVENT_BYTES
+        except BlockingIOError:
+            return 0
+
+    try:
+        yield count
+    finally:
+        os.close(watch)
+
+
+@pytest.fixture
+def pty_name() -> Iterator[str]:
+    """A real terminal device (a pty's slave), open meanwhile."""
     master, slave = pty.openpty()
     try:
-        name = os.ttyname(slave)
-        missing = str(tmp_path / "ttyS7")
-        lines = serial_lines([(name, UNDESCRIBED), (missing, UNDESCRIBED), ("/dev/ttyACM9", "Arduino Uno")])
+        yield os.ttyname(slave)
     finally:
         os.close(master)
         os.close(slave)
-    assert lines == [f"  {name}: a built-in serial port (not a USB adapter; the system describes it no further)",
-                     "  /dev/ttyACM9: Arduino Uno",
-                     f"  (left out: {missing}: built-in serial port slots with no hardware answering)"]
-    assert serial_lines([(missing, UNDESCRIBED)]) == [
-        "  none", f"  (left out: {missing}: built-in serial port slots with no hardware answering)"]
+
+
+def test_listing_a_port_never_opens_it(pty_name: str) -> None:
+    """Opening a serial port raises its DTR and RTS and closing drops them (HUPCL): listing touches no port."""
+    with opens_of(pty_name) as opens:
+        lines = serial_lines([(pty_name, UNDESCRIBED), ("/dev/ttyACM9", "Arduino Uno")])
+        assert opens() == 0
+        os.close(os.open(pty_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK))
+        assert opens() == 1  # the watch sees an open
+    assert lines == [f"  {pty_name}: a built-in serial port (not a USB adapter; the system describes it no further)",
+                     "  /dev/ttyACM9: Arduino Uno"]
+
+
+def test_a_port_with_no_uart_behind_it_is_left_out(pty_name: str, tmp_path: Path) -> None:
+    """The kernel's UART type of a port (``/sys/class/tty/NAME/type``; a folder of that layout here, for the pty)
+    0 is a slot with nothing there, named as left out, like a port with no device file; another type is listed."""
+    uart_type = tmp_path / Path(pty_name).name / "type"
+    uart_type.parent.mkdir()
+    missing = str(tmp_path / "ttyS7")
+    uart_type.write_text("0\n")
+    assert serial_lines([(pty_name, UNDESCRIBED), (missing, UNDESCRIBED)], tmp_path) == [
+        "  none", f"  (left out: {pty_name}, {missing}: built-in serial port slots with no hardware behind them)"]
+    uart_type.write_text("4\n")  # a 16550A
+    assert serial_lines([(pty_name, UNDESCRIBED)], tmp_path) == [
+        f"  {pty_name}: a built-in serial port (not a USB adapter; the system describes it no further)"]

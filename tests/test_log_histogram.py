@@ -38,3 +38,15 @@ def test_empty_is_nan_and_bad_bounds_are_refused() -> None:
     for low, high, bins in ((0.0, 1.0, 10), (2.0, 1.0, 10), (1.0, math.inf, 10), (1.0, 2.0, 0)):
         with pytest.raises(ValueError, match="LogHistogram"):
             LogHistogram(low, high, bins)
+
+
+def test_a_percentile_outside_0_to_100_is_refused() -> None:
+    """q = 150 read one bin past the last (an answer above ``high``); q < 0 and NaN are no percentile either, even
+    of an empty histogram."""
+    histogram = LogHistogram(1e-6, 1.0)
+    histogram.add([1e-3])
+    for q in (150.0, 100.000001, -1.0, math.nan):
+        for tested in (histogram, LogHistogram(1e-6, 1.0)):
+            with pytest.raises(ValueError, match=r"q must be in \[0, 100\]"):
+                tested.percentile(q)
+    assert histogram.percentile(0.0) == histogram.percentile(100.0) == pytest.approx(1e-3, rel=0.012)

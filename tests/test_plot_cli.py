@@ -94,6 +94,17 @@ def test_along_x_on_a_path_whose_x_turns_back_plots_along_the_path_and_says_so(
     assert note is None and figure.axes[3].get_xlabel() == "finger x (mm)"
 
 
+def test_along_x_where_the_finger_never_touches_is_refused_in_one_line(
+        recording: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Past 0.3 s the swipe has lifted: no block of that span has an x to plot along (an empty figure, x from
+    -0.05 to 0.05 mm, was written); along time the same span plots, shaded as lifted."""
+    args = ["plot", str(recording), "--along", "x", "--start", "0.301", "--out", str(recording.with_suffix(".png"))]
+    assert main(args) == 1
+    assert capsys.readouterr().err == ("tpad-rt plot: --along x: the finger touches in no block of that span: there "
+                                       "is no x to plot along (plot along time, the default)\n")
+    assert main(args[:2] + args[4:]) == 0
+
+
 def test_departures_are_a_strip_at_the_friction_panels_foot_not_marks_over_the_curve(recording: Path) -> None:
     """Blocks marked departed (here every fourth touching one of a real render) are shaded in the bottom
     DEPARTED_STRIP of the friction panel, below its lowest curve; no marker is drawn on the curves."""

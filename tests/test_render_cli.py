@@ -20,6 +20,7 @@ import pytest
 from scipy.io import wavfile
 
 from tpad_rt.cli import main
+from tpad_rt.cli.render import peak_text
 from tpad_rt.config import load_texture
 from tpad_rt.device import Device
 from tpad_rt.kernel.layout import FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, FLAG_WATCHDOG
@@ -230,6 +231,14 @@ def test_recording_and_summary(grating: tuple[Recording, str]) -> None:
     mean_error = float(lines[4].split("mean ")[1].split(",")[0])
     assert mean_error < 0.01  # latency-compensated: the plate follows the finger
     assert lines[-1].startswith("wrote ") and lines[-1].endswith("g.npz")
+
+
+def test_the_peak_is_put_in_the_kicks_only_when_the_drive_was_lower_outside_them() -> None:
+    """A kick held the drive at the limit, but so did another block: the peak is not the kicks' alone."""
+    assert peak_text(40.0, 40.0, 2, 30.25) == ("peak 40.00 V of 40 V max, in the shaper's kicks (2 blocks at the limit "
+                                               "to move the plate as fast as it allows), 30.25 V outside them")
+    assert peak_text(40.0, 40.0, 1, 40.0) == "peak 40.00 V of 40 V max"
+    assert peak_text(12.5, 40.0, 0, 12.5, "amplifier") == "peak 12.50 V of 40 V max (amplifier's clamp)"
 
 
 def _departures(recording: Recording) -> tuple[np.ndarray, np.ndarray]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -12,7 +13,9 @@ import pytest
 from PIL import Image
 
 from tpad_rt.cli import main
-from tpad_rt.plate_maps import Finger, plate_maps
+from tpad_rt.config.texture_schema import MAX_FREQUENCY_HZ
+from tpad_rt.errors import ConfigError
+from tpad_rt.plate_maps import MAX_T_S, Finger, plate_maps
 from tpad_rt.device import Device
 from tpad_rt.physics.friction import relative_friction
 from tpad_rt.texture import load_compiled
@@ -87,6 +90,26 @@ def test_a_slow_finger_is_inverted_at_the_speed_floor() -> None:
     assert still.saturated_percent == 0.0
 
 
+def test_maps_at_the_latest_time_are_finite_and_keep_the_phase_of_the_fastest_pulse(tmp_path: Path) -> None:
+    """At MAX_T_S every shipped texture maps to finite values, and a sine pulse at the fastest frequency a texture
+    may have is still where its period says (a quarter cycle before MAX_T_S: its low level); past MAX_T_S the time
+    is refused (1e20 s gave a NaN phase and a traceback)."""
+    device, finger = Device.default(), Finger(100.0, 0.0, 0.5)
+    for path in sorted(TEXTURES.glob("*.yaml")):
+        maps = plate_maps(load_compiled(path), device, finger, MAX_T_S, 5.0)
+        assert all(np.isfinite(values).all() for values in (maps.friction, maps.volts_asked, maps.power_w)), path
+    fast = tmp_path / "fast.yaml"
+    fast.write_text(f"description: fastest sine pulse\nkind: temporal\nwaveform: sine\nfrequency_hz: "
+                    f"{MAX_FREQUENCY_HZ}\nfriction: {{low: 0.5, high: 1.0}}\n")
+    pulse = load_compiled(fast)
+    quarter_s = 0.25 / MAX_FREQUENCY_HZ
+    assert plate_maps(pulse, device, finger, MAX_T_S - quarter_s, 5.0).friction == pytest.approx(0.5, abs=1e-9)
+    assert plate_maps(pulse, device, finger, MAX_T_S, 5.0).friction == pytest.approx(0.75, abs=1e-9)
+    for late_s in (math.nextafter(MAX_T_S, math.inf), 1e20):
+        with pytest.raises(ConfigError, match=r"--t-s: must be from 0 to 1e\+06 s"):
+            plate_maps(pulse, device, finger, late_s, 5.0)
+
+
 def test_show_runs_as_a_program_and_prints_one_line(tmp_path: Path) -> None:
     out = tmp_path / "grating.png"
     done = subprocess.run(
@@ -107,10 +130,12 @@ def test_show_runs_as_a_program_and_prints_one_line(tmp_path: Path) -> None:
         ([str(GOOD / "grating.yaml"), "--speed-mm-s", "-1"], "--speed-mm-s: must be a finite number >= 0, got -1"),
         ([str(GOOD / "grating.yaml"), "--force-n", "-0.5"], "--force-n: must be a finite number >= 0, got -0.5"),
         ([str(GOOD / "grating.yaml"), "--t-s", "-0.5"], "--t-s: must be a finite number >= 0, got -0.5"),
+        ([str(GOOD / "grating.yaml"), "--t-s", "1e20"], "--t-s: must be from 0 to 1e+06 s (a texture repeats with "),
         ([str(GOOD / "grating.yaml"), "--resolution-mm", "0"], "--resolution-mm: must be a finite number > 0, got 0"),
         ([str(GOOD / "grating.yaml"), "--resolution-mm", "0.001"], "--resolution-mm: 0.001 gives 130000 x 60000"),
     ],
-    ids=["missing", "device-as-texture", "texture-as-device", "speed", "force", "time", "resolution", "too-fine"],
+    ids=["missing", "device-as-texture", "texture-as-device", "speed", "force", "time", "too-late", "resolution",
+         "too-fine"],
 )
 def test_bad_input_is_one_line_and_exit_1(
     arguments: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture

@@ -22,7 +22,7 @@ Inputs and outputs, by URL (``tpad_rt.inputs``, ``tpad_rt.outputs``)
     open_input("scripted://swipe?speed_mm_s=100"), open_output("sim://", ...)
 Offline rendering and recordings (``tpad_rt.offline``, ``tpad_rt.recording``)
     OfflineRender, read_recording, write_recording
-Physics (``tpad_rt.physics``, SI units, NumPy-vectorised, numba-callable)
+Physics (``tpad_rt.physics``, SI units, NumPy-vectorised; the friction model numba-callable)
     friction.relative_friction, friction.amplitude_for,
     electromech.impedance, electromech.real_power_eq6, electromech.real_power_exact,
     electromech.resonance_hz, electromech.quality_factor,

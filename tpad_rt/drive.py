@@ -20,10 +20,12 @@ import math
 import numbers
 from dataclasses import dataclass, replace
 from enum import Enum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
+
+if TYPE_CHECKING:
+    from tpad_rt.device import Device  # annotations only: the device model loads pydantic
 
 
 class Consumes(Enum):

@@ -23,11 +23,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tpad_rt.kernel.layout import FLAG_WATCHDOG
-from tpad_rt.texture import CompiledTexture
+
+if TYPE_CHECKING:  # annotations only: the texture loads the kernels, which judging a run does not need
+    from tpad_rt.texture import CompiledTexture
 
 #: How far (relative friction) the achieved friction may be from the texture under the finger
 #: before a block counts as a departure: 0.1, a tenth of the whole range of relative friction.

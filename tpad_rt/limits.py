@@ -12,6 +12,8 @@ MAX_MEASUREMENT_BYTES, MAX_MEASUREMENT_ROWS
     the limits (units in the names)
 DEFAULT_PLATE_MM
     the plate (length, width) assumed without a device file
+DEFAULT_FORCE_N
+    the contact force assumed where a finger sample carries none
 position_range_mm(plate_length_mm, plate_width_mm) -> ((x_low, x_high), (y_low, y_high))
     the finger positions accepted for a plate: one plate length (width) beyond each edge
 """
@@ -42,6 +44,8 @@ MAX_TRAJECTORY_BYTES = 64 * 2**20
 MAX_TRAJECTORY_ROWS = 2_000_000
 #: Plate size (mm, length x width) of the default device, used where no device is given.
 DEFAULT_PLATE_MM = (130.0, 60.0)
+#: Contact force (N) of a finger sample that carries none (the default of ``RenderOptions.default_force_n``).
+DEFAULT_FORCE_N = 0.5
 
 
 def position_range_mm(plate_length_mm: float, plate_width_mm: float) -> tuple[tuple[float, float], tuple[float, float]]:

@@ -3,7 +3,7 @@
 API map
 -------
 LogHistogram(low, high, bins_per_decade=BINS_PER_DECADE)
-    ``add(values)``, ``percentile(q) -> float`` (NaN while empty), ``count``
+    ``add(values)``, ``percentile(q) -> float`` (q in [0, 100], else ValueError; NaN while empty), ``count``
 
 Percentiles of a whole run (push-to-output latency over every block: tpad_rt.telemetry) without keeping
 its values: a value lands in the bin ``[low * 10**(k / bins_per_decade), low * 10**((k + 1) / bins_per_decade))``,
@@ -54,7 +54,10 @@ class LogHistogram:
 
     def percentile(self, q: float) -> float:
         """The ``q``-th percentile (0 to 100) of the values added: the geometric middle of the bin holding the
-        value of rank ``ceil(q / 100 * count)`` (the smallest for q = 0); NaN when none was added."""
+        value of rank ``ceil(q / 100 * count)`` (the smallest for q = 0); NaN when none was added.
+        Raises ValueError for a ``q`` outside [0, 100] (or NaN)."""
+        if not 0.0 <= q <= 100.0:
+            raise ValueError(f"LogHistogram.percentile: q must be in [0, 100], got {q}")
         total = self.count
         if total == 0:
             return math.nan

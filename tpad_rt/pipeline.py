@@ -49,7 +49,9 @@ from tpad_rt.errors import ConfigError, SampleError, TpadError
 from tpad_rt.inputs.base import FINGER_DTYPE
 from tpad_rt.kernel import layout
 from tpad_rt.aot.library import publish
-from tpad_rt.limits import FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, position_range_mm
+from tpad_rt.limits import (
+    DEFAULT_FORCE_N, FINGER_TIME_WINDOW_S, MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, position_range_mm,
+)
 from tpad_rt.texture import CompiledTexture
 
 #: Highest carrier frequency, as a fraction of the sample rate, the pipeline renders (the kernel's own bound).
@@ -158,7 +160,7 @@ class RenderOptions:
     velocity_window_ms: float = 10.0
     watchdog_ms: float = 50.0
     ramp_ms: float = 5.0
-    default_force_n: float = 0.5
+    default_force_n: float = DEFAULT_FORCE_N
     mu_floor: float = 0.01
     finger_ring: int = 1024
     telemetry_ring: int = 8192

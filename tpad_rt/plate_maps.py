@@ -6,7 +6,7 @@ Finger(speed_mm_s, direction_deg, force_n)
     how the finger moves while the maps are made
 plate_maps(texture, device, finger, t_s, resolution_mm) -> PlateMaps
     friction, drive volts (asked and clipped), power and saturation at the centres of a grid over
-    the plate; ConfigError past MAX_POINTS points
+    the plate; ConfigError past MAX_POINTS points, or for ``t_s`` outside [0, MAX_T_S]
 
 ``tpad-rt show`` draws them; ``tpad-rt serve`` sends the friction map to its page.
 """
@@ -26,6 +26,11 @@ from tpad_rt.texture import CompiledTexture
 
 #: Most grid points a figure evaluates (a 130 x 60 mm plate at 0.02 mm).
 MAX_POINTS = 20_000_000
+#: Latest time (s) a map is drawn at, 11.6 days. A texture's phase is ``t_s * frequency_hz`` cycles in float64: here
+#: it still resolves 1.2e-7 of a cycle of the fastest temporal texture (1 kHz); at 1e12 s only an eighth of one, and
+#: past 2**52 cycles (4.5e12 s at 1 kHz) the kernel has no phase left and gives NaN. A texture repeats with its
+#: period, so a later time draws the same map as that time modulo the period.
+MAX_T_S = 1e6
 
 
 @dataclass(frozen=True)
@@ -73,8 +78,11 @@ def plate_maps(
 ) -> PlateMaps:
     """Friction, drive volts and power at the centres of a ``resolution_mm`` grid over the plate.
 
-    Raises ConfigError if the grid would have more than MAX_POINTS points.
+    Raises ConfigError if the grid would have more than MAX_POINTS points, or ``t_s`` (s) is outside [0, MAX_T_S].
     """
+    if not 0.0 <= t_s <= MAX_T_S:
+        raise ConfigError(f"--t-s: must be from 0 to {MAX_T_S:g} s (a texture repeats with its period: take the "
+                          f"time modulo it), got {t_s:g}")
     length_mm, width_mm = device.plate.length_m * 1e3, device.plate.width_m * 1e3
     spans = (length_mm / resolution_mm, width_mm / resolution_mm)  # inf for a subnormal step
     if spans[0] * spans[1] > 4 * MAX_POINTS or math.ceil(spans[0]) * math.ceil(spans[1]) > MAX_POINTS:

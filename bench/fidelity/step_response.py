@@ -36,6 +36,8 @@ from typing import Any
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 FS_HZ = 192000
 BLOCK = 16
 SPEED_MM_S = 100.0
@@ -167,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--levels", type=float, nargs="+", default=[0.3, 0.5, 0.75, 0.9])
     parser.add_argument("--baseline", metavar="REV", help="also measure this git revision (a worktree of it)")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
+    parser.add_argument("--out", type=results_folder.folder, default=ROOT / "bench" / "results")
     parser.add_argument("--worker", type=float, nargs="+", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:

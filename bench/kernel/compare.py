@@ -40,6 +40,8 @@ from typing import IO, Any
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 Message = dict[str, Any]
 
 
@@ -272,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, help="seconds of audio per stream (default: run.py's full plan)")
     parser.add_argument("--clock", choices=("cpu", "wall"), default="cpu",
                         help="time each stream by the worker thread's CPU time (default) or by the wall clock")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for kernel_compare.*")
+    parser.add_argument("--out", type=results_folder.folder, default=ROOT / "bench" / "results", help="folder for kernel_compare.*")
     args = parser.parse_args(argv)
     revisions = {name: {"name": rev, "commit": git("rev-parse", "--verify", f"{rev}^{{commit}}")}
                  for name, rev in (("a", args.rev_a), ("b", args.rev_b))}

@@ -41,6 +41,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 sys.path[:0] = [str(HERE), str(ROOT / "tests")]  # the siblings; the NumPy texture reference
 
 from numpy_pipeline import NumpyPipeline  # noqa: E402
@@ -329,10 +331,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--smoke", action="store_true",
                         help="the test suite's check that the bench runs: every section once at one block (seconds; "
                              "figures meaningless)")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for kernel.json/.md")
+    parser.add_argument("--out", type=results_folder.folder, default=ROOT / "bench" / "results", help="folder for kernel.json/.md")
     parser.add_argument("--offline-only", action="store_true",
                         help="measure the offline section only; keep the rest of kernel.json as it is")
     args = parser.parse_args(argv)
+    results_folder.refuse_smoke_into_results(parser, args.smoke, args.out)
     plan = SMOKE if args.smoke else QUICK if args.quick else FULL
     log = lambda line: print(line, flush=True)  # noqa: E731
     if args.offline_only:

@@ -48,6 +48,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT))
 
@@ -237,8 +239,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="the test suite's check that the bench runs: 1 round idle, 20 commands, 1 trip "
                              "(figures meaningless)")
     parser.add_argument("--rounds", type=int, default=4, help="rounds per load (default 4)")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for the results")
+    parser.add_argument("--out", type=results_folder.folder, default=ROOT / "bench" / "results", help="folder for the results")
     args = parser.parse_args(argv)
+    results_folder.refuse_smoke_into_results(parser, args.smoke, args.out)
     rounds, commands, trips = (1, 20, 1) if args.smoke else (2, 100, 5) if args.quick else (args.rounds, 300, 10)
     loads = ["idle"] if args.smoke else list(LOADS)
     loadavg_before = " ".join(Path("/proc/loadavg").read_text().split()[:3])

@@ -4,7 +4,8 @@ latency and start-up time, on a JACK dummy server at 192 kHz.
     python bench/latency/run.py                 # full run: 30 s per load and callback, in 6 runs
     python bench/latency/run.py --quick         # 6 s in 3 runs, fewer start-ups
     python bench/latency/run.py --seconds 60    # longer load runs
-    python bench/latency/run.py --smoke --out DIR  # every part once, idle, in short windows: figures meaningless
+    python bench/latency/run.py --smoke --out DIR  # every part once, idle, in short windows, the parts sharing
+                                                   # their servers: figures meaningless
 
 Writes bench/results/latency.json and latency.md and prints the tables. Every measured
 configuration runs in a fresh process (bench/latency/worker.py) against a dummy JACK
@@ -38,6 +39,7 @@ bench/latency/README.md says what each figure means. Nothing here is a pass/fail
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -46,6 +48,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
@@ -54,9 +57,13 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 sys.path.insert(0, str(HERE))
 
 from jack import cpu_hogs, jack_server, playback_latency_frames, wait_for_no_clients  # noqa: E402
+
+from tpad_rt.kernel_cache import plan_complete  # noqa: E402
 
 RATE_HZ = 192000
 COMPUTE_BLOCKS = (16, 32, 64, 256)
@@ -71,7 +78,8 @@ TARGET_S = 2 * LOAD_BLOCK / RATE_HZ
 @dataclass(frozen=True)
 class Plan:
     """Seconds per compute-time run, at each of ``compute_blocks``; seconds per load (of ``loads``) and callback,
-    split into ``load_runs`` runs; start-up runs, warm and with an empty numba cache."""
+    split into ``load_runs`` runs; start-up runs, warm and with an empty numba cache; whether the parts share
+    their JACK servers (:class:`Servers`)."""
 
     compute_s: float
     load_s: float
@@ -80,6 +88,7 @@ class Plan:
     cold_startups: int = 3
     compute_blocks: tuple[int, ...] = COMPUTE_BLOCKS
     loads: tuple[str, ...] = LOADS
+    shared_servers: bool = False
 
     @property
     def run_s(self) -> float:
@@ -87,9 +96,34 @@ class Plan:
         return self.load_s / self.load_runs
 
 
-#: The test suite's smoke run (tests/test_bench_smoke.py): every part once, at 64 frames, idle, in short windows.
+#: The test suite's smoke run (tests/test_bench_smoke.py): every part once, at 64 frames, idle, in short windows,
+#: on one synchronous and one asynchronous server.
 SMOKE = Plan(compute_s=0.2, load_s=0.2, startups=1, load_runs=1, cold_startups=0, compute_blocks=(LOAD_BLOCK,),
-             loads=("idle",))
+             loads=("idle",), shared_servers=True)
+
+
+class Servers(contextlib.ExitStack):
+    """The dummy JACK servers the parts run on: a fresh one for each part, or (``shared``) one per period size
+    and mode, started when a part first asks for it and stopped when this context exits (the smoke run's: a
+    server takes a second to start). Each server's output goes to ``logs``/jackd-NAME.log."""
+
+    def __init__(self, logs: Path, shared: bool) -> None:
+        super().__init__()
+        self._logs, self._shared = logs, shared
+        self._running: dict[tuple[int, bool], dict[str, str]] = {}
+
+    @contextlib.contextmanager
+    def server(self, block: int, name: str, *, sync: bool = True) -> Iterator[dict[str, str]]:
+        """The environment of a running server of ``block``-frame periods, synchronous unless ``sync`` is
+        False; ``name`` names its log."""
+        if not self._shared:
+            with jack_server(RATE_HZ, block, self._logs / f"jackd-{name}.log", sync=sync) as env:
+                yield env
+            return
+        if (block, sync) not in self._running:
+            self._running[block, sync] = self.enter_context(
+                jack_server(RATE_HZ, block, self._logs / f"jackd-{name}.log", sync=sync))
+        yield self._running[block, sync]
 
 
 def _worker(args: list[str], env: dict[str, str], timeout_s: float) -> dict[str, Any]:
@@ -111,7 +145,10 @@ WARM_TIMEOUT_S = 900
 
 def warm_up(env: dict[str, str], modes: list[str]) -> str | None:
     """Run the worker once in each of ``modes``, unmeasured, to fill the numba cache if it is cold (a
-    measured worker's timeout leaves no room for the compile); the first error, or None."""
+    measured worker's timeout leaves no room for the compile); the first error, or None. Runs nothing when the
+    whole compile plan is in the cache already (``tpad-rt warm`` ran for these sources: tests/run runs it)."""
+    if plan_complete():
+        return None
     for mode in modes:
         result = _worker([mode], env, WARM_TIMEOUT_S)
         if "error" in result:
@@ -119,12 +156,12 @@ def warm_up(env: dict[str, str], modes: list[str]) -> str | None:
     return None
 
 
-def measure_compute(plan: Plan, log: Callable[[str], None], logs: Path) -> list[dict[str, Any]]:
+def measure_compute(plan: Plan, log: Callable[[str], None], servers: Servers) -> list[dict[str, Any]]:
     """Part 1: compute time per block, empty vs tpad-rt callback, one server per block size (the numba cache
     filled first)."""
     rows = []
     for block in plan.compute_blocks:
-        with jack_server(RATE_HZ, block, logs / f"jackd-{block}.log") as env:
+        with servers.server(block, str(block)) as env:
             if not rows and (error := warm_up(env, ["startup"])) is not None:
                 log(f"warm-up: {error}")
             for callback in ("silence", "tpad"):
@@ -136,7 +173,7 @@ def measure_compute(plan: Plan, log: Callable[[str], None], logs: Path) -> list[
     return rows
 
 
-def measure_loads(plan: Plan, gil_threads: int, log: Callable[[str], None], logs: Path,
+def measure_loads(plan: Plan, gil_threads: int, log: Callable[[str], None], servers: Servers,
                   report: dict[str, Any]) -> list[dict[str, Any]]:
     """Part 2 (and 3): the three callbacks idle, under GIL load, under CPU load, at 64 frames.
 
@@ -145,7 +182,7 @@ def measure_loads(plan: Plan, gil_threads: int, log: Callable[[str], None], logs
     tpad-rt run has a baseline run next to it in time (the machine's other work drifts).
     """
     rows = []
-    with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-load.log") as env:
+    with servers.server(LOAD_BLOCK, "load") as env:
         report["server_playback_latency_frames"] = playback_latency_frames(env["JACK_DEFAULT_SERVER"])
         names = list(CALLBACKS)
         for load in plan.loads:
@@ -169,10 +206,10 @@ def measure_loads(plan: Plan, gil_threads: int, log: Callable[[str], None], logs
     return rows
 
 
-def measure_async_latency(plan: Plan, log: Callable[[str], None], logs: Path) -> dict[str, Any]:
+def measure_async_latency(plan: Plan, log: Callable[[str], None], servers: Servers) -> dict[str, Any]:
     """Part 3's comparison: the tpad-rt callback idle at 64 frames on a server in JACK's default
     asynchronous mode (every other part runs ``jackd -S``)."""
-    with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-async.log", sync=False) as env:
+    with servers.server(LOAD_BLOCK, "async", sync=False) as env:
         frames = playback_latency_frames(env["JACK_DEFAULT_SERVER"])
         result = _worker(["stream", "tpad", "--block", str(LOAD_BLOCK), "--seconds", str(plan.compute_s)], env,
                          plan.compute_s + 120)
@@ -212,15 +249,14 @@ def _run_s(command: list[str], env: dict[str, str]) -> float:
     return time.monotonic() - begin
 
 
-def measure_startup(plan: Plan, log: Callable[[str], None], logs: Path) -> dict[str, Any]:
-    """Part 4: spawn -> first sample at the DAC, through ``tpad-rt play`` (when it renders to audio://) and
-    through the Renderer API, next to ``import tpad_rt`` and ``import tpad_rt.engine``, alternated."""
-    play = _play_has_audio()
-    modes = ["startup", "play"] if play else ["startup"]
+def measure_startup(plan: Plan, log: Callable[[str], None], logs: Path, servers: Servers) -> dict[str, Any]:
+    """Part 4: spawn -> first sample at the DAC, through ``tpad-rt play`` and through the Renderer API, next to
+    ``import tpad_rt`` and ``import tpad_rt.engine``, alternated."""
+    modes = ["startup", "play"]
     runs: dict[str, list[dict[str, float]]] = {mode: [] for mode in modes}
     baseline, engine_import, numba_floor = [], [], []
     (logs / "numba_floor.py").write_text(NUMBA_FLOOR_MODULE)
-    with jack_server(RATE_HZ, LOAD_BLOCK, logs / "jackd-startup.log") as env:
+    with servers.server(LOAD_BLOCK, "startup") as env:
         env = {key: value for key, value in env.items() if key != "DISPLAY"}  # play: scripted input, no mouse
         floor_env = {**env, "PYTHONPATH": str(logs)}
         _run_s([sys.executable, "-c", "import numba_floor"], floor_env)  # compiles its cache; not counted
@@ -250,15 +286,9 @@ def measure_startup(plan: Plan, log: Callable[[str], None], logs: Path) -> dict[
                 cold[mode].append({key: (value - spawned_ns) * 1e-9 for key, value in result.items()})
             log("cold start-up: first sample at " + ", ".join(f"{mode} {cold[mode][-1]['first_dac_ns']:.2f} s"
                                                               for mode in modes))
-    return {"runs": runs["startup"], "play_runs": runs.get("play", []), "import_tpad_rt_s": baseline,
-            "import_tpad_rt_engine_s": engine_import, "numba_floor_s": numba_floor, "play_wired_to_audio": play,
-            "cold_runs": cold["startup"], "cold_play_runs": cold.get("play", [])}
-
-
-def _play_has_audio() -> bool:
-    """True when ``tpad-rt play`` renders to audio:// (not the interim offline renderer)."""
-    done = subprocess.run([sys.executable, "-m", "tpad_rt", "play", "--help"], capture_output=True, text=True)
-    return "interim" not in done.stdout.lower() and "audio://" in done.stdout
+    return {"runs": runs["startup"], "play_runs": runs["play"], "import_tpad_rt_s": baseline,
+            "import_tpad_rt_engine_s": engine_import, "numba_floor_s": numba_floor,
+            "cold_runs": cold["startup"], "cold_play_runs": cold["play"]}
 
 
 def _band(values: list[float], scale: float = 1.0, digits: int = 3) -> str:
@@ -475,9 +505,7 @@ def markdown(report: dict[str, Any]) -> str:
             "process, its first sample read from the Renderer's block records. *Renderer API*: the process "
             "imports `tpad_rt.engine`, builds a `Renderer` on the same URL with the same texture, calls `start()` "
             "(warm-up call of the callback, stream open, start). Both wait for the first callback; the first "
-            "sample at the DAC is that block's entry time plus its DAC delay."
-            + ("" if startup["play_wired_to_audio"] else " `tpad-rt play` did not render to audio:// in this "
-               "tree (the interim offline version): only the API path was measured."),
+            "sample at the DAC is that block's entry time plus its DAC delay.",
             "",
             "| step | tpad-rt play | Renderer API |",
             "| --- | ---: | ---: |",
@@ -602,16 +630,18 @@ def main(argv: list[str] | None = None) -> int:
                         help="6 s per load and callback in 3 runs, 3 s compute runs, 5 start-ups")
     parser.add_argument("--smoke", action="store_true",
                         help="the test suite's check that the bench runs: every part once at 64 frames, part 2 idle "
-                             "only, 0.2 s windows, no start-up with an empty cache (figures meaningless)")
+                             "only, 0.2 s windows, no start-up with an empty cache, one server for the synchronous parts "
+                             "(figures meaningless)")
     parser.add_argument("--seconds", type=float, default=None,
                         help="seconds per load and callback, split into 6 runs (default 30; --quick 6, 3 runs)")
     parser.add_argument("--gil-threads", type=int, default=1, help="Python threads spinning for GIL load (default 1)")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for latency.json/.md")
+    parser.add_argument("--out", type=results_folder.folder, default=ROOT / "bench" / "results", help="folder for latency.json/.md")
     parser.add_argument("--startup-only", action="store_true",
                         help="measure part 4 (start-up) only; keep the other parts of latency.json as they are")
     parser.add_argument("--rewrite-md", action="store_true",
                         help="measure nothing: rewrite latency.md (and the summary in latency.json) from latency.json")
     args = parser.parse_args(argv)
+    results_folder.refuse_smoke_into_results(parser, args.smoke, args.out)
     if args.rewrite_md:
         report = json.loads((args.out / "latency.json").read_text())
         report["summary"] = summarise(report)
@@ -625,8 +655,9 @@ def main(argv: list[str] | None = None) -> int:
         plan = replace(plan, load_s=args.seconds)
     if args.startup_only:
         report = json.loads((args.out / "latency.json").read_text())
-        with tempfile.TemporaryDirectory(prefix="tpadrt-latency-") as logs:
-            report["startup"] = measure_startup(plan, lambda line: print(line, flush=True), Path(logs))
+        with tempfile.TemporaryDirectory(prefix="tpadrt-latency-") as logs, \
+                Servers(Path(logs), plan.shared_servers) as servers:
+            report["startup"] = measure_startup(plan, lambda line: print(line, flush=True), Path(logs), servers)
         report["plan"]["startups"], report["plan"]["cold_startups"] = plan.startups, plan.cold_startups
         report["summary"] = summarise(report)
         (args.out / "latency.json").write_text(json.dumps(report, indent=1) + "\n")
@@ -637,10 +668,11 @@ def main(argv: list[str] | None = None) -> int:
     report: dict[str, Any] = {"quick": args.quick, "smoke": args.smoke, "rate_hz": RATE_HZ, "plan": asdict(plan),
                               "gil_threads": args.gil_threads, "machine": machine()}
     with tempfile.TemporaryDirectory(prefix="tpadrt-latency-") as logs:
-        report["compute"] = measure_compute(plan, log, Path(logs))
-        report["loads"] = measure_loads(plan, args.gil_threads, log, Path(logs), report)
-        report["async"] = measure_async_latency(plan, log, Path(logs))
-        report["startup"] = measure_startup(plan, log, Path(logs))
+        with Servers(Path(logs), plan.shared_servers) as servers:
+            report["compute"] = measure_compute(plan, log, servers)
+            report["loads"] = measure_loads(plan, args.gil_threads, log, servers, report)
+            report["async"] = measure_async_latency(plan, log, servers)
+            report["startup"] = measure_startup(plan, log, Path(logs), servers)
         report["jackd_xrun_lines"] = {path.name: sum("xrun" in line.lower() for line in path.read_text().splitlines())
                                       for path in sorted(Path(logs).glob("jackd-*.log"))}
     report["summary"] = summarise(report)

@@ -3,7 +3,7 @@
     python bench/latency/serial_run.py              # 5 runs of 4 s per load and writer
     python bench/latency/serial_run.py --quick      # 2 runs of 2 s
     python bench/latency/serial_run.py --buffer-ms 1 --envelope-hz 16000
-    python bench/latency/serial_run.py --smoke --out DIR  # one run of 0.3 s per writer, idle: figures meaningless
+    python bench/latency/serial_run.py --smoke --out DIR  # one run of 0.3 s, tpad-rt's streamer, idle: figures meaningless
 
 Writes bench/results/latency_serial.json and latency_serial.md and prints the table.
 Every run starts the amplifier emulator (``tpad-rt amp emulate``) on a new pty in a
@@ -45,6 +45,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 sys.path.insert(0, str(HERE))
 
 from jack import cpu_hogs  # noqa: E402
@@ -146,10 +148,10 @@ def markdown(report: dict[str, Any]) -> str:
              "Loads: " + "; ".join(f"{name}: {LOADS[name]}" for name in p["loads"]) + ".", "",
              "| writer | load | envelope rate achieved (min of runs) | samples the amplifier missed, per run | in all |",
              "|---|---|---|---|---:|"]
-    for writer, title in WRITERS.items():
+    for writer in p["writers"]:
         for load in p["loads"]:
             row = s[f"{writer}/{load}"]
-            lines.append(f"| {title} | {load} | {min(row['rate_fraction']) * 100:.1f} % | "
+            lines.append(f"| {WRITERS[writer]} | {load} | {min(row['rate_fraction']) * 100:.1f} % | "
                          f"{', '.join(str(u) for u in row['missed'])} | {sum(row['missed'])} |")
     lines += ["", "| load | push-to-amplifier p50 | p99 | host's estimate p50 | target fill |", "|---|---|---|---|---|"]
     for load in p["loads"]:
@@ -163,27 +165,29 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="2 runs of 2 s per row")
     parser.add_argument("--smoke", action="store_true",
-                        help="the test suite's check that the bench runs: one run of 0.3 s per writer, idle only "
-                             "(figures meaningless)")
+                        help="the test suite's check that the bench runs: one run of 0.3 s of tpad-rt's streamer, "
+                             "idle only (figures meaningless)")
     parser.add_argument("--seconds", type=float, default=4.0, help="seconds per run (default 4)")
     parser.add_argument("--runs", type=int, default=5, help="runs per row (default 5)")
     parser.add_argument("--buffer-ms", type=float, default=1.0, help="the host's target fill (default 1 ms)")
     parser.add_argument("--envelope-hz", type=int, default=16000, help="envelope rate (default 16000 Hz)")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for the results")
+    parser.add_argument("--out", type=results_folder.folder, default=ROOT / "bench" / "results", help="folder for the results")
     args = parser.parse_args(argv)
+    results_folder.refuse_smoke_into_results(parser, args.smoke, args.out)
     seconds, rounds = (0.3, 1) if args.smoke else (2.0, 2) if args.quick else (args.seconds, args.runs)
     loads = ["idle"] if args.smoke else list(LOADS)
-    runs: dict[str, dict[str, list[dict[str, Any]]]] = {w: {load: [] for load in loads} for w in WRITERS}
+    writers = ["tpad"] if args.smoke else list(WRITERS)
+    runs: dict[str, dict[str, list[dict[str, Any]]]] = {w: {load: [] for load in loads} for w in writers}
     for round_number in range(rounds):
         for load in loads:
-            for writer in (WRITERS if round_number % 2 == 0 else reversed(list(WRITERS))):
+            for writer in (writers if round_number % 2 == 0 else reversed(writers)):
                 result = run_once(writer, load, seconds, args.buffer_ms, args.envelope_hz)
                 runs[writer][load].append(result)
                 print(f"round {round_number + 1}/{rounds} {writer:6s} {load:4s}: missed {result['missed']}, "
                       f"rate {result['rate_fraction'] * 100:.1f} %", flush=True)
     report = {
         "parameters": {"seconds": seconds, "runs": rounds, "buffer_ms": args.buffer_ms,
-                       "envelope_hz": args.envelope_hz, "loads": loads},
+                       "envelope_hz": args.envelope_hz, "loads": loads, "writers": writers},
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform()},
         "summary": summarise(runs),
         "runs": {w: {load: [{k: v for k, v in r.items() if k != "latency_ms"} for r in rs] for load, rs in by.items()}

@@ -33,6 +33,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 sys.path.insert(0, str(HERE))
 
 from jack import jack_server  # noqa: E402
@@ -137,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--block", type=int, default=64, help="frames per period (default 64)")
     parser.add_argument("--ping-seconds", type=float, default=3.0, help="seconds per ping phase (default 3)")
     parser.add_argument("--ping-rounds", type=int, default=3, help="ping rounds (default 3)")
-    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results", help="folder for the results")
+    parser.add_argument("--out", type=results_folder.folder, default=ROOT / "bench" / "results", help="folder for the results")
     args = parser.parse_args(argv)
     seconds, rounds = (1.0, 2) if args.quick else (args.seconds, args.rounds)
     ping_seconds, ping_rounds = (2.0, 1) if args.quick else (args.ping_seconds, args.ping_rounds)

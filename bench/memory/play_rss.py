@@ -10,8 +10,9 @@ the endless back-and-forth swipe; no JACK) with the tree of ``--repo`` on PYTHON
 the child's VmRSS from /proc every 0.1 s, and reports its RSS one second after play
 started (the ``output ...`` line, printed just before the renderer starts) and at the end,
 the growth in between (MB, and MB/s), and the peak. ``null://`` is the baseline measured
-in the same run: the same renderer, input and telemetry with no plate simulated. The
-issue's target: ``sim://`` grows by at most 5 MB after its first second over 60 s.
+in the same run, at the same time (both plays run at once, a thread reading each): the same
+renderer, input and telemetry with no plate simulated. The issue's target: ``sim://`` grows
+by at most 5 MB after its first second over 60 s.
 
 Writes bench/results/memory_play.json and memory_play.md (with ``--label``: memory_play_LABEL.*; ``--out``: elsewhere)
 and prints the table. Not a test (docs/testing.md "Benchmarks are not tests").
@@ -26,10 +27,13 @@ import platform
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))  # results_folder: the --out checks every bench script shares
+import results_folder  # noqa: E402
 RESULTS = ROOT / "bench" / "results"
 #: The shortest run measured: RSS is read from one second in until one second before the end.
 MIN_SECONDS = 3.0
@@ -88,11 +92,12 @@ def main(argv: list[str] | None = None) -> None:
                         help=f"play duration (s, default 60, at least {MIN_SECONDS:g})")
     parser.add_argument("--repo", type=Path, default=ROOT, help="the checkout to run (default: this one)")
     parser.add_argument("--label", default="", help="suffix of the result files")
-    parser.add_argument("--out", type=Path, default=RESULTS, help="folder for the results (default bench/results)")
+    parser.add_argument("--out", type=results_folder.folder, default=RESULTS, help="folder for the results (default bench/results)")
     args = parser.parse_args(argv)
     if not args.seconds >= MIN_SECONDS:
         parser.error(f"--seconds: at least {MIN_SECONDS:g} (RSS is read from 1 s in to 1 s before the end)")
-    rows = [measure(args.repo.resolve(), output, args.seconds) for output in ("sim://", "null://")]
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        rows = list(pool.map(lambda output: measure(args.repo.resolve(), output, args.seconds), ("sim://", "null://")))
     result = {"repo": str(args.repo.resolve()), "python": platform.python_version(), "machine": platform.machine(),
               "cpus": os.cpu_count(), "load_average": os.getloadavg(), "rows": rows}
     stem = "memory_play" + (f"_{args.label}" if args.label else "")

@@ -13,9 +13,11 @@ A block fits a run when their :func:`shape` is the same: every line, with the nu
 measures masked (times, counts, latencies, volts, power) and the settings kept (rates,
 block size, the power cap and budget, the volt limit, the departure judge's tolerance,
 everything in the first line). Segments only some runs print are left out of the shape
-(:data:`OPTIONAL`: departures in a touch's start ramp, a stalled output, a host-reported
-DAC delay), a count of one block reads as any count; the first line's input reason reads the same whether pynput is missing or the
-display is (the README's text says both).
+(:data:`OPTIONAL`: departures in a touch's start ramp, the shaper's kicks at the drive's limit
+(a touch-down's, in most runs), a stalled output, a host-reported DAC delay). The first clause
+of the first line's input reason reads the same whether pynput is missing or the display is
+(the README's text says both); the rest of the reason (the finger the swipe takes, and why)
+is kept.
 """
 
 from __future__ import annotations
@@ -40,12 +42,13 @@ ENVIRONMENT = {**{name: value for name, value in os.environ.items() if name != "
 SETTINGS = re.compile(r"\d+ Hz|of \d+ frames|cap [\d.]+ W|budget [\d.]+ W|of [\d.]+ V max|further than [\d.]+")
 #: Segments some runs print and others do not (how the host's timing fell): not part of the shape.
 OPTIONAL = (re.compile(r"; [\d,]+ of them in a touch's start ramp \(the drive fading in\)"),
+            re.compile(r", in the shaper's kicks \([\d,]+ blocks? at the limit to move the plate as fast as it "
+                       r"allows\), [\d.]+ V outside them"),
             re.compile(r"; the output stalled for [\d.]+ s"),
             re.compile(r" \(of which the host reports [^)]*\)"))
-#: A count of one, in the singular ("1 block"): the same shape as any other count.
-ONE_BLOCK = re.compile(r"# block\b")
-#: The first line's input reason without pynput, which the README's text names beside "no display".
-NO_PYNPUT = re.compile(r"\(no pynput for the mouse: [^)]*\)")
+#: The first clause of the first line's input reason without pynput (what to install; it holds no ';'), which
+#: the README's text names beside "no display".
+NO_PYNPUT = re.compile(r"\(no pynput for the mouse: [^;]*;")
 
 
 def run_sample() -> list[str]:
@@ -87,11 +90,11 @@ def shape(lines: list[str]) -> list[str]:
         for segment in OPTIONAL:
             line = segment.sub("", line)
         if number == 0:
-            shaped.append(NO_PYNPUT.sub("(no display)", line))
+            shaped.append(NO_PYNPUT.sub("(no display;", line))
             continue
         pieces, kept = SETTINGS.split(line), SETTINGS.findall(line)
         masked = [re.sub(r"(?<![\w.])\d+(?:[.,]\d+)*", "#", piece) for piece in pieces]  # not p50's
-        shaped.append(ONE_BLOCK.sub("# blocks", "".join(part for pair in zip(masked, [*kept, ""]) for part in pair)))
+        shaped.append("".join(part for pair in zip(masked, [*kept, ""]) for part in pair))
     return shaped
 
 

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from tpad_rt.config.device_schema import FORCE_SLACK_N, MIN_FORCE_STEP_N
+from tpad_rt.config.device_ranges import FORCE_SLACK_N, MIN_FORCE_STEP_N
 from tpad_rt.csv_lines import check_header, data_lines
 from tpad_rt.decimal_text import parse_decimal
 from tpad_rt.errors import ConfigError, printable

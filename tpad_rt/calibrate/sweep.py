@@ -32,15 +32,18 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tpad_rt.calibrate.impedance import BvdFit, fit_sweep
 from tpad_rt.calibrate.measurements import ImpedanceSweep
-from tpad_rt.device import Device
 from tpad_rt.errors import BackendError
-from tpad_rt.outputs.serial_amp import AmpLink
 from tpad_rt.physics import electromech
+
+if TYPE_CHECKING:  # annotations only: the device loads pydantic, the amplifier link the kernels
+    from tpad_rt.device import Device
+    from tpad_rt.outputs.serial_amp import AmpLink
 
 #: The drive held while sweeping (V peak), at most 1/8 of the device's max volts.
 DEFAULT_DRIVE_V = 5.0

@@ -1,9 +1,12 @@
 """The ``tpad-rt`` command line: one module per subcommand.
 
 Each subcommand module defines ``add_parser(subparsers)`` (which registers the
-subcommand and sets ``func`` to its ``run(args) -> int``). ``main`` turns every
-:class:`~tpad_rt.errors.TpadError` and every bad flag into one message on stderr
-and exit status 1, never a traceback.
+subcommand and sets ``func`` to its ``run(args) -> int``), and imports at module level
+only what its parser needs: the device model, the texture, the kernels and the engine
+are imported by the functions that run them. ``main`` imports the module of the
+subcommand it runs, and every module only for ``tpad-rt --help`` (docs/architecture.md
+"Start-up"). It turns every :class:`~tpad_rt.errors.TpadError` and every bad flag into
+one message on stderr and exit status 1, never a traceback.
 """
 
 from __future__ import annotations
@@ -26,8 +29,9 @@ class _Parser(argparse.ArgumentParser):
         self.exit(1, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full ``tpad-rt`` parser with every subcommand registered."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The ``tpad-rt`` parser with every subcommand registered; with ``only`` (a subcommand's name), the others
+    are registered by name alone, and only that one's module is imported."""
     from tpad_rt.version import __version__
 
     parser = _Parser(
@@ -38,13 +42,18 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     subparsers.required = True
     for name in _SUBCOMMANDS:
-        importlib.import_module(f"tpad_rt.cli.{name}").add_parser(subparsers)
+        if only is None or name == only:
+            importlib.import_module(f"tpad_rt.cli.{name}").add_parser(subparsers)
+        else:
+            subparsers.add_parser(name)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``tpad-rt`` with ``argv`` (default: ``sys.argv[1:]``); returns the exit status."""
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    chosen = argv[0] if argv and argv[0] in _SUBCOMMANDS else None  # else --help, --version or a usage error
+    args = build_parser(chosen).parse_args(argv)
     command = " ".join(name for name in (args.command, getattr(args, "action", None)) if name)  # "amp emulate"
     try:
         return int(args.func(args) or 0)

@@ -51,20 +51,16 @@ import textwrap
 import threading
 from collections.abc import Callable, Iterator
 from types import FrameType
+from typing import TYPE_CHECKING
 
-from tpad_rt.amp.emulator import (
-    Amplifier, Circuit, Emulator, FaultPlan, Plate, Port, Recorder, amplifier_info, check_record_path, counters,
-    recording_scalars, sim_rate_hz, write_recording,
-)
 from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.clock import MonotonicClock
-from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
-from tpad_rt.limits import MAX_FORCE_N, MAX_INPUT_S
-from tpad_rt.pipeline import RenderOptions
+from tpad_rt.limits import DEFAULT_FORCE_N, MAX_FORCE_N, MAX_INPUT_S
 
-#: Contact force (N) of the simulated plate: the runtime's default finger force.
-CONTACT_FORCE_N = RenderOptions.default_force_n
+if TYPE_CHECKING:  # the emulator's plate is the kernels': the functions import it when they run
+    from tpad_rt.amp.emulator import FaultPlan
+
 #: Longest delay:MS fault (ms).
 MAX_DELAY_MS = 10_000.0
 
@@ -109,6 +105,8 @@ def fault_spec(text: str) -> tuple[str, tuple[float, ...]]:
 
 def fault_plan(specs: list[tuple[str, tuple[float, ...]]], seed: int) -> FaultPlan:
     """The FaultPlan of the parsed ``--fault`` specs; ConfigError when a single-valued fault is given twice."""
+    from tpad_rt.amp.emulator import FaultPlan
+
     given: dict[str, list[tuple[float, ...]]] = {}
     for kind, values in specs:
         given.setdefault(kind, []).append(values)
@@ -154,8 +152,8 @@ def add_parser(subparsers: Subparsers) -> None:
                          help=f"end after S seconds, at most {MAX_INPUT_S:g} (default: run until SIGTERM or Ctrl-C)")
     emulate.add_argument("--fault", metavar="SPEC", action="append", default=[], type=fault_spec,
                          help="inject a fault (see below); repeatable")
-    emulate.add_argument("--force-n", metavar="N", type=number(0, True, MAX_FORCE_N, "N"), default=CONTACT_FORCE_N,
-                         help=f"contact force on the simulated plate (default {CONTACT_FORCE_N:g}): its circuit and "
+    emulate.add_argument("--force-n", metavar="N", type=number(0, True, MAX_FORCE_N, "N"), default=DEFAULT_FORCE_N,
+                         help=f"contact force on the simulated plate (default {DEFAULT_FORCE_N:g}): its circuit and "
                          "plate at that force")
     emulate.add_argument("--seed", metavar="N", type=whole(2**32 - 1, "a 32-bit seed", low=0), default=0,
                          help="seed of the random faults (default 0)")
@@ -198,6 +196,12 @@ _ENDINGS = {"stopped": "stopped by a signal", "duration": "ran for --duration", 
 
 def run(args: argparse.Namespace) -> int:
     """Emulate until stopped; 0 when it ends as asked (ConfigError, BackendError for what a user can fix)."""
+    from tpad_rt.amp.emulator import (
+        Amplifier, Circuit, Emulator, Plate, Port, Recorder, amplifier_info, check_record_path, counters,
+        recording_scalars, sim_rate_hz, write_recording,
+    )
+    from tpad_rt.device import Device
+
     device = Device.default() if args.device is None else Device.from_file(args.device)
     plan = fault_plan(args.fault, args.seed)
     if args.record is not None:

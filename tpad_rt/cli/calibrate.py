@@ -29,27 +29,27 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rich import box
 from rich.console import Console
 from rich.table import Table
 
 from tpad_rt.calibrate import sweep
-from tpad_rt.calibrate.amplitude import Circuit, GammaFit, fit_gamma
-from tpad_rt.calibrate.device_file import (
-    BuildOptions, build_document, circuit_of, convert_document, default_carrier_hz, write_device,
-)
 from tpad_rt.calibrate.impedance import QUANTITIES, BvdFit, fit_sweep
 from tpad_rt.calibrate.measurements import ImpedanceSweep, read_amplitudes, read_impedance_sweeps
 from tpad_rt.cli.arguments import Subparsers, number
-from tpad_rt.config import load_device
-from tpad_rt.config.device_schema import MAX_CARRIER_HZ, MAX_VOLTS, MIN_CARRIER_HZ
-from tpad_rt.device import Device
+from tpad_rt.config.device_ranges import MAX_CARRIER_HZ, MAX_VOLTS, MIN_CARRIER_HZ
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.files import NewFile, check_writable_target
 from tpad_rt.json_text import json_text
 from tpad_rt.shipped import device_file
 from tpad_rt.figures import figure_target, save
+
+# The parser needs none of these (they load pydantic's device model): the functions import them when they run.
+if TYPE_CHECKING:
+    from tpad_rt.calibrate.amplitude import Circuit, GammaFit
+    from tpad_rt.device import Device
 
 _HEADER = "# written by tpad-rt calibrate {action}: its source entries say where each value came from\n"
 
@@ -229,6 +229,10 @@ def _circuit(args: argparse.Namespace) -> tuple[Circuit, float, list[str]]:
     """The circuit the amplitudes are read through, the carrier (Hz) rows without freq_hz were driven at (the
     device's; for sweeps, the loaded resonance at the lowest force that calibrate build would write with the
     default device's shunt), and the impedance fits' warnings."""
+    from tpad_rt.calibrate.amplitude import Circuit
+    from tpad_rt.calibrate.device_file import circuit_of, default_carrier_hz
+    from tpad_rt.device import Device
+
     if args.impedance:
         sweeps, fits = _fits(args.impedance)
         return circuit_of(fits), default_carrier_hz(fits, Device.default().shunt_ohm), _fit_warnings(sweeps, fits)
@@ -250,6 +254,8 @@ def _gamma_table(fit: GammaFit) -> Table:
 
 def run_amplitude(args: argparse.Namespace) -> int:
     """Fit gamma; print the table or JSON; draw --plot. ConfigError for a bad file."""
+    from tpad_rt.calibrate.amplitude import fit_gamma
+
     out = None if args.plot is None else figure_target("--plot", args.plot)
     circuit, carrier_hz, warnings = _circuit(args)
     measurements = read_amplitudes(args.measurements)
@@ -278,6 +284,12 @@ def _summary(device: Device, out: Path) -> str:
 def run_build(args: argparse.Namespace) -> int:
     """Fit, build and write the device file; print what it holds. ConfigError for a bad input or a device
     that would not load."""
+    from tpad_rt.calibrate.amplitude import fit_gamma
+    from tpad_rt.calibrate.device_file import (
+        BuildOptions, build_document, circuit_of, default_carrier_hz, write_device,
+    )
+    from tpad_rt.config import load_device
+
     out = Path(args.out)
     if args.label is not None and not (0 < len(args.label) <= MAX_LABEL_CHARS and args.label.isprintable()):
         raise ConfigError(f"--label: must be 1 to {MAX_LABEL_CHARS} printable characters, got "
@@ -319,6 +331,7 @@ def _write_sweep(out: Path, found: sweep.SweepResult) -> None:
 def run_sweep(args: argparse.Namespace) -> int:
     """Find the resonance through the amplifier; print it. ConfigError for a bad option or a sweep the model does
     not fit, BackendError for the amplifier."""
+    from tpad_rt.device import Device
     from tpad_rt.outputs.serial_amp import AmpLink, parse_serial_url
 
     plot = None if args.plot is None else figure_target("--plot", args.plot)
@@ -392,6 +405,8 @@ def _progress(what: str) -> Iterator[Callable[[int, int], None]]:
 
 def run_convert(args: argparse.Namespace) -> int:
     """Convert the format 1 file; say how far its amplitude table was from one gamma."""
+    from tpad_rt.calibrate.device_file import convert_document, write_device
+
     out = Path(args.out)
     check_writable_target(out, "device files", [args.old])
     document, spread = convert_document(args.old)

@@ -9,14 +9,13 @@ any file is bad.
 from __future__ import annotations
 
 import argparse
-
-from rich.console import Console
-from rich.text import Text
+from typing import TYPE_CHECKING
 
 from tpad_rt.cli.arguments import Subparsers
-from tpad_rt.config import DeviceFile, TextureFile, load_any
-from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
+
+if TYPE_CHECKING:
+    from rich.console import Console
 
 
 def add_parser(subparsers: Subparsers) -> None:
@@ -33,6 +32,10 @@ def add_parser(subparsers: Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Check every file; 1 if any is bad, else 0."""
+    from rich.text import Text
+
+    from tpad_rt.config import DeviceFile, load_any
+
     out = _console(stderr=False)
     err = _console(stderr=True)
     bad = 0
@@ -40,6 +43,8 @@ def run(args: argparse.Namespace) -> int:
         try:
             model = load_any(name)
             if isinstance(model, DeviceFile):  # what play and render also refuse: derived values out of bounds
+                from tpad_rt.device import Device  # the device model: only for a device file
+
                 Device.from_spec(model, name)
         except ConfigError as error:
             bad += 1
@@ -47,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
                 err.print(Text(line, style="red"))
             continue
         if not args.quiet:
-            out.print(Text.assemble(("ok", "bold green"), f"  {name} ({_summary(model)})"))
+            summary = f"device: {model.label}" if isinstance(model, DeviceFile) else f"texture: {model.kind}"
+            out.print(Text.assemble(("ok", "bold green"), f"  {name} ({summary})"))
     if len(args.files) > 1 and not args.quiet:
         good = len(args.files) - bad
         out.print(Text(f"{len(args.files)} files checked: {good} ok, {bad} with errors", style="bold"))
@@ -56,8 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _console(stderr: bool) -> Console:
     """A console that never wraps, highlights or interprets markup (plain when not a terminal)."""
+    from rich.console import Console
+
     return Console(stderr=stderr, soft_wrap=True, highlight=False, markup=False, emoji=False)
 
-
-def _summary(model: TextureFile | DeviceFile) -> str:
-    return f"device: {model.label}" if isinstance(model, DeviceFile) else f"texture: {model.kind}"

@@ -11,16 +11,14 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any, cast, get_args
-
-from annotated_types import Ge, Le
+from typing import Any
 
 from rich import box
 from rich.console import Console
 from rich.table import Table
 
 from tpad_rt.cli.arguments import Subparsers, number, whole
-from tpad_rt.config.device_schema import DensityGCm3, ModeM, PlateSideMm, ThicknessMm, YoungsModulusGpa
+from tpad_rt.config.device_ranges import DENSITY_G_CM3, MODE_M, PLATE_SIDE_MM, THICKNESS_MM, YOUNGS_MODULUS_GPA
 from tpad_rt.decimal_text import parse_decimal
 from tpad_rt.errors import ConfigError
 from tpad_rt.json_text import json_text
@@ -80,26 +78,18 @@ def add_parser(subparsers: Subparsers) -> None:
         metavar=_PLATE_FORM,
         help="add a plate (repeatable), e.g. MyGlass:0.5:2.5:70",
     )
-    (shortest_mm, longest_mm), (lowest_m, highest_m) = _bounds(PlateSideMm), _bounds(ModeM)
+    (shortest_mm, longest_mm), (lowest_m, highest_m) = PLATE_SIDE_MM, MODE_M
     parser.add_argument("--length-mm", type=number(shortest_mm, True, longest_mm, "mm"), default=130.0,
                         help="plate length (default 130)")
-    parser.add_argument("--mode", type=whole(int(highest_m), "m of a device file's mode", int(lowest_m)), default=20,
+    parser.add_argument("--mode", type=whole(highest_m, "m of a device file's mode", lowest_m), default=20,
                         help="m of the m x 0 mode (default 20)")
     parser.add_argument("--reference", default="SLG_0.56", help="plate the power is relative to (default SLG_0.56)")
     parser.set_defaults(func=run)
 
 
-def _bounds(alias: Any) -> tuple[float, float]:
-    """``(low, high)`` of a device-file number type (``Annotated[float, Ge(low), Le(high)]``)."""
-    metadata = get_args(alias)[1:]
-    low = next(item.ge for item in metadata if isinstance(item, Ge))
-    high = next(item.le for item in metadata if isinstance(item, Le))
-    return float(cast(float, low)), float(cast(float, high))
-
-
-#: ``--plate`` numbers: name, the device-file type whose bounds apply, unit.
-_PLATE_NUMBERS = (("thickness", ThicknessMm, "mm"), ("density", DensityGCm3, "g/cm3"),
-                  ("Young's modulus", YoungsModulusGpa, "GPa"))
+#: ``--plate`` numbers: name, the device-file bounds that apply (``(low, high)``), unit.
+_PLATE_NUMBERS = (("thickness", THICKNESS_MM, "mm"), ("density", DENSITY_G_CM3, "g/cm3"),
+                  ("Young's modulus", YOUNGS_MODULUS_GPA, "GPa"))
 
 
 def _parse_plate(text: str) -> Layer:
@@ -113,8 +103,7 @@ def _parse_plate(text: str) -> Layer:
         numbers = [parse_decimal(field) for field in fields[1:]]
     except ValueError:
         raise ConfigError(problem) from None
-    for value, (name, alias, unit) in zip(numbers, _PLATE_NUMBERS):
-        low, high = _bounds(alias)
+    for value, (name, (low, high), unit) in zip(numbers, _PLATE_NUMBERS):
         if not low <= value <= high:
             raise ConfigError(f"--plate {text!r}: {name} must be in [{low:g}, {high:g}] {unit}, got {value:g}")
     return Layer(fields[0].strip(), "user", *numbers)

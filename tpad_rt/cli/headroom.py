@@ -2,20 +2,23 @@
 
 API map
 -------
-swipe_url(speed_mm_s, force_n) -> str
-    endless back-and-forth swipes along the plate at that speed (mm/s) and force (N)
+swipe_url(speed_mm_s, force_n=None) -> str
+    endless back-and-forth swipes along the plate at that speed (mm/s) and force (N; the swipe's own without)
 FingerTally
     ``.add(rows)`` per telemetry drain: the touching blocks' mean speed and force, the lowest friction the
     texture asked of the plate, the saturated blocks
 hint_lines(tally, device, max_voltage_v, power_cap_w, judged, departed, departed_saturated) -> list[str]
     nothing for a run that neither saturated in SATURATION_HINT_SHARE of its touching blocks nor departed in
-    DEPARTURE_HINT_SHARE of its judged ones; else one line each, from the run's figures and the device model
+    DEPARTURE_HINT_SHARE of its judged ones; else one line each, from the run's figures and the device model:
+    a slower swipe only where one at least the device's speed floor, and slower than the run's, would help
 
 The figures behind the hints: the friction model (paper Eqs. 2-3) needs a vibration amplitude
 proportional to the finger's speed for a given friction, and the drive gives at most the
 amplitude of the lower of the voltage limit and the power cap's volts (at the run's force, at
 an antinode). So the lowest friction the drive reaches at the run's speed, and the fastest
-finger that reaches the texture's lowest level, follow from the device alone.
+finger that reaches the texture's lowest level, follow from the device alone. The model takes
+a finger slower than the device's speed floor as that fast: where only a finger below it (or
+within SPEED_MARGIN of it) would reach the texture's lowest level, no speed is suggested.
 """
 
 from __future__ import annotations
@@ -39,9 +42,11 @@ DEPARTURE_HINT_SHARE = 0.05
 SPEED_MARGIN = 0.8
 
 
-def swipe_url(speed_mm_s: float, force_n: float) -> str:
-    """Endless back-and-forth swipes along the plate at ``speed_mm_s`` (mm/s) pressing ``force_n`` (N)."""
-    return f"scripted://swipe?speed_mm_s={speed_mm_s:g}&force_n={force_n:g}&repeat=0&back_and_forth=1"
+def swipe_url(speed_mm_s: float, force_n: float | None = None) -> str:
+    """Endless back-and-forth swipes along the plate at ``speed_mm_s`` (mm/s) pressing ``force_n`` (N; the swipe's
+    own force when None)."""
+    force = "" if force_n is None else f"&force_n={force_n:g}"
+    return f"scripted://swipe?speed_mm_s={speed_mm_s:g}{force}&repeat=0&back_and_forth=1"
 
 
 @dataclass
@@ -83,6 +88,8 @@ class _Reach:
     limit: str
     lowest_mu: float
     fastest_mm_s: float  # the fastest finger (mm/s) for which it reaches the texture's lowest friction
+    floor_mm_s: float  # the device's speed floor (mm/s): the model takes a slower finger as this fast
+    floor_mu: float  # the lowest friction it reaches for a finger at floor_mm_s
 
 
 def _reach(device: Device, speed_mm_s: float, force_n: float, target_mu: float, max_voltage_v: float,
@@ -98,15 +105,18 @@ def _reach(device: Device, speed_mm_s: float, force_n: float, target_mu: float, 
     model = (device.mu0, device.poisson, device.psi_star)
     speed_m_s = max(speed_mm_s * 1e-3, device.speed_floor_m_s)
     lowest = float(relative_friction(amplitude_m, device.carrier_hz, speed_m_s, *model))
+    floor_mu = float(relative_friction(amplitude_m, device.carrier_hz, device.speed_floor_m_s, *model))
     per_m_s = float(amplitude_for(min(max(target_mu, 1e-6), 1.0), device.carrier_hz, 1.0, *model))
     fastest_mm_s = math.inf if per_m_s == 0.0 else amplitude_m / per_m_s * 1e3
-    return _Reach(limit, lowest, fastest_mm_s)
+    return _Reach(limit, lowest, fastest_mm_s, device.speed_floor_m_s * 1e3, floor_mu)
 
 
-def _round_speed(speed_mm_s: float) -> float:
-    """``speed_mm_s`` rounded down to 5 mm/s (10 above 50), at least 5."""
-    step = 10.0 if speed_mm_s > 50 else 5.0
-    return max(5.0, math.floor(speed_mm_s / step) * step)
+def _slower_speed(speed_mm_s: float, floor_mm_s: float) -> float | None:
+    """``speed_mm_s`` (mm/s) rounded down to 1 mm/s (5 from 5, 10 above 50): a swipe's speed to suggest, None
+    when that is below ``floor_mm_s`` (mm/s) or 0."""
+    step = 10.0 if speed_mm_s > 50 else 5.0 if speed_mm_s >= 5 else 1.0
+    rounded = math.floor(speed_mm_s / step) * step
+    return rounded if rounded >= floor_mm_s and rounded > 0 else None
 
 
 def hint_lines(tally: FingerTally, device: Device, max_voltage_v: float, power_cap_w: float, judged: int,
@@ -120,22 +130,21 @@ def hint_lines(tally: FingerTally, device: Device, max_voltage_v: float, power_c
     speed_mm_s, force_n = tally.speed_mm_s, tally.force_n
     reach = _reach(device, speed_mm_s, force_n, tally.lowest_mu, max_voltage_v, power_cap_w)
     finger = f"at {speed_mm_s:.0f} mm/s under {force_n:.2g} N"
+    swipe_force_n = force_n if force_n > 0 else None  # a finger at no force: the swipe's own
     shaped = device.contact_width_m is not None
     if reach.lowest_mu > tally.lowest_mu:
-        slower = _round_speed(SPEED_MARGIN * reach.fastest_mm_s)
         why = (f"the texture asks for friction down to {tally.lowest_mu:.2f}, and {finger} the drive's {reach.limit} "
                f"lowers it to {reach.lowest_mu:.2f} at best (at an antinode"
                + ("; less towards the nodes of the plate's standing wave)" if shaped else ")"))
-        change = (f"a finger at most {reach.fastest_mm_s:.0f} mm/s reaches {tally.lowest_mu:.2f}: try "
-                  f"--input '{swipe_url(slower, force_n)}', raise the texture's lowest friction to "
-                  f"{reach.lowest_mu:.2f}, or use a device with more headroom")
+        change = _change_for_friction(reach, tally.lowest_mu, swipe_force_n)
     else:
-        slower = _round_speed(speed_mm_s / 2)
+        slower = _slower_speed(speed_mm_s / 2, reach.floor_mm_s)
         why = (f"{finger} the drive's {reach.limit} reaches the texture's lowest friction, {tally.lowest_mu:.2f}, at an "
                f"antinode (down to {reach.lowest_mu:.2f}), so it hits the limit while hurrying the plate through the "
                "texture's changes" + (" and towards the nodes of the plate's standing wave" if shaped else ""))
-        change = (f"a slower finger leaves more headroom (try --input '{swipe_url(slower, force_n)}'), as do gentler "
-                  "changes in the texture")
+        change = ("gentler changes in the texture leave more headroom" if slower is None else
+                  f"a slower finger leaves more headroom (try --input '{swipe_url(slower, swipe_force_n)}'), as do "
+                  "gentler changes in the texture")
     lines = []
     said_why = saturated_share >= SATURATION_HINT_SHARE
     if said_why:
@@ -149,3 +158,21 @@ def hint_lines(tally: FingerTally, device: Device, max_voltage_v: float, power_c
         lines.append(f"departures in {100 * departed_share:.1f} % of judged blocks, more than "
                      f"{100 * DEPARTURE_HINT_SHARE:g} %: {cause}{advice}; --record then `tpad-rt plot` shows where")
     return lines
+
+
+def _change_for_friction(reach: _Reach, target_mu: float, force_n: float | None) -> str:
+    """What to change when the drive does not reach the texture's lowest friction ``target_mu`` at the run's
+    speed: a swipe slow enough (pressing ``force_n``, N; the swipe's own when None) when one at least the speed
+    floor reaches it with SPEED_MARGIN, and a lowest friction the drive reaches at the run's speed."""
+    raise_mu = (f"raise the texture's lowest friction to {math.ceil(reach.lowest_mu * 100) / 100:.2f}, or use a "
+                "device with more headroom")
+    slower = _slower_speed(SPEED_MARGIN * reach.fastest_mm_s, reach.floor_mm_s)
+    if slower is not None:
+        return (f"a finger at most {reach.fastest_mm_s:.0f} mm/s reaches {target_mu:.2f}: try "
+                f"--input '{swipe_url(slower, force_n)}', {raise_mu}")
+    if reach.fastest_mm_s < reach.floor_mm_s:
+        return (f"no finger speed reaches {target_mu:.2f} with this drive (the friction model takes a finger slower "
+                f"than the device's speed floor, {reach.floor_mm_s:g} mm/s, as that fast, and there the drive lowers "
+                f"it to {reach.floor_mu:.2f} at best): {raise_mu}")
+    return (f"only a finger between the device's speed floor, {reach.floor_mm_s:g} mm/s, and "
+            f"{reach.fastest_mm_s:.1f} mm/s reaches {target_mu:.2f}: {raise_mu}")

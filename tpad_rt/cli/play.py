@@ -4,7 +4,7 @@
 device first, then the default output), else the simulated plate ``sim://``;
 ``--input auto`` picks ``mouse://`` when an X display answers, else endless
 back-and-forth swipes (:func:`auto_swipe`) at the speed and force the texture's file
-recommends (its ``finger``; :data:`FALLBACK_FINGER` for a file without one), the mouse
+recommends (its ``finger``; FALLBACK_SPEED_MM_S and FALLBACK_FORCE_N for a file without one), the mouse
 pressing with that force. The first line says both choices and why.
 A :class:`~tpad_rt.inputs.live.LiveFeed` feeds the input into the renderer; a status
 panel (finger, target friction and, on an output that simulates the plate (``sim://``),
@@ -50,10 +50,6 @@ from rich.table import Table
 from tpad_rt.cli.arguments import Subparsers, number
 from tpad_rt.cli.headroom import FingerTally, hint_lines, swipe_url
 from tpad_rt.cli.render import add_session_arguments, over_cap_line, peak_text, session_options
-from tpad_rt.compiling import compile_notice, ensure_compiled
-from tpad_rt.config import load_texture
-from tpad_rt.config.texture_schema import Finger
-from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError
 from tpad_rt.files import check_writable_target
 from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks, start_ramps
@@ -65,11 +61,15 @@ from tpad_rt.limits import MAX_INPUT_S, MAX_RECORDING_SAMPLES, MAX_STALL_TIMEOUT
 from tpad_rt.drive import Consumes
 from tpad_rt.outputs import audio
 
+# The parser needs none of the file models, the device model and the kernels (tpad-rt --help starts without
+# numba and pydantic): the functions import them when they run.
 if TYPE_CHECKING:
+    from tpad_rt.config.texture_schema import Finger
     from tpad_rt.engine import Renderer
 
-#: The finger ``--input auto`` follows for a texture whose file recommends none (its ``finger``): 100 mm/s, 0.5 N.
-FALLBACK_FINGER = Finger(speed_mm_s=100.0, force_n=0.5)
+#: The finger ``--input auto`` follows for a texture whose file recommends none (its ``finger``): speed (mm/s)
+#: and force (N).
+FALLBACK_SPEED_MM_S, FALLBACK_FORCE_N = 100.0, 0.5
 #: Status refreshes per second.
 STATUS_HZ = 5
 #: The telemetry column of the friction a simulated plate gave each block (``sim://`` measures it).
@@ -112,7 +112,7 @@ def add_parser(subparsers: Subparsers) -> None:
         parser, input_default="auto", max_duration_s=MAX_INPUT_S,
         input_help="finger input URL, or auto: mouse:// with an X display, else endless back-and-forth swipes at "
         "the speed and force the texture's file recommends (its finger; without one "
-        f"{auto_swipe(FALLBACK_FINGER)})",
+        f"{swipe_url(FALLBACK_SPEED_MM_S, FALLBACK_FORCE_N)})",
         output_default="auto", output_help="output URL (audio://[device]?..., serial://PORT?..., sim://, "
         "wav://FILE.wav, null://), or auto: an audio device that accepts --rate (JACK first), else sim://")
     parser.add_argument("--record", metavar="FILE.npz",
@@ -149,11 +149,13 @@ def auto_swipe(finger: Finger) -> str:
 
 def choose_input(requested: str, recommended: Finger | None, force_n: float | None = None) -> Choice:
     """``requested``, or for ``auto`` ``mouse://`` when pynput is installed and an X display answers, else
-    :func:`auto_swipe`: at the ``recommended`` finger's speed (mm/s) and force (N), :data:`FALLBACK_FINGER`'s
-    when None; ``force_n`` (N, ``--force``) replaces the force."""
+    :func:`auto_swipe`: at the ``recommended`` finger's speed (mm/s) and force (N), :data:`FALLBACK_SPEED_MM_S` and
+    :data:`FALLBACK_FORCE_N` when None; ``force_n`` (N, ``--force``) replaces the force."""
     if requested != "auto":
         return Choice(requested)
-    finger = recommended or FALLBACK_FINGER
+    from tpad_rt.config.texture_schema import Finger
+
+    finger = recommended or Finger(speed_mm_s=FALLBACK_SPEED_MM_S, force_n=FALLBACK_FORCE_N)
     whose = "the texture's recommended finger" if recommended else "no finger in the texture's file"
     why = f"{whose}: {finger.speed_mm_s:g} mm/s under {finger.force_n:g} N"
     if force_n is not None:
@@ -171,6 +173,10 @@ def choose_input(requested: str, recommended: Finger | None, force_n: float | No
 
 def run(args: argparse.Namespace) -> int:
     """Play (module docstring); 0 when it ends normally or by Ctrl-C."""
+    from tpad_rt.compiling import compile_notice, ensure_compiled
+    from tpad_rt.config import load_texture
+    from tpad_rt.device import Device
+
     if args.record is not None:
         if Path(args.record).suffix.lower() != ".npz":
             raise ConfigError(f"--record: must end in .npz, got '{args.record}'")

@@ -2,7 +2,7 @@
 
 Four panels against time (or, with ``--along x``, the finger's x; when x turns back, as on a
 circle or a back-and-forth swipe, the distance along the finger's path instead, with a note,
-since x would fold the path onto itself): relative friction
+since x would fold the path onto itself; refused when the finger touches in no block): relative friction
 (target, and achieved when the plate was simulated), plate amplitude (commanded, and
 simulated), drive volts against the device maximum, and power against the cap and the
 average budget (the drive's per block, and averaged over the budget's window; the
@@ -89,7 +89,8 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
     """A matplotlib Figure of ``recording``'s blocks from ``start_s`` to ``end_s`` (s) (module docstring), and a
     note when the horizontal axis is not the one asked for.
 
-    ``along`` is ``time`` or ``x``. Raises ConfigError when no block lies in the span.
+    ``along`` is ``time`` or ``x``. Raises ConfigError when no block lies in the span, or (``x``) when the finger
+    touches in none of them.
     """
     plt = pyplot()
     from matplotlib.patches import Patch
@@ -111,6 +112,9 @@ def plot_recording(recording: Recording, along: str = "time", start_s: float = -
     touching = (flags & FLAG_WATCHDOG) == 0
     saturated = (flags & (FLAG_VOLTAGE | FLAG_POWER)) != 0
     note = None
+    if along == "x" and not touching.any():
+        raise ConfigError("--along x: the finger touches in no block" + ("" if inside.all() else " of that span")
+                          + ": there is no x to plot along (plot along time, the default)")
     if along == "x" and _turns_back(blocks["x_mm"][touching]):
         note = "x turns back, which would fold the path onto itself: plotted along the finger's path instead"
         axis = np.where(touching, _path_mm(blocks["x_mm"], blocks["y_mm"], touching), np.nan)

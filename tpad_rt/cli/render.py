@@ -24,15 +24,13 @@ import contextlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn, TimeRemainingColumn
 
 from tpad_rt.cli.arguments import Subparsers, number, whole
-from tpad_rt.compiling import compile_notice, ensure_compiled
-from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.felt import DEPARTURE_TOLERANCE_MU, judge_blocks
 from tpad_rt.files import check_writable_target
@@ -41,12 +39,15 @@ from tpad_rt.kernel.layout import (
     FLAG_FAULT, FLAG_POWER, FLAG_SHAPER_LIMIT, FLAG_VOLTAGE, FLAG_WATCHDOG, MODEL_GUARD_FRACTION,
 )
 from tpad_rt.limits import MAX_BLOCK_FRAMES, MAX_FORCE_N, MAX_RATE_HZ, MAX_RECORDING_SAMPLES, MAX_RENDER_S
-from tpad_rt.offline import OfflineRender, RenderResult, check_render_size, input_span_s, texture_under_finger
 from tpad_rt.outputs import Capability, open_output, output_kind
-from tpad_rt.outputs.wav import WavOutput
-from tpad_rt.pipeline import Pipeline, RenderOptions
 from tpad_rt.recording import Recording, run_metadata, write_recording
-from tpad_rt.texture import CompiledTexture, load_compiled
+
+# The parser needs none of these (tpad-rt --help starts without numba and pydantic): the functions import
+# them when they run.
+if TYPE_CHECKING:
+    from tpad_rt.offline import OfflineRender, RenderResult
+    from tpad_rt.pipeline import RenderOptions
+    from tpad_rt.texture import CompiledTexture
 
 DEFAULT_OUTPUT = "sim://"
 INPUT_HELP = "finger input, e.g. scripted://swipe?speed_mm_s=100 or file:///path/trajectory.csv"
@@ -102,6 +103,8 @@ def add_drive_arguments(parser: argparse.ArgumentParser) -> None:
 
 def session_options(args: argparse.Namespace) -> RenderOptions:
     """The RenderOptions of :func:`add_session_arguments`' options."""
+    from tpad_rt.pipeline import RenderOptions
+
     return RenderOptions(power_budget_w=args.power_budget, power_avg_w=args.power_avg, track=args.track,
                          mode_compensation=args.mode_compensation,
                          **({} if args.force is None else {"default_force_n": args.force}))
@@ -138,6 +141,12 @@ def open_session(args: argparse.Namespace, stack: contextlib.ExitStack, *, keep_
     ``--duration``, or a render beyond the limits (module docstring; checked before
     the outputs open and the kernel warms up); BackendError when an output cannot open.
     """
+    from tpad_rt.device import Device
+    from tpad_rt.offline import OfflineRender, check_render_size, input_span_s
+    from tpad_rt.outputs.wav import WavOutput
+    from tpad_rt.pipeline import Pipeline
+    from tpad_rt.texture import load_compiled
+
     device = Device.default() if args.device is None else Device.from_file(args.device)
     texture = load_compiled(args.texture)
     source = stack.enter_context(open_input(args.input, device=device))
@@ -172,6 +181,8 @@ def _writes_file(url: str) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     """Render (module docstring); 0 on success."""
+    from tpad_rt.compiling import compile_notice, ensure_compiled
+
     out = Path(args.out)
     if out.suffix.lower() not in (".npz", ".wav"):
         raise ConfigError(f"--out: must end in .npz (recording) or .wav (drive), got '{args.out}'")
@@ -233,6 +244,8 @@ def judge_departures(result: RenderResult, metadata: dict[str, Any], texture: Co
 
 def _departure_line(result: RenderResult, texture: CompiledTexture) -> str:
     """How many touching blocks departed from the texture under the finger, and the worst one."""
+    from tpad_rt.offline import texture_under_finger
+
     blocks = result.blocks
     departed = blocks["departed"] != 0
     felt_mu, known = texture_under_finger(result, texture)
@@ -252,10 +265,11 @@ def peak_text(peak_v: float, max_v: float, kick_blocks: int, outside_kicks_v: fl
     """The drive's peak ``peak_v`` (V) against ``max_v`` (V; from ``clamp``, e.g. an amplifier, when not the
     device file) for ``play``'s and ``render``'s summaries; when the
     shaper held the drive at a limit in ``kick_blocks`` blocks (FLAG_SHAPER_LIMIT: the kick that moves the plate's
-    envelope as fast as the limits allow, at a touch-down or a steep step), says that the peak is there and what it
-    was outside them, ``outside_kicks_v`` (V): a kick is by design, not saturation."""
+    envelope as fast as the limits allow, at a touch-down or a steep step) and the drive outside them stayed below
+    the peak, at ``outside_kicks_v`` (V), says that the peak is there and what it was outside them: a kick is by
+    design, not saturation."""
     text = f"peak {peak_v:.2f} V of {max_v:g} V max" + (f" ({clamp}'s clamp)" if clamp else "")
-    if not kick_blocks:
+    if not kick_blocks or outside_kicks_v >= peak_v:
         return text
     return (f"{text}, in the shaper's kicks ({kick_blocks} block{'s' if kick_blocks != 1 else ''} at the limit to "
             f"move the plate as fast as it allows), {outside_kicks_v:.2f} V outside them")
@@ -278,6 +292,8 @@ def summary_lines(result: RenderResult, metadata: dict[str, Any], wall_s: float,
     the finger touched, had settled (start ramp, velocity window) and the drive was
     not saturated.
     """
+    from tpad_rt.offline import texture_under_finger
+
     blocks = result.blocks
     flags = blocks["saturated"].astype(np.int64)
     touching = (flags & FLAG_WATCHDOG) == 0

@@ -17,7 +17,6 @@ the token (``--token``, or one made up and printed). Ctrl-C (or SIGTERM, or
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import dataclasses
 import errno
@@ -34,15 +33,14 @@ from rich.console import Console
 from tpad_rt.cli.arguments import Subparsers, number, whole
 from tpad_rt.cli.play import choose_output
 from tpad_rt.cli.render import add_drive_arguments, session_options
-from tpad_rt.compiling import compile_notice
-from tpad_rt.device import Device
 from tpad_rt.errors import BackendError, ConfigError, printable
 from tpad_rt.files import check_writable_target
 from tpad_rt.limits import MAX_INPUT_S, MAX_STALL_TIMEOUT_S
 from tpad_rt.shipped import TEXTURES_DIR, texture_file
-from tpad_rt.texture import load_compiled
 
 if TYPE_CHECKING:
+    import asyncio
+
     from tpad_rt.engine import Renderer
     from tpad_rt.serve.server import Server, Settings
 
@@ -104,7 +102,12 @@ def add_parser(subparsers: Subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve (module docstring); 0 when it ends by Ctrl-C, SIGTERM or --duration."""
+    import asyncio
+
+    from tpad_rt.compiling import compile_notice
+    from tpad_rt.device import Device
     from tpad_rt.serve.server import Server
+    from tpad_rt.texture import load_compiled
 
     settings = _settings(args)
     if args.record is not None:
@@ -177,6 +180,8 @@ async def _serve(server: Server, settings: Settings, duration_s: float | None, c
                  output: str) -> str:
     """Run ``server`` until Ctrl-C, SIGTERM or ``duration_s``; what stopped it. BackendError when it cannot
     listen; the renderer's error when it fails."""
+    import asyncio
+
     stop, ready = asyncio.Event(), asyncio.Event()
     reasons: list[str] = []
     loop = asyncio.get_running_loop()

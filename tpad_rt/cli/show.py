@@ -2,7 +2,8 @@
 
 Three maps over the device's plate (length x width, y down as on the screen), for a
 finger sliding at ``--speed-mm-s`` towards ``--direction-deg`` with ``--force-n``
-at ``--t-s`` seconds after the texture was set:
+at ``--t-s`` seconds after the texture was set (at most ``tpad_rt.plate_maps.MAX_T_S``, 1e6 s:
+past it a texture's phase in time loses its precision; a texture repeats with its period):
 
 1. the target relative friction, evaluated by the compiled texture kernel;
 2. the peak drive volts that friction asks for (inverse friction model at the finger
@@ -26,18 +27,22 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from rich.console import Console
 
 from tpad_rt.cli.arguments import Subparsers, decimal
-from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError, printable
 from tpad_rt.figures import figure_target, pyplot, save
-from tpad_rt.plate_maps import Finger, PlateMaps, plate_maps
-from tpad_rt.texture import CompiledTexture, load_compiled
+
+# The parser needs none of these (the maps come from the texture kernel): run imports them.
+if TYPE_CHECKING:
+    from tpad_rt.device import Device
+    from tpad_rt.plate_maps import Finger, PlateMaps
+    from tpad_rt.texture import CompiledTexture
 
 _BUDGET_COLOUR = "#00c8ff"
 #: Seconds of the texture's time sampled, 1 ms apart from ``--t-s``, to tell whether a flat map changes in time.
@@ -72,6 +77,10 @@ def run(args: argparse.Namespace) -> int:
     ``--out`` that exists and is not a regular file, BackendError when the figure
     cannot be written.
     """
+    from tpad_rt.device import Device
+    from tpad_rt.plate_maps import Finger, plate_maps
+    from tpad_rt.texture import load_compiled
+
     finger = Finger(
         speed_mm_s=_checked("--speed-mm-s", args.speed_mm_s, minimum=0.0),
         direction_deg=_checked("--direction-deg", args.direction_deg),
@@ -94,22 +103,42 @@ def run(args: argparse.Namespace) -> int:
 
 def time_hint(maps: PlateMaps, texture: CompiledTexture, finger: Finger, t_s: float) -> str | None:
     """When the friction map is flat but the texture changes in time at the plate's centre (over TIME_SPAN_S
-    from ``t_s``): one line saying so, with the range and a ``--t-s`` that draws another level; else None."""
+    from ``t_s``): one line saying so, with the range and a ``--t-s`` (at most MAX_T_S) that draws another level,
+    written with the fewest digits (4 at least) that stay within 1 ms of it and still draw that level; else None."""
+    from tpad_rt.plate_maps import MAX_T_S
+
     level = float(maps.friction.flat[0])
     if not np.all(maps.friction == level):
         return None
     times_s = t_s + np.arange(0.0, TIME_SPAN_S, 1e-3)
     ux, uy = finger.unit_direction
-    values = texture.evaluate(maps.x_mm[len(maps.x_mm) // 2], maps.y_mm[len(maps.y_mm) // 2], ux, uy, times_s)
-    other = np.abs(values - level) > 1e-9
+    x_mm, y_mm = maps.x_mm[len(maps.x_mm) // 2], maps.y_mm[len(maps.y_mm) // 2]
+    values = texture.evaluate(x_mm, y_mm, ux, uy, times_s)
+    other = (np.abs(values - level) > 1e-9) & (times_s <= MAX_T_S)
     if not other.any():
         return None
     first = int(np.argmax(other))
     stretch = other[first:]
     middle = first + (len(stretch) if stretch.all() else int(np.argmin(stretch))) // 2  # of the first other stretch
-    return (f"the map is flat at t = {t_s:g} s ({level:.3g} everywhere): this texture changes in time, not over the "
-            f"plate (friction {values.min():.3g} to {values.max():.3g} over {TIME_SPAN_S:g} s from there); "
-            f"--t-s {times_s[middle]:.4g} draws it at {values[middle]:.3g}")
+    suggested = _shortest(times_s[middle], 4, lambda t: (np.abs(t - times_s[middle]) < 1e-3)
+                          & (texture.evaluate(x_mm, y_mm, ux, uy, t) == values[middle]))
+    return (f"the map is flat at t = {_seconds(t_s)} s ({level:.3g} everywhere): this texture changes in time, not "
+            f"over the plate (friction {values.min():.3g} to {values.max():.3g} over {TIME_SPAN_S:g} s from there); "
+            f"--t-s {suggested} draws it at {values[middle]:.3g}")
+
+
+def _seconds(t_s: float) -> str:
+    """``t_s`` (s) as the shortest decimal of 6 to 17 significant digits that reads back as it (``%g`` rounds a
+    time such as 86401.022 to 86401)."""
+    return _shortest(t_s, 6, lambda t: t == t_s)
+
+
+def _shortest(value: float, fewest: int, keeps: Callable[[np.ndarray], np.ndarray]) -> str:
+    """The shortest of ``value``'s ``%g`` decimals of ``fewest`` to 17 significant digits whose value ``keeps``
+    accepts (it takes an array of them); the 17-digit one, which reads back as ``value``, when it accepts none."""
+    texts = [f"{value:.{digits}g}" for digits in range(fewest, 18)]
+    kept = keeps(np.array([float(text) for text in texts]))
+    return texts[int(np.argmax(kept))] if kept.any() else texts[-1]
 
 
 def _checked(option: str, value: float, minimum: float | None = None, inclusive: bool = True) -> float:
@@ -134,7 +163,7 @@ def draw(maps: PlateMaps, texture: CompiledTexture, device: Device, finger: Fing
     figure.suptitle(printable(texture.description), fontsize=12, fontweight="bold")
     moving = f"towards {finger.direction_deg:g}°" if finger.speed_mm_s > 0 else "(still)"
     figure.supxlabel(f"{printable(source)} ({texture.kind}) on {printable(device.label)}: finger {finger.speed_mm_s:g} mm/s {moving}, "
-                     f"{finger.force_n:g} N, t = {t_s:g} s", fontsize=9, color="0.3")
+                     f"{finger.force_n:g} N, t = {_seconds(t_s)} s", fontsize=9, color="0.3")
     extent = (0.0, device.plate.length_m * 1e3, device.plate.width_m * 1e3, 0.0)
     _friction_panel(figure, panels[0], maps, extent, t_s if in_time else None)
     if finger.speed_mm_s > 0:
@@ -163,7 +192,7 @@ def _friction_panel(figure: Any, axes: Any, maps: PlateMaps, extent: tuple[float
     low, high = maps.friction.min(), maps.friction.max()
     levels = f"{low:.3g} everywhere" if low == high else f"{low:.3g} to {high:.3g}"
     if changes_at_s is not None:
-        levels += f" at t = {changes_at_s:g} s; it changes in time (--t-s draws another)"
+        levels += f" at t = {_seconds(changes_at_s)} s; it changes in time (--t-s draws another)"
     axes.set_title(f"target friction (1: vibration off): {levels}", fontsize=10, loc="left")
 
 

@@ -17,32 +17,35 @@ from typing import Annotated, ClassVar, Literal
 from annotated_types import Ge, Le, Lt, MinLen
 from pydantic import Strict, model_validator
 
+from tpad_rt.config.device_ranges import (
+    DENSITY_G_CM3,
+    FORCE_SLACK_N,
+    MAX_CARRIER_HZ,
+    MAX_VOLTS,
+    MIN_CARRIER_HZ,
+    MIN_FORCE_STEP_N,
+    MODE_M,
+    PLATE_SIDE_MM,
+    THICKNESS_MM,
+    YOUNGS_MODULUS_GPA,
+)
 from tpad_rt.config.fields import Flag, StrictModel, Text, rule_error
 from tpad_rt.limits import MAX_FORCE_N
 
-#: Forces closer than this (N) are not told apart: far finer than a finger-force calibration resolves,
-#: and it keeps the kernel's force grid from collapsing to a zero step.
-MIN_FORCE_STEP_N = 0.001
-#: Slack (N) for decimal forces' rounding: 1.001 - 1.0 is 0.000999999999999889 in binary.
-FORCE_SLACK_N = 1e-9
 #: The motional branch's quality factor sqrt(L / C) / R must lie in (MIN_Q, MAX_Q] at every force:
 #: above 0.5 the plate rings (an underdamped resonator, which sim:// models); a MAX_Q plate takes
 #: seconds to ring up, far beyond any TPaD.
 MIN_Q = 0.5
 MAX_Q = 1e6
-#: Carriers (Hz) a device file may drive at, and the highest peak volts it may name.
-MIN_CARRIER_HZ = 1000.0
-MAX_CARRIER_HZ = 200_000.0
-MAX_VOLTS = 10_000.0
 #: The device file format this tpad-rt reads and writes.
 DEVICE_FORMAT_VERSION = 2
 
-ThicknessMm = Annotated[float, Strict(), Ge(0.01), Le(100)]
-DensityGCm3 = Annotated[float, Strict(), Ge(0.1), Le(50)]
-YoungsModulusGpa = Annotated[float, Strict(), Ge(0.01), Le(2000)]
-PlateSideMm = Annotated[float, Strict(), Ge(1), Le(1000)]
+ThicknessMm = Annotated[float, Strict(), Ge(THICKNESS_MM[0]), Le(THICKNESS_MM[1])]
+DensityGCm3 = Annotated[float, Strict(), Ge(DENSITY_G_CM3[0]), Le(DENSITY_G_CM3[1])]
+YoungsModulusGpa = Annotated[float, Strict(), Ge(YOUNGS_MODULUS_GPA[0]), Le(YOUNGS_MODULUS_GPA[1])]
+PlateSideMm = Annotated[float, Strict(), Ge(PLATE_SIDE_MM[0]), Le(PLATE_SIDE_MM[1])]
 #: m of the plate's m x n mode (nodal lines along its length).
-ModeM = Annotated[int, Strict(), Ge(1), Le(1000)]
+ModeM = Annotated[int, Strict(), Ge(MODE_M[0]), Le(MODE_M[1])]
 Volts = Annotated[float, Strict(), Ge(0.1), Le(MAX_VOLTS)]
 ForceN = Annotated[float, Strict(), Ge(0), Le(MAX_FORCE_N)]
 ForceTable = Annotated[list[ForceN], MinLen(1)]

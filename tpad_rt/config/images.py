@@ -14,19 +14,19 @@ are read (:func:`tpad_rt.files.open_regular`).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
-from PIL import ImageFile, PngImagePlugin, PpmImagePlugin
 
 from tpad_rt.errors import ConfigError
 from tpad_rt.files import open_regular
 
+if TYPE_CHECKING:  # Pillow loads with the first picture read, not with every texture file
+    from PIL import ImageFile
+
 IMAGE_SUFFIXES = (".png", ".pgm", ".npy")
 MAX_IMAGE_SIDE = 4096
 
-#: The decoders tried, in turn (Pillow reads PGM with its PPM plugin); each reads only the header when opening.
-_PICTURE_PLUGINS = (PngImagePlugin.PngImageFile, PpmImagePlugin.PpmImageFile)
 _SIXTEEN_BIT_MODES = ("I;16", "I;16B", "I;16L", "I")
 
 
@@ -57,7 +57,10 @@ def read_image(path: Path) -> np.ndarray:
 
 def _open_picture(stream: BinaryIO) -> ImageFile.ImageFile:
     """The picture in ``stream``, its header read and nothing decoded; SyntaxError if no plugin knows it."""
-    for plugin in _PICTURE_PLUGINS:
+    from PIL import PngImagePlugin, PpmImagePlugin
+
+    # The decoders tried, in turn (Pillow reads PGM with its PPM plugin); each reads only the header when opening.
+    for plugin in (PngImagePlugin.PngImageFile, PpmImagePlugin.PpmImageFile):
         stream.seek(0)
         try:
             return plugin(stream)

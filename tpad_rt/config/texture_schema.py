@@ -11,9 +11,8 @@ from __future__ import annotations
 import os
 from contextvars import ContextVar
 from pathlib import Path
-from typing import Annotated, Any, Literal, Union
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Union
 
-import numpy as np
 from annotated_types import Ge, Gt, Le, MaxLen, MinLen
 from pydantic import (
     AfterValidator,
@@ -38,9 +37,11 @@ from tpad_rt.config.fields import (
     Text,
     rule_error,
 )
-from tpad_rt.config.images import ImageError, read_image
 from tpad_rt.config.shapes import Outline, Region
 from tpad_rt.errors import ConfigError
+
+if TYPE_CHECKING:  # NumPy and the image reader load with the first image a texture names (check starts without)
+    import numpy as np
 
 #: Validation-context key: the directory relative image paths start from.
 BASE_DIR = "base_dir"
@@ -85,6 +86,8 @@ def _usable_image(value: Path, info: ValidationInfo) -> Path:
     together may have at most MAX_TEXTURE_PIXELS pixels. With ``context[IMAGE_DIRS]`` an
     image (links resolved) outside those folders is refused before it is opened.
     """
+    from tpad_rt.config.images import ImageError, read_image
+
     context = info.context or {}
     path = Path(context.get(BASE_DIR, ".")) / value
     allowed: list[Path] | None = context.get(IMAGE_DIRS)
@@ -192,6 +195,8 @@ class _ImageMap(StrictModel):
         Raises ConfigError if the file is no longer usable (changed since validation).
         """
         if self._pixels is None:
+            from tpad_rt.config.images import ImageError, read_image
+
             try:
                 self._pixels = read_image(self.image)
             except ImageError as err:

@@ -916,6 +916,9 @@ def _shape_at_full_gain(
     The same expressions as one sample at a time: the same values to the bit.
     """
     clipped = 0
+    model_keep = 1.0 - model_step  # m += k (e - m) as m (1 - k) + k e: a shorter chain from sample to sample
+    cap_pull_v = cap_v * model_step
+    low_pull_v = low_v * model_step
     j = first
     while j < stop:
         if on_reference:
@@ -937,7 +940,7 @@ def _shape_at_full_gain(
                 break
             envelope[j] = cap_v
             clipped += 1
-            model_v += (cap_v - model_v) * model_step
+            model_v = model_v * model_keep + cap_pull_v
             j += 1
         while j < stop and low_v <= cap_v:  # held at low_v (braking): the model falls to it
             drive_v = model_v + (command_v + start_offset_v * decay[j + 1] - model_v) * follow_gain
@@ -945,7 +948,7 @@ def _shape_at_full_gain(
                 break
             envelope[j] = low_v
             clipped += 1
-            model_v += (low_v - model_v) * model_step
+            model_v = model_v * model_keep + low_pull_v
             j += 1
         if j == stop:
             break
@@ -954,7 +957,7 @@ def _shape_at_full_gain(
         envelope[j] = e_v
         on_reference = e_v == drive_v
         clipped += 0 if on_reference else 1
-        model_v += (e_v - model_v) * model_step
+        model_v = model_v * model_keep + e_v * model_step
         j += 1
     return on_reference, model_v, clipped
 
@@ -980,6 +983,8 @@ def _shape_in_sequence(
     k = 0
     while k < count:
         full = k
+        if ramp_direction > 0.0 and not min(max(ramp + ramp_direction * k, 0.0), ramp_samples) < ramp_samples:
+            full = count  # rising and at full gain: at full gain to the end (no search sample by sample)
         while full < count and not min(max(ramp + ramp_direction * full, 0.0), ramp_samples) < ramp_samples:
             full += 1
         if full > k:
@@ -996,7 +1001,7 @@ def _shape_in_sequence(
                 model_v = command_v + start_offset_v * decay[k]
             e_v = gain * (1.0 / ramp_samples) * min(max(command_v + start_offset_v * decay[k + 1], 0.0), cap_v)
             on_reference = False
-            model_v += (e_v - model_v) * model_step
+            model_v = model_v * (1.0 - model_step) + e_v * model_step
             envelope[k] = e_v
             k += 1
     state[STATE_MODEL_ON_REF] = 1.0 if on_reference else 0.0
@@ -1010,8 +1015,9 @@ def _follow_model(state: np.ndarray, envelope: np.ndarray, reference_before_v: f
     ``m += k (e - m)``, from ``reference_before_v`` (the smoothed volts before the first) if it sat on the
     command. The guard reads it after a press (_guard_model)."""
     model_v = reference_before_v if state[STATE_MODEL_ON_REF] != 0.0 else state[STATE_MODEL_V]
+    model_keep = 1.0 - model_step
     for k in range(envelope.shape[0]):
-        model_v += (envelope[k] - model_v) * model_step
+        model_v = model_v * model_keep + envelope[k] * model_step
     state[STATE_MODEL_V] = model_v
     state[STATE_MODEL_ON_REF] = 0.0
 

@@ -41,14 +41,18 @@ import contextlib
 import functools
 import importlib
 import re
-from importlib import metadata
 from collections.abc import Sequence
 from types import ModuleType
+from typing import TYPE_CHECKING
 
-from tpad_rt.device import Device
 from tpad_rt.errors import ConfigError
 from tpad_rt.outputs.base import Capability, Consumes, Output, OutputKind
 from tpad_rt.urls import Url, UrlForm, parse_url
+
+if TYPE_CHECKING:
+    from importlib import metadata
+
+    from tpad_rt.device import Device  # annotations only: the device model loads pydantic
 
 #: The schemes tpad-rt ships: scheme -> module.
 BUILTIN_SCHEMES = {
@@ -119,6 +123,8 @@ def _declaration_problem(module: ModuleType) -> str:
 def _installed() -> dict[str, metadata.EntryPoint]:
     """The schemes installed packages declare (entry point group ENTRY_POINT_GROUP, by name), read once; a
     name that is no scheme (see _SCHEME) could never be typed in a URL and is left out."""
+    from importlib import metadata  # 20 ms: when a URL is parsed, not when the package is imported
+
     return {entry.name: entry for entry in metadata.entry_points(group=ENTRY_POINT_GROUP)
             if _SCHEME.fullmatch(entry.name) and entry.name not in BUILTIN_SCHEMES}
 

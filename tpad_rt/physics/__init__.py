@@ -11,9 +11,11 @@ API map
     amplification_number, power_ratio; Layer, TABLE1_GLASSES, ACTUATOR, table1_glass
 
 Every public function validates its inputs (ValueError naming the argument, the
-expected range and the value got) and broadcasts like a NumPy ufunc. Each has a
-numba-compiled scalar twin ``<name>_core`` (``njit(cache=True, nogil=True)``, no
-checks) for the real-time kernels.
+expected range and the value got) and broadcasts like a NumPy ufunc. The friction
+model, which the real-time kernels evaluate, has a numba-compiled scalar twin
+``<name>_core`` of each function (``njit(cache=True, nogil=True)``, no checks);
+``electromech`` and ``plate`` are plain NumPy. The package imports each module on
+first use, so that what needs no friction model starts without numba.
 """
 
 import importlib
@@ -23,7 +25,7 @@ __all__ = ["electromech", "friction", "plate"]
 
 
 def __getattr__(name: str) -> ModuleType:
-    """The submodule ``name`` of __all__, imported on first use: friction and plate import numba, which a
+    """The submodule ``name`` of __all__, imported on first use: friction imports numba, which a
     renderer on the ahead-of-time kernels never needs (docs/kernel.md "Ahead-of-time kernels")."""
     if name in __all__:
         return importlib.import_module(f"{__name__}.{name}")

@@ -9,19 +9,18 @@ sees, hence the relative power of two TPaDs (Eq. 21). SI units: m, kg/m^3, Pa, H
 ``TABLE1_GLASSES`` and ``ACTUATOR`` hold the paper's eight glasses (Table 1) and
 its actuator (Section VI).
 
-The ``*_core`` functions are numba-compiled scalar kernels without input checks;
-the public functions validate their inputs and broadcast like NumPy ufuncs.
+The functions validate their inputs and broadcast like NumPy ufuncs. They are plain
+NumPy, as in :mod:`tpad_rt.physics.electromech`: no kernel evaluates them, and
+``tpad-rt design`` starts without numba.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-import numba
+import numpy as np
 import numpy.typing as npt
 
-from tpad_rt.physics._ufunc import ufunc
 from tpad_rt.physics._validate import FloatOrArray, positive
 
 
@@ -78,68 +77,37 @@ def table1_glass(label: str) -> Layer:
     raise KeyError(f"no Table 1 glass {label!r}; expected one of {', '.join(g.label for g in TABLE1_GLASSES)}")
 
 
-@numba.njit(cache=True, nogil=True)
-def bending_wavenumber_core(freq_hz: float, mass_per_length_kg_m: float, stiffness_n_m2: float) -> float:
+def _bending_wavenumber(freq_hz: FloatOrArray, mass_per_length_kg_m: FloatOrArray,
+                        stiffness_n_m2: FloatOrArray) -> FloatOrArray:
     """Bending wavenumber (rad/m), ``(mu w^2 / D)^(1/4)``: paper Eq. 16. No input checks."""
-    omega = 2.0 * math.pi * freq_hz
-    return (mass_per_length_kg_m * omega * omega / stiffness_n_m2) ** 0.25
+    omega = 2.0 * np.pi * freq_hz
+    wavenumber: FloatOrArray = (mass_per_length_kg_m * omega * omega / stiffness_n_m2) ** 0.25
+    return wavenumber
 
 
-@numba.njit(cache=True, nogil=True)
-def mode_resonance_hz_core(
-    thickness_m: float, density_kg_m3: float, youngs_pa: float, length_m: float, mode_m: float
-) -> float:
+def _mode_resonance_hz(thickness_m: FloatOrArray, density_kg_m3: FloatOrArray, youngs_pa: FloatOrArray,
+                       length_m: FloatOrArray, mode_m: FloatOrArray) -> FloatOrArray:
     """Resonance (Hz) of the ``m x 0`` mode of a bare plate (Euler-Bernoulli beam). No input checks."""
-    beta = math.pi * (mode_m - 0.5) / length_m  # free-free, m nodal lines: beta length = (m - 1/2) pi
-    omega = beta * beta * math.sqrt(youngs_pa * thickness_m * thickness_m / (12.0 * density_kg_m3))
-    return omega / (2.0 * math.pi)
+    beta = np.pi * (mode_m - 0.5) / length_m  # free-free, m nodal lines: beta length = (m - 1/2) pi
+    omega = beta * beta * np.sqrt(youngs_pa * thickness_m * thickness_m / (12.0 * density_kg_m3))
+    resonance: FloatOrArray = omega / (2.0 * np.pi)
+    return resonance
 
 
-@numba.njit(cache=True, nogil=True)
-def sandwich_stiffness_per_width_core(h_p: float, e_p: float, h_a: float, e_a: float) -> float:
+def _sandwich_stiffness_per_width(h_p: FloatOrArray, e_p: FloatOrArray, h_a: FloatOrArray,
+                                  e_a: FloatOrArray) -> FloatOrArray:
     """Flexural stiffness per width D1' (N m) of plate plus actuator: paper Eq. 20. No input checks."""
-    return e_p * h_p**3 / 3.0 + e_a * (h_a**3 / 3.0 + h_p * h_a * h_a + h_p * h_p * h_a)
+    stiffness: FloatOrArray = e_p * h_p**3 / 3.0 + e_a * (h_a**3 / 3.0 + h_p * h_a * h_a + h_p * h_p * h_a)
+    return stiffness
 
 
-@numba.njit(cache=True, nogil=True)
-def amplification_number_core(
-    h_p: float, rho_p: float, e_p: float, h_a: float, rho_a: float, e_a: float
-) -> float:
+def _amplification_number(h_p: FloatOrArray, rho_p: FloatOrArray, e_p: FloatOrArray, h_a: FloatOrArray,
+                          rho_a: FloatOrArray, e_a: FloatOrArray) -> FloatOrArray:
     """Amplification number n: paper Eq. 19 as written. No input checks."""
-    d1_per_width = sandwich_stiffness_per_width_core(h_p, e_p, h_a, e_a)
+    d1_per_width = _sandwich_stiffness_per_width(h_p, e_p, h_a, e_a)
     bracket = (d1_per_width / e_p) ** (1.0 / 3.0) * (rho_a * h_a / (h_p * h_p * rho_p) + 1.0 / h_p) / 12.0
-    return 12.0 * bracket**0.75
-
-
-@numba.njit(cache=True, nogil=True)
-def power_ratio_core(n_1: float, n_2: float) -> float:
-    """Power of TPaD 2 over TPaD 1 at equal drive voltage, n1^2 / n2^2: paper Eq. 21. No input checks."""
-    return (n_1 / n_2) ** 2
-
-
-@ufunc
-def _bending_wavenumber_ufunc(freq_hz, mass_per_length_kg_m, stiffness_n_m2):  # type: ignore[no-untyped-def]
-    return bending_wavenumber_core(freq_hz, mass_per_length_kg_m, stiffness_n_m2)
-
-
-@ufunc
-def _mode_resonance_hz_ufunc(thickness_m, density_kg_m3, youngs_pa, length_m, mode_m):  # type: ignore[no-untyped-def]
-    return mode_resonance_hz_core(thickness_m, density_kg_m3, youngs_pa, length_m, mode_m)
-
-
-@ufunc
-def _sandwich_stiffness_per_width_ufunc(h_p, e_p, h_a, e_a):  # type: ignore[no-untyped-def]
-    return sandwich_stiffness_per_width_core(h_p, e_p, h_a, e_a)
-
-
-@ufunc
-def _amplification_number_ufunc(h_p, rho_p, e_p, h_a, rho_a, e_a):  # type: ignore[no-untyped-def]
-    return amplification_number_core(h_p, rho_p, e_p, h_a, rho_a, e_a)
-
-
-@ufunc
-def _power_ratio_ufunc(n_1, n_2):  # type: ignore[no-untyped-def]
-    return power_ratio_core(n_1, n_2)
+    n: FloatOrArray = 12.0 * bracket**0.75
+    return n
 
 
 def bending_wavenumber(
@@ -150,7 +118,7 @@ def bending_wavenumber(
     ``mass_per_length_kg_m`` is mu (kg/m), ``stiffness_n_m2`` the flexural
     stiffness D (N m^2). All must be finite and > 0 (ValueError otherwise).
     """
-    return _bending_wavenumber_ufunc(
+    return _bending_wavenumber(
         *positive(freq_hz=freq_hz, mass_per_length_kg_m=mass_per_length_kg_m, stiffness_n_m2=stiffness_n_m2)
     )
 
@@ -174,7 +142,7 @@ def mode_resonance_hz(
     22.4-44.6 kHz, 2.6 % low at the low end and 0.5 % at the top.
     All arguments must be finite and > 0 (ValueError otherwise).
     """
-    return _mode_resonance_hz_ufunc(
+    return _mode_resonance_hz(
         *positive(
             thickness_m=thickness_m,
             density_kg_m3=density_kg_m3,
@@ -193,7 +161,7 @@ def sandwich_stiffness_per_width(
     ``D1' = E_p h_p^3 / 3 + E_a (h_a^3 / 3 + h_p h_a^2 + h_p^2 h_a)``; thicknesses
     (m) and Young's moduli (Pa) must be finite and > 0 (ValueError otherwise).
     """
-    return _sandwich_stiffness_per_width_ufunc(*positive(h_p=h_p, e_p=e_p, h_a=h_a, e_a=e_a))
+    return _sandwich_stiffness_per_width(*positive(h_p=h_p, e_p=e_p, h_a=h_a, e_a=e_a))
 
 
 def amplification_number(
@@ -211,7 +179,7 @@ def amplification_number(
     depend on frequency or width. Thicknesses (m), densities (kg/m^3) and Young's
     moduli (Pa) must be finite and > 0 (ValueError otherwise).
     """
-    return _amplification_number_ufunc(
+    return _amplification_number(
         *positive(h_p=h_p, rho_p=rho_p, e_p=e_p, h_a=h_a, rho_a=rho_a, e_a=e_a)
     )
 
@@ -222,4 +190,6 @@ def power_ratio(n_1: npt.ArrayLike, n_2: npt.ArrayLike) -> FloatOrArray:
     Assumes the reflected glass impedance dominates and is alike for both.
     ``n_1`` and ``n_2`` must be finite and > 0 (ValueError otherwise).
     """
-    return _power_ratio_ufunc(*positive(n_1=n_1, n_2=n_2))
+    n_1_checked, n_2_checked = positive(n_1=n_1, n_2=n_2)
+    ratio: FloatOrArray = (n_1_checked / n_2_checked) ** 2
+    return ratio
