@@ -20,7 +20,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # foundation: errors, limits, files, text and URL parsing, clocks: no tpad_rt module above them
     ("tpad_rt.version", "tpad_rt.errors", "tpad_rt.limits", "tpad_rt.files", "tpad_rt.decimal_text",
      "tpad_rt.json_text", "tpad_rt.urls", "tpad_rt.csv_lines", "tpad_rt.shipped", "tpad_rt.clock",
-     "tpad_rt.drive_guard", "tpad_rt.figures", "tpad_rt.compiling", "tpad_rt.log_histogram",
+     "tpad_rt.drive_guard", "tpad_rt.figures", "tpad_rt.compiling", "tpad_rt.compile_events", "tpad_rt.log_histogram",
      "tpad_rt.compile_runner", "tpad_rt.kernel_cache"),
     # physics: the paper's equations, vectorised
     ("tpad_rt.physics",),

@@ -28,16 +28,14 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 import threading
 import time
 from collections.abc import Iterator
 from typing import Any
 
-import numba
-from numba.core import event
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from rich.status import Status
 
 from tpad_rt import kernel_cache
 from tpad_rt.compile_runner import PlanReport, run_plan
@@ -58,77 +56,26 @@ PLAIN_PROGRESS_STEP = 0.1
 KERNEL_PACKAGE = "tpad_rt.kernel"
 
 _active = threading.Lock()  # held by the outermost compile_notice
-_current: list[_Notice] = []  # the outermost compile_notice's listener, while it is active
-
-
-class _Notice(event.Listener):
-    """Counts numba's compiles; prints the notice at the first and keeps a spinner up to date."""
-
-    def __init__(self, console: Console):
-        self.console = console
-        self.started_s: float | None = None
-        self.compiled = 0
-        self.status: Status | None = None
-
-    def begin(self) -> None:
-        """Print the notice and start the spinner, once."""
-        if self.started_s is None:
-            self.started_s = time.perf_counter()
-            self.console.print(MISSING)
-            if self.console.is_terminal:
-                self.status = self.console.status("compiling")
-                self.status.start()
-
-    def on_start(self, compile_event: event.Event) -> None:
-        if not _is_kernel(compile_event.data):
-            return
-        self.begin()
-        if self.status is not None:
-            self.status.update(f"compiling {_name(compile_event.data)} ({self.compiled} functions done)")
-
-    def on_end(self, compile_event: event.Event) -> None:
-        if _is_kernel(compile_event.data):
-            self.compiled += 1
-
-    def finish(self) -> None:
-        """Stop the spinner; say what was compiled, if anything."""
-        if self.status is not None:
-            self.status.stop()
-        if self.started_s is not None:
-            self.console.print(f"tpad-rt: compiled {self.compiled} functions in "
-                               f"{time.perf_counter() - self.started_s:.1f} s")
-
-
-def _function(data: Any) -> Any:
-    """The Python function a compile event is about (None if it names none)."""
-    dispatcher = data.get("dispatcher") if isinstance(data, dict) else None
-    return getattr(dispatcher, "py_func", None)
-
-
-def _is_kernel(data: Any) -> bool:
-    """True for a compile of one of tpad-rt's kernels (``tpad_rt.kernel``), not of other numba code (the
-    physics module's ufuncs, the user's own)."""
-    return str(getattr(_function(data), "__module__", "")).startswith(KERNEL_PACKAGE)
-
-
-def _name(data: Any) -> str:
-    """The name of the function a compile event is about."""
-    return str(getattr(_function(data), "__qualname__", "a kernel"))
 
 
 @contextlib.contextmanager
 def compile_notice(console: Console | None = None) -> Iterator[None]:
     """Show the compile notice for compiles inside the block (module docstring); on stderr by default."""
+    if "numba" not in sys.modules and kernel_cache.plan_complete():
+        yield  # every path's kernels are cached (the compile plan covers them): nothing to listen for, and a start
+        return  # on ahead-of-time code does not import numba for it
+    from numba.core import event
+
+    from tpad_rt.compile_events import Notice
+
     if not _active.acquire(blocking=False):  # an outer compile_notice shows them
         yield
         return
-    notice = _Notice(console or Console(stderr=True, soft_wrap=True, highlight=False, markup=False, emoji=False))
-    _current.append(notice)
+    notice = Notice(console or Console(stderr=True, soft_wrap=True, highlight=False, markup=False, emoji=False))
     try:
         with event.install_listener("numba:compile", notice):
             yield
     finally:
-        _current.clear()
         notice.finish()
         _active.release()
 
@@ -145,7 +92,11 @@ def _stderr_console() -> Console:
 def ensure_compiled(jobs: int | None = None, console: Console | None = None) -> PlanReport | None:
     """Compile the whole plan unless numba's cache has it (module docstring); raises CompileError (a worker
     failed) and KeyboardInterrupt (Ctrl-C)."""
-    if numba.config.DISABLE_JIT or kernel_cache.plan_complete():  # type: ignore[attr-defined]  # not in its stubs
+    if kernel_cache.plan_complete():
+        return None
+    import numba
+
+    if numba.config.DISABLE_JIT:  # type: ignore[attr-defined]  # not in its stubs
         return None  # with numba's JIT off (the kernel coverage run) nothing compiles
     console = console or _stderr_console()
     waiting = "tpad-rt: waiting for another tpad-rt that is compiling the kernels"

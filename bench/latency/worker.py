@@ -47,6 +47,7 @@ import os
 import sys
 import threading
 import time
+from typing import Any
 from pathlib import Path
 
 RATE_HZ = 192000
@@ -304,13 +305,13 @@ def startup_play(block: int) -> dict:
     imported_ns = monotonic_ns()
     original = Renderer.start
     noted: dict = {}
-    begin_notice = compiling._Notice.begin
+    compile_plan = compiling._compile_plan
 
-    def begin(self: compiling._Notice) -> None:  # when the compile notice is printed (first run only)
+    def compile_first(jobs: int, console: Any) -> Any:  # the compile notice's first line is printed (first run only)
         noted.setdefault("notice_ns", monotonic_ns())
-        begin_notice(self)
+        return compile_plan(jobs, console)
 
-    compiling._Notice.begin = begin  # type: ignore[method-assign]
+    compiling._compile_plan = compile_first  # type: ignore[assignment]
 
     def start(self: Renderer) -> None:
         original(self)

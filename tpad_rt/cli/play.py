@@ -200,12 +200,19 @@ def run(args: argparse.Namespace) -> int:
             if args.record is not None:
                 renderer.record(args.record, input_url=finger.url)
             ensure_compiled()  # every argument checked: compile the whole plan if the cache lacks it
-            renderer.texture.evaluate(np.zeros(1), np.zeros(1))  # the status line's texture under the finger
+            # The status line's texture under the finger loads the texture kernel (numba): after the first
+            # sample when the output runs ahead-of-time code (an audio output then starts without numba).
+            ahead_of_time = not renderer.driver.warm_compiles()
+            if not ahead_of_time:
+                renderer.texture.evaluate(np.zeros(1), np.zeros(1))
             renderer.start()
+            started_s = time.monotonic()  # the session counts from the first sample: what it played, it says
+            if ahead_of_time:
+                renderer.texture.evaluate(np.zeros(1), np.zeros(1))
             compiling.close()
             with renderer, LiveFeed(source, _pusher(renderer, args.force), renderer.lift,
                                     clock=renderer.now_s) as feed:
-                session = Session(renderer, console)
+                session = Session(renderer, console, started=started_s)
                 _loop(session, feed, interrupted, args.duration)
                 session.tick()  # the blocks since the last status period, judged while the renderer runs
     session.take_telemetry()
