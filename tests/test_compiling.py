@@ -88,7 +88,7 @@ def test_a_second_process_waits_for_the_compile_in_progress(cache: Path) -> None
     out, err = warm.communicate(timeout=120)
     assert warm.returncode == 0 and err == ""
     assert out.splitlines() == [f"tpad-rt warm: every kernel is compiled already, cached in {cache}",
-                                "tpad-rt warm: no C compiler (cc, gcc, clang or $CC): the ahead-of-time audio "
+                                "tpad-rt warm: no C compiler ($CC (no-such-compiler) names no program): the ahead-of-time audio "
                                 "callbacks are not built; the renderer uses numba's, which start about half a second "
                                 "later"]
 

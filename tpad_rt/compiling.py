@@ -47,8 +47,8 @@ MISSING = "tpad-rt: compiling kernels missing from numba's cache"
 #: The most workers ensure_compiled starts by default (the plan's steps allow about three at once).
 MAX_DEFAULT_JOBS = 2
 #: Wall time (s) of a compile of the whole plan with 1 and 2 workers on a quiet 2-core machine (the notice's
-#: estimate): the plan takes about 40 s of CPU (docs/kernel.md "Compiling once").
-PLAN_WALL_S = {1: 45, 2: 35}
+#: estimate; measured: 24.0 s and 17.1 s, docs/kernel.md "Compiling once").
+PLAN_WALL_S = {1: 25, 2: 20}
 #: Progress lines off a terminal: one each time another tenth of the steps is done.
 PLAIN_PROGRESS_STEP = 0.1
 

@@ -8,6 +8,7 @@ it names the cache folder. Ctrl-C stops it (exit 130). Nothing here imports numb
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -66,7 +67,8 @@ def _build_ahead_of_time(folders: Sequence[Path] | None = None) -> None:
               file=sys.stderr)
         return
     if path is None:
-        print("tpad-rt warm: no C compiler (cc, gcc, clang or $CC): the ahead-of-time audio callbacks are not "
+        which = f"$CC ({os.environ['CC']}) names no program" if os.environ.get("CC") else "no cc, gcc or clang"
+        print(f"tpad-rt warm: no C compiler ({which}): the ahead-of-time audio callbacks are not "
               "built; the renderer uses numba's, which start about half a second later")
     else:
         print(f"tpad-rt warm: built the ahead-of-time audio callbacks: {path}")
