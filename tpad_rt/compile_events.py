@@ -22,7 +22,6 @@ from rich.status import Status
 from tpad_rt.compiling import KERNEL_PACKAGE, MISSING
 
 
-
 class Notice(event.Listener):
     """Counts numba's compiles; prints the notice at the first and keeps a spinner up to date."""
 
