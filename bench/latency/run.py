@@ -524,8 +524,8 @@ def markdown(report: dict[str, Any]) -> str:
             f"first run on a machine compiles the kernels) | **{cell(startup.get('cold_play_runs', []), 'first_dac_ns')}** "
             f"| **{cell(startup.get('cold_runs', []), 'first_dac_ns')}** |",
             f"| baseline: `python -c \"import tpad_rt\"` (spawn to exit) | {_band(startup['import_tpad_rt_s'])} | |",
-            f"| second baseline: `python -c \"import tpad_rt.engine\"` (spawn to exit: numba, the kernels "
-            f"from the cache, the interpreter's exit) | {_band(startup['import_tpad_rt_engine_s'])} | |",
+            f"| second baseline: `python -c \"import tpad_rt.engine\"` (spawn to exit: the engine's imports, "
+            f"no numba; the interpreter's exit) | {_band(startup['import_tpad_rt_engine_s'])} | |",
             *([f"| numba's floor: `import numba`, then one call of a trivial cached `njit` function (spawn to "
                f"that call's return; every process running cached numba code pays it) "
                f"| {_band(startup['numba_floor_s'])} | |"]
@@ -538,7 +538,9 @@ def markdown(report: dict[str, Any]) -> str:
             "From imports done to the first sample at the DAC: "
             + (f"play {_band([r['first_dac_ns'] - r['imported_ns'] for r in play_runs])} s, " if play_runs else "")
             + f"API {_band([r['first_dac_ns'] - r['imported_ns'] for r in runs])} s. `import tpad_rt` is lazy; "
-            "most of the start-up is importing numba and loading the cached kernels.",
+            "with the ahead-of-time audio callbacks built (`tpad-rt warm` with a C compiler) neither start imports "
+            "numba before its first sample (docs/kernel.md \"Ahead-of-time kernels\"); without them both pay "
+            "numba's floor above.",
         ]
     v = verdict
     lines += [
@@ -642,6 +644,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="measure nothing: rewrite latency.md (and the summary in latency.json) from latency.json")
     args = parser.parse_args(argv)
     results_folder.refuse_smoke_into_results(parser, args.smoke, args.out)
+    if (args.startup_only or args.rewrite_md) and not (args.out / "latency.json").is_file():
+        parser.error(f"--startup-only and --rewrite-md update {args.out / 'latency.json'}, which does not exist: "
+                     "run without them first (or copy a latency.json there)")
     if args.rewrite_md:
         report = json.loads((args.out / "latency.json").read_text())
         report["summary"] = summarise(report)
