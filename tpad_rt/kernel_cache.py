@@ -10,6 +10,9 @@ cache_dir(package_dir) -> Path
 plan_stamp() -> str
     the SHA-256 of everything a compiled kernel depends on: the sources of :data:`COMPILED_PACKAGES` and
     the compile plan, numba's and Python's versions and the machine
+package_version(name) -> bytes
+    the installed version of package ``name`` (numba's and llvmlite's ``_version.py``), read without importing
+    it or scanning every installed distribution; shared with the ahead-of-time library's stamp
 plan_complete() -> bool
     whether a whole compile plan finished for :func:`plan_stamp` (its mark is in the kernels' cache folder,
     so clearing the cache clears it)
@@ -39,7 +42,6 @@ import fcntl
 import hashlib
 import importlib.metadata
 import os
-import platform
 import sys
 import tempfile
 from collections.abc import Callable, Iterator
@@ -83,9 +85,22 @@ def plan_stamp() -> str:
     digest = hashlib.sha256()
     for source in sorted([*(path for folder in COMPILED_PACKAGES for path in folder.glob("*.py")), _PLAN_SOURCE]):
         digest.update(source.name.encode() + b"\0" + source.read_bytes())
-    for version in (importlib.metadata.version("numba"), sys.version, platform.machine()):
-        digest.update(version.encode() + b"\0")
+    for version in (package_version("numba"), sys.version.encode(), os.uname().machine.encode()):
+        digest.update(version + b"\0")
     return digest.hexdigest()
+
+
+def package_version(name: str) -> bytes:
+    """The installed version of package ``name`` without importing it (nor asking the import system for it): the
+    ``_version.py`` (numba's and llvmlite's name the release and the revision) of the first ``name`` folder on
+    ``sys.path``, without the slow scan of every installed distribution that ``importlib.metadata`` makes; the
+    distribution's version where there is no such file."""
+    for entry in sys.path:
+        try:
+            return (Path(entry or ".") / name / "_version.py").read_bytes()
+        except OSError:
+            continue
+    return importlib.metadata.version(name).encode()
 
 
 def _mark() -> Path:

@@ -34,9 +34,9 @@ import functools
 import hashlib
 import os
 import platform
-import sys
-from importlib import metadata
 from pathlib import Path
+
+from tpad_rt.kernel_cache import package_version
 
 _PACKAGE = Path(__file__).resolve().parents[1]
 #: The sources compiled into the library (tests/test_aot.py checks these cover the callbacks' cache stamp).
@@ -67,25 +67,12 @@ def library_stamp() -> str:
     for source in SOURCES:
         digest.update(source.name.encode() + b"\0" + hashlib.sha256(source.read_bytes()).digest())
     for name in ("numba", "llvmlite"):
-        digest.update(f"{name}=".encode() + _package_version(name) + b"\0")
+        digest.update(f"{name}=".encode() + package_version(name) + b"\0")
     for setting in CODEGEN_SETTINGS:
         digest.update(f"{setting}={os.environ.get(setting, '')}\0".encode())
     system = os.uname()  # platform.system() and .machine() say the same, after about 4 ms the first time
     digest.update(f"{system.sysname} {system.machine}\0{_cpu_identity()}".encode())
     return digest.hexdigest()
-
-
-def _package_version(name: str) -> bytes:
-    """The installed version of package ``name`` without importing it (nor asking the import system for it): the
-    ``_version.py`` (numba's and llvmlite's name the release and the revision) of the first ``name`` folder on
-    ``sys.path``, without the slow scan of every installed distribution that ``importlib.metadata`` makes; the
-    distribution's version where there is no such file."""
-    for entry in sys.path:
-        try:
-            return (Path(entry or ".") / name / "_version.py").read_bytes()
-        except OSError:
-            continue
-    return metadata.version(name).encode()
 
 
 @functools.cache
